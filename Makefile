@@ -1,0 +1,23 @@
+# The two commands of the README: `make demo` and `make test`. Both set everything up themselves.
+VENV  ?= .venv
+PY    := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test quick setup clean
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml scripts/bootstrap.sh
+	VENV=$(VENV) bash scripts/bootstrap.sh
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/lft demo --out out/demo
+
+quick: $(STAMP)
+	$(VENV)/bin/lft demo --quick --out out/quick
+
+test: $(STAMP)
+	$(PY) -m pytest -q tests
+
+clean:
+	rm -rf out .pytest_cache
