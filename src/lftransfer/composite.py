@@ -1,0 +1,23 @@
+"""Compositing the synthetic render over the real view camera image."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def composite(synthetic_rgb: np.ndarray, alpha: np.ndarray, real_rgb: np.ndarray) -> np.ndarray:
+    """alpha * synthetic + (1 - alpha) * real (real objects are assumed not to occlude synthetic ones).
+
+    Args:
+        synthetic_rgb: (H, W, 3) float radiance of the synthetic render.
+        alpha: (H, W) float coverage of the synthetic render in [0, 1].
+        real_rgb: (H, W, 3) float radiance of the real view.
+
+    Returns:
+        (H, W, 3) float32 composite.
+    """
+    if synthetic_rgb.shape != real_rgb.shape or alpha.shape != synthetic_rgb.shape[:2]:
+        raise ValueError(f"composite: shapes differ: synthetic {synthetic_rgb.shape}, alpha {alpha.shape}, "
+                         f"real {real_rgb.shape}")
+    a = np.clip(alpha, 0.0, 1.0)[..., None]
+    return (a * synthetic_rgb + (1.0 - a) * real_rgb).astype(np.float32)

@@ -1,0 +1,71 @@
+"""Image files: linear float images as EXR (through Mitsuba's Bitmap), display images as sRGB PNG.
+
+Every write goes to a temporary file in the destination folder and is renamed into place, so an interrupted
+run never leaves a half-written file and never destroys an earlier complete one.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def _atomic_target(path: Path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """sRGB transfer function of linear values in [0, 1] (values outside are clipped)."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def to_display(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """(H, W, 3) linear radiance times ``scale`` -> (H, W, 3) uint8 sRGB."""
+    return np.round(linear_to_srgb(np.asarray(rgb, np.float64) * scale) * 255).astype(np.uint8)
+
+
+def write_png(path: str | Path, image: np.ndarray) -> Path:
+    """Write an 8-bit (H, W, 3) image, or a float image in [0, 1] as sRGB-encoded linear values, atomically."""
+    import imageio.v3 as iio
+
+    path = Path(path)
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        img = to_display(img)
+    tmp = _atomic_target(path)
+    try:
+        iio.imwrite(tmp, img, extension=".png")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def write_exr(path: str | Path, image: np.ndarray) -> Path:
+    """Write a float32 (H, W, C) linear image as OpenEXR, atomically."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).write(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an EXR written by :func:`write_exr` as float32 (H, W, C)."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    return np.array(mi.Bitmap(str(path)), dtype=np.float32)

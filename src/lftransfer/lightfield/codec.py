@@ -1,0 +1,238 @@
+"""Precomputed resampling between a device image behind the lens array and a :class:`LightField` grid.
+
+Both directions are a single ``cv2.remap`` with maps built once (DESIGN.md section 2):
+
+- image -> light field (capture): each grid sample (k, u_j, v_i) reads the device pixel where its ray lands
+  (:meth:`LensletDevice.ray_to_pixel`, so the lens distortion is applied);
+- light field -> image (projection): each device pixel reads the grid at its own ray's (u, v)
+  (:meth:`LensletDevice.pixel_to_ray`), the light field tiled as a ``(K * V, U)`` image.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from lftransfer.lightfield.lightfield import LightField
+from lftransfer.optics.device import LensletDevice
+from lftransfer.optics.lens_array import LensArray
+
+__all__ = ["LensletCodec"]
+
+_OUTSIDE = -1.0e4        # map coordinate far outside any source image: remap returns the border value 0
+_CV_MAX = 32767          # cv2.remap needs source and destination sizes below SHRT_MAX
+_MIN_WEIGHT = 1e-4       # inverse map: pixels whose valid interpolation weight is below this stay black
+_CORNERS = ((0, 0), (1, 0), (0, 1), (1, 1))
+_PULL_STEP = 0.5         # px per step when pulling a sample that landed off its lenslet back onto it
+_MAX_PULL_STEPS = 64
+
+
+def _bilinear_numpy(src: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
+    """Bilinear gather with zero outside ``src`` (the fallback for images too large for ``cv2.remap``)."""
+    h, w = src.shape[:2]
+    x0, y0 = np.floor(mx).astype(np.int64), np.floor(my).astype(np.int64)
+    tx, ty = (mx - x0).astype(np.float32), (my - y0).astype(np.float32)
+    out = np.zeros(mx.shape + src.shape[2:], np.float32)
+    for dy, wy in ((0, 1.0 - ty), (1, ty)):
+        for dx, wx in ((0, 1.0 - tx), (1, tx)):
+            xx, yy = x0 + dx, y0 + dy
+            ok = (xx >= 0) & (xx < w) & (yy >= 0) & (yy < h)
+            wgt = np.where(ok, wx * wy, 0.0).astype(np.float32)
+            val = src[np.clip(yy, 0, h - 1), np.clip(xx, 0, w - 1)]
+            out += (wgt[..., None] * val) if src.ndim == 3 else wgt * val
+    return out
+
+
+class _Remap:
+    """One precomputed bilinear resampling ``dst[r, c] = src(map_y[r, c], map_x[r, c])``, zero outside."""
+
+    def __init__(self, map_x: np.ndarray, map_y: np.ndarray, src_shape: tuple[int, int]) -> None:
+        self.map_x = np.ascontiguousarray(map_x, dtype=np.float32)
+        self.map_y = np.ascontiguousarray(map_y, dtype=np.float32)
+        self.src_shape = src_shape
+        self.use_cv = max(*src_shape, *self.map_x.shape) < _CV_MAX
+        if self.use_cv:
+            self._m1, self._m2 = cv2.convertMaps(self.map_x, self.map_y, cv2.CV_16SC2)
+
+    def __call__(self, src: np.ndarray) -> np.ndarray:
+        src = np.ascontiguousarray(src, dtype=np.float32)
+        if self.use_cv:
+            out = cv2.remap(src, self._m1, self._m2, interpolation=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            if src.ndim == 3 and out.ndim == 2:  # cv2 drops a trailing channel axis of length 1
+                out = out[..., None]
+            return out
+        return _bilinear_numpy(src, self.map_x, self.map_y)
+
+
+class LensletCodec:
+    """Precomputed maps between a device image (H, W, 3) and a light field grid (K, V, U, 3).
+
+    Attributes:
+        array: The lens array.
+        device: The camera or projector behind it.
+        U, V: Angular grid size.
+        map_x, map_y: ``(K * V, U) float32`` forward map: device pixel (col, row) of every grid sample.
+        inv_map_x, inv_map_y: ``(H, W) float32`` inverse map into the light field tiled as a ``(K * V, U)``
+            image: ``inv_map_x = i_frac``, ``inv_map_y = k * V + j_frac``; far outside where there is no data.
+        pixel_lenslet: ``(H, W) int64`` lenslet seen by each device pixel, -1 for none.
+        mask: ``(V, U) bool`` the light field's data mask (:meth:`LightField.mask`).
+    """
+
+    def __init__(self, array: LensArray, device: LensletDevice, U: int, V: int) -> None:
+        """Build both maps.
+
+        Args:
+            array: The lens array.
+            device: The device behind it (its ``distortion`` must have shape ``(K, 2)``).
+            U: Samples along u (>= 1).
+            V: Samples along v (>= 1).
+        """
+        U, V = int(U), int(V)
+        if U < 1 or V < 1:
+            raise ValueError(f"U and V must be positive, got U={U}, V={V}")
+        if device.distortion.shape != (array.K, 2):
+            raise ValueError(f"device distortion has shape {device.distortion.shape}, expected ({array.K}, 2)")
+        self.array, self.device, self.U, self.V = array, device, U, V
+        K, H, W = array.K, device.height, device.width
+        grid = LightField.zeros(array, U, V)
+        self.mask = grid.mask()
+        a = array.half_width
+
+        # ---- inverse map: every device pixel -> fractional grid index
+        cols, rows = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+        px = np.stack([cols.ravel(), rows.ravel()], axis=-1)
+        k, d = device.pixel_to_ray(array, px)
+        self.pixel_lenslet = k.reshape(H, W)
+        valid = k >= 0
+        u = np.where(valid, d[:, 0] / np.where(valid, d[:, 2], 1.0), np.inf)
+        v = np.where(valid, d[:, 1] / np.where(valid, d[:, 2], 1.0), np.inf)
+        tol = 1e-9 * a
+        valid &= (np.abs(u) <= a + tol) & (np.abs(v) <= a + tol)
+        fi = np.clip((u + a) / (2.0 * a) * U - 0.5, 0.0, U - 1)
+        fj = np.clip((v + a) / (2.0 * a) * V - 0.5, 0.0, V - 1)
+        inv_x = np.where(valid, fi, _OUTSIDE)
+        inv_y = np.where(valid, np.maximum(k, 0) * V + fj, _OUTSIDE)
+        self.inv_map_x = inv_x.reshape(H, W).astype(np.float32)
+        self.inv_map_y = inv_y.reshape(H, W).astype(np.float32)
+        self._inverse = _Remap(self.inv_map_x, self.inv_map_y, (K * V, U))
+        # Renormalise over data samples so that pixels near a cell border are not darkened by masked zeros.
+        tiled_mask = np.broadcast_to(self.mask.astype(np.float32), (K, V, U)).reshape(K * V, U)
+        norm = self._inverse(tiled_mask)
+        self._inv_norm = np.where(norm > _MIN_WEIGHT, 1.0 / np.maximum(norm, _MIN_WEIGHT), 0.0).astype(np.float32)
+
+        # ---- forward map: every grid sample -> device pixel
+        kk = np.repeat(np.arange(K), V * U)
+        dd = np.tile(grid.directions().reshape(-1, 3), (K, 1))
+        fwd = device.ray_to_pixel(array, kk, dd)                      # (K*V*U, 2)
+        fwd = self._avoid_crosstalk(fwd, kk)
+        keep = np.tile(self.mask.ravel(), K) & np.all(np.isfinite(fwd), axis=1)
+        fwd[~keep] = _OUTSIDE
+        self.map_x = fwd[:, 0].reshape(K * V, U).astype(np.float32)
+        self.map_y = fwd[:, 1].reshape(K * V, U).astype(np.float32)
+        self._forward = _Remap(self.map_x, self.map_y, (H, W))
+
+    def _footprint(self, x: np.ndarray, y: np.ndarray, k: np.ndarray):
+        """Bilinear footprint of points: own-lenslet flags and weights of the four surrounding pixels.
+
+        Args:
+            x, y: ``(N,)`` pixel coordinates (finite).
+            k: ``(N,)`` lenslet of each point.
+
+        Returns:
+            ``own (N, 4) bool``, ``weight (N, 4) float64``, ``x0, y0 (N,) int64`` (top-left corner).
+        """
+        H, W = self.pixel_lenslet.shape
+        x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        tx, ty = x - x0, y - y0
+        own = np.empty((len(x), 4), bool)
+        weight = np.empty((len(x), 4))
+        for c, (dx, dy) in enumerate(_CORNERS):
+            xx, yy = x0 + dx, y0 + dy
+            inside = (xx >= 0) & (xx < W) & (yy >= 0) & (yy < H)
+            lens = np.where(inside, self.pixel_lenslet[np.clip(yy, 0, H - 1), np.clip(xx, 0, W - 1)], -1)
+            own[:, c] = lens == k
+            weight[:, c] = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
+        return own, weight, x0, y0
+
+    def _avoid_crosstalk(self, px: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Keep forward samples on their own lenslet's pixels.
+
+        A sample whose ray lands wholly off its lenslet's pixels (distortion can push border samples out of
+        the cell) is pulled towards the lenslet's centre pixel until it touches one of them. A sample whose
+        bilinear footprint (the four surrounding pixels) includes pixels of another lenslet, or of none, is
+        then moved onto the centre of its own footprint pixel with the largest bilinear weight, so that light
+        of a neighbour (from the far side of its angular range) does not leak in at cell borders.
+
+        Args:
+            px: ``(N, 2)`` pixel coordinates (col, row) of the samples (NaN allowed).
+            k: ``(N,)`` their lenslets.
+
+        Returns:
+            ``(N, 2)`` adjusted pixel coordinates (NaN stays NaN).
+        """
+        px = px.copy()
+        finite = np.flatnonzero(np.all(np.isfinite(px), axis=1))
+        x, y, kf = px[finite, 0], px[finite, 1], k[finite]
+        centre = np.column_stack([self.array.centres[kf], np.ones(len(kf))]) @ self.device.homography.T
+        cx, cy = centre[:, 0] / centre[:, 2], centre[:, 1] / centre[:, 2]
+        for _ in range(_MAX_PULL_STEPS):
+            own, _, _, _ = self._footprint(x, y, kf)
+            lost = ~np.any(own, axis=1)
+            if not np.any(lost):
+                break
+            dx, dy = cx[lost] - x[lost], cy[lost] - y[lost]
+            dist = np.hypot(dx, dy)
+            step = np.minimum(_PULL_STEP, dist) / np.maximum(dist, 1e-12)
+            x[lost] += step * dx
+            y[lost] += step * dy
+        own, weight, x0, y0 = self._footprint(x, y, kf)
+        fix = ~np.all(own | (weight <= 0), axis=1) & np.any(own, axis=1)
+        best = np.argmax(np.where(own, weight + 1.0, 0.0), axis=1)
+        offs = np.array(_CORNERS)
+        x = np.where(fix, x0 + offs[best, 0], x)
+        y = np.where(fix, y0 + offs[best, 1], y)
+        px[finite, 0], px[finite, 1] = x, y
+        return px
+
+    def _check_lightfield(self, lf: LightField) -> None:
+        if not isinstance(lf, LightField):
+            raise ValueError(f"expected a LightField, got {type(lf).__name__}")
+        if lf.array != self.array:
+            raise ValueError("the light field belongs to a different lens array than the codec")
+        expected = (self.array.K, self.V, self.U, 3)
+        if lf.data.shape != expected:
+            raise ValueError(f"light field has shape {lf.data.shape}, expected {expected}")
+
+    def image_to_lightfield(self, image: np.ndarray) -> LightField:
+        """Resample a device image onto the light field grid (bilinear; masked samples are 0).
+
+        Args:
+            image: ``(H, W, 3)`` float image of the device (e.g. linear radiance).
+
+        Returns:
+            LightField ``(K, V, U, 3) float32``.
+        """
+        image = np.asarray(image)
+        expected = (self.device.height, self.device.width, 3)
+        if image.shape != expected:
+            raise ValueError(f"image has shape {image.shape}, expected {expected}")
+        if not np.issubdtype(image.dtype, np.floating):
+            raise ValueError(f"image must be a float array (linear values), got dtype {image.dtype}")
+        out = self._forward(image).reshape(self.array.K, self.V, self.U, 3)
+        out *= self.mask[None, :, :, None]
+        return LightField(out, self.array)
+
+    def lightfield_to_image(self, lf: LightField) -> np.ndarray:
+        """Resample a light field onto the device's pixels (bilinear over data samples, 0 off the lenslets).
+
+        Args:
+            lf: LightField ``(K, V, U, 3)`` on this codec's array and grid.
+
+        Returns:
+            ``(H, W, 3) float32`` device image.
+        """
+        self._check_lightfield(lf)
+        src = (lf.data * self.mask[None, :, :, None]).reshape(self.array.K * self.V, self.U, 3)
+        img = self._inverse(src)
+        return (img * self._inv_norm[..., None]).astype(np.float32, copy=False)

@@ -1,0 +1,146 @@
+"""One complete run: simulated rig, transfer, ground truth, metrics and output files.
+
+This is what ``lft run`` and ``lft demo`` call. It reports progress through a callback and never prints.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from lftransfer.composite import composite
+from lftransfer.report import write_outputs
+from lftransfer.rig.model import nominal_rig
+from lftransfer.rig.sim import SimRig
+from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
+from lftransfer.verify import evaluate, render_ground_truth
+
+Progress = Callable[[str, int], None]   # (description, steps done so far)
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Options of a run.
+
+    Attributes:
+        bounces: number of bounces N.
+        lighting_model: the model used for the outputs ("area", "point" or "prefiltered").
+        compare_models: further lighting models whose cross-transfer error is also measured (full reruns).
+        gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
+        capture_spp: rays per LF camera pixel in the simulated rig.
+        use_cache: cache ground-truth renders.
+    """
+
+    bounces: int = 2
+    lighting_model: str | None = None
+    compare_models: tuple[str, ...] = ("point",)
+    gt_spp: int | None = None
+    capture_spp: int = 4
+    use_cache: bool = True
+
+
+def quick_scene(scene):
+    """The same scene at a small resolution (for ``--quick`` and tests): every device at a quarter size."""
+    rig = scene.rig.model_copy(update={
+        "lf_camera": [scene.rig.lf_camera[0] // 4, scene.rig.lf_camera[1] // 4],
+        "projector": [scene.rig.projector[0] // 4, scene.rig.projector[1] // 4],
+        "angular_samples": max(8, scene.rig.angular_samples // 3),
+    })
+    view = scene.view.model_copy(update={"resolution": [scene.view.resolution[0] // 4, scene.view.resolution[1] // 4]})
+    render = scene.render.model_copy(update={"gt_spp": max(16, scene.render.gt_spp // 4)})
+    return scene.model_copy(update={"rig": rig, "view": view, "render": render})
+
+
+def count_run_steps(scene, options: RunOptions) -> int:
+    """Progress steps of :func:`run_scene`, for a progress bar."""
+    settings = TransferSettings(bounces=options.bounces)
+    n_models = 1 + len(_other_models(scene, options))
+    return 2 + count_steps(settings) + (n_models - 1) * count_steps(TransferSettings(bounces=options.bounces,
+                                                                                     bounce_views=False)) + 6 + 2
+
+
+def _other_models(scene, options: RunOptions) -> list[str]:
+    primary = options.lighting_model or scene.render.lighting_model
+    return [m for m in options.compare_models if m != primary]
+
+
+def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
+              progress: Progress | None = None) -> dict:
+    """Run light field transfer on a scene with the simulated rig and write every output into ``out``.
+
+    Args:
+        scene: ``lftransfer.scenes.SceneConfig``.
+        out: output folder (created).
+        options: see :class:`RunOptions`.
+        progress: called with a description and the number of steps done.
+
+    Returns:
+        The report (also written as ``report.json``).
+    """
+    done = [0]
+
+    def step(msg: str) -> None:
+        done[0] += 1
+        if progress:
+            progress(msg, done[0])
+
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    step("set up the simulated rig")
+    rig = SimRig(scene, capture_spp=options.capture_spp)
+    model = nominal_rig(scene.rig)          # what the pipeline knows of the rig: the rig file's values
+    timings["setup"] = time.perf_counter() - t0
+    primary = options.lighting_model or scene.render.lighting_model
+    render = scene.render
+    settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
+                                lighting_model=primary, aperture_samples=render.aperture_samples,
+                                lf_spp=render.spp, view_spp=render.spp)
+    result = run_transfer(rig, model, scene, settings, progress=step)
+    for k, v in result.timings_s.items():
+        timings[k] = timings.get(k, 0.0) + v
+
+    t = time.perf_counter()
+    gt = render_ground_truth(scene, spp=options.gt_spp or render.gt_spp, use_cache=options.use_cache, progress=step)
+    timings["ground_truth"] = time.perf_counter() - t
+    metrics = evaluate(result, gt)
+    by_model = {primary: {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}}
+    for other in _other_models(scene, options):
+        t = time.perf_counter()
+        alt = run_transfer(rig, model, scene, TransferSettings(**{**settings.__dict__, "lighting_model": other,
+                                                                  "bounce_views": False}), progress=step)
+        m = evaluate(alt, gt)
+        by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+        timings[f"transfer_{other}_model"] = time.perf_counter() - t
+
+    comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+    timings["total"] = time.perf_counter() - t0
+    from lftransfer.backend import variant
+
+    report = {
+        **{k: metrics[k] for k in ("psnr_db", "psnr_db_direct_only", "cross_transfer_rel_error",
+                                   "gt_noise_psnr_db", "cross_gt_noise_rel")},
+        "lighting_model": primary,
+        "by_lighting_model": by_model,
+        "cross_term_rel_size": metrics["cross_term_rel_size"],
+        "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
+                     "projector_gain": b.projector_gain} for b in result.bounces],
+        "projector_clipped_fraction": result.clipped_fraction,
+        "timings_s": {k: round(v, 3) for k, v in timings.items()},
+        "resolution": {
+            "lenslets": [scene.rig.rows, scene.rig.cols], "lattice": scene.rig.lattice,
+            "lf_camera": list(scene.rig.lf_camera), "projector": list(scene.rig.projector),
+            "view": list(scene.view.resolution), "angular_samples": scene.rig.angular_samples,
+            "metrics": metrics["metric_resolution"],
+        },
+        "gt_spp": options.gt_spp or render.gt_spp,
+        "variant": variant(),
+        "scene": str(scene.source) if scene.source else None,
+    }
+    step("write outputs")
+    write_outputs(out, result, gt.image, comp, report, captured_raw=result.captured_raw,
+                  camera_bits=scene.rig.lf_camera_bits)
+    return report

@@ -1,0 +1,91 @@
+"""Wavefront path tracing of ray batches in one half-space, with next-event estimation only.
+
+Every light of this package is a delta or an explicitly sampled area light (point light, lenslets), so a path
+gathers light only through ``light.illuminate`` at each vertex; BSDF sampling continues the path for
+interreflections inside the half-space. Rays that miss at the first intersection are compacted away before
+any shading, since most rays of a lenslet camera see the dark background.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from lftransfer.backend import mitsuba
+
+
+class Light(Protocol):
+    """Anything that adds reflected radiance at surface points (see :mod:`lftransfer.render.lights`)."""
+
+    def illuminate(self, scene, si, active, seed: int = 0): ...
+
+
+def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
+          max_depth: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Radiance arriving at ray origins from along the rays.
+
+    Args:
+        scene: a loaded Mitsuba scene (one half-space).
+        origins: (N, 3) float ray origins, metres.
+        directions: (N, 3) float unit directions.
+        lights: lights to gather at every path vertex.
+        max_depth: surface interactions per path (1 = direct light only).
+        seed: random seed (BSDF sampling).
+
+    Returns:
+        radiance (N, 3) float32 W m^-2 sr^-1, hit (N,) bool (first ray hit a surface), distance (N,) float32
+        (inf where missed).
+    """
+    mi = mitsuba()
+
+    n = len(origins)
+    radiance = np.zeros((n, 3), np.float32)
+    distance = np.full(n, np.inf, np.float32)
+    if n == 0:
+        return radiance, np.zeros(0, bool), distance
+    o = np.ascontiguousarray(origins, dtype=np.float32)
+    d = np.ascontiguousarray(directions, dtype=np.float32)
+    rays = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+    t = scene.ray_intersect_preliminary(rays).t
+    t_np = np.array(t)
+    hit = np.isfinite(t_np)
+    idx = np.flatnonzero(hit)
+    distance[idx] = t_np[idx]
+    if len(idx) == 0:
+        return radiance, hit, distance
+    radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed)
+    return radiance, hit, distance
+
+
+def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
+          max_depth: int = 3, seed: int = 0) -> np.ndarray:
+    """Path-traced radiance for rays that are known to hit (no compaction). Shapes as in :func:`trace`."""
+    mi = mitsuba()
+    import drjit as dr
+
+    n = len(origins)
+    ray = mi.Ray3f(mi.Point3f(origins[:, 0], origins[:, 1], origins[:, 2]),
+                   mi.Vector3f(directions[:, 0], directions[:, 1], directions[:, 2]))
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(dr.opaque(mi.UInt32, seed), n)
+    ctx = mi.BSDFContext()
+    throughput = mi.Color3f(1.0)
+    result = mi.Color3f(0.0)
+    active = mi.Bool(True)
+    for depth in range(max_depth):
+        si = scene.ray_intersect(ray, active)
+        active &= si.is_valid()
+        for light in lights:
+            result += throughput * light.illuminate(scene, si, active, seed=seed * 16 + depth)
+        if depth + 1 == max_depth:
+            break
+        bs, weight = si.bsdf().sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
+        throughput *= weight
+        active &= dr.any(weight != 0.0)
+        ray = si.spawn_ray(si.to_world(bs.wo))
+        dr.eval(result, throughput, ray, active)
+        sampler.schedule_state()
+        if not dr.any(active):
+            break
+    return np.array(result, dtype=np.float32).T  # Color3f converts to (3, N)

@@ -1,0 +1,244 @@
+"""Scene objects (``lftransfer.scenes.ObjectConfig``) as Mitsuba scene dicts.
+
+Every object becomes one Mitsuba shape whose dict key, and therefore shape id (``shape.id()``), is derived from
+the object's name by :func:`object_keys`: lower case, each run of characters other than ``a-z0-9`` replaced by
+``_`` (``"red block"`` -> ``"red_block"``); a name that repeats an earlier key, or is ``type``, gets a suffix
+``_2``, ``_3``, ... in list order. Shapes of a loaded scene can then be found again with
+``{s.id(): s for s in scene.shapes()}`` or by comparing ``si.shape`` with ``mi.ShapePtr(shape)``.
+
+Primitives map to Mitsuba's own shapes (``sphere``, ``cube``, ``rectangle``); cylinders, meshes and spheres with a
+non-uniform scale become triangle meshes. Triangle meshes are written once as binary PLY files into a cache
+folder (``$LFT_CACHE_DIR/meshes`` or ``~/.cache/lftransfer/meshes``), named by a hash of their content, and
+referenced by a ``ply`` shape dict, so that every result of this module is a plain dict that callers may copy or
+extend. The PLY holds the object's local geometry; the object's transform is the shape's ``to_world``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from lftransfer.backend import mitsuba
+
+__all__ = ["bsdf_dict", "shape_dict", "scene_dict", "object_keys", "mesh_cache_dir", "write_ply",
+           "SPHERE_SUBDIVISIONS"]
+
+SPHERE_SUBDIVISIONS = 4        # icosphere subdivisions of a non-uniformly scaled sphere (5120 triangles)
+_RESERVED_KEYS = {"type"}
+
+
+def _rgb(value) -> dict:
+    return {"type": "rgb", "value": [float(x) for x in value]}
+
+
+def bsdf_dict(material) -> dict:
+    """Mitsuba BSDF dict of a material.
+
+    - diffuse -> ``diffuse`` with ``reflectance`` = albedo;
+    - glossy -> ``roughplastic`` (GGX, ``alpha`` = roughness), or ``plastic`` when roughness is 0, with
+      ``diffuse_reflectance`` = albedo and ``specular_reflectance`` = specular;
+    - metal -> ``roughconductor`` (material ``none``, GGX, ``alpha`` = roughness), or ``conductor`` when
+      roughness is 0, with ``specular_reflectance`` = specular.
+
+    Args:
+        material: ``DiffuseMaterial``, ``GlossyMaterial`` or ``MetalMaterial``.
+
+    Returns:
+        A dict for ``mi.load_dict``.
+
+    Raises:
+        ValueError: unknown material type.
+    """
+    kind = material.type
+    if kind == "diffuse":
+        return {"type": "diffuse", "reflectance": _rgb(material.albedo)}
+    if kind == "glossy":
+        d = {"type": "plastic", "diffuse_reflectance": _rgb(material.albedo),
+             "specular_reflectance": _rgb(material.specular)}
+        if material.roughness > 0:
+            d.update(type="roughplastic", distribution="ggx", alpha=float(material.roughness))
+        return d
+    if kind == "metal":
+        d = {"type": "conductor", "material": "none", "specular_reflectance": _rgb(material.specular)}
+        if material.roughness > 0:
+            d.update(type="roughconductor", distribution="ggx", alpha=float(material.roughness))
+        return d
+    raise ValueError(f"unknown material type {kind!r}")
+
+
+def mesh_cache_dir() -> Path:
+    """Folder of cached PLY meshes: ``$LFT_CACHE_DIR/meshes`` or ``~/.cache/lftransfer/meshes`` (created)."""
+    root = Path(os.environ.get("LFT_CACHE_DIR", Path.home() / ".cache" / "lftransfer"))
+    path = root / "meshes"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_ply(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None) -> Path:
+    """Write a triangle mesh as a binary little-endian PLY into :func:`mesh_cache_dir`, once per content.
+
+    The file is named by the SHA-256 of its bytes and written atomically (temporary file, then rename), so
+    concurrent writers and readers never see a partial file.
+
+    Args:
+        vertices: (N, 3) positions, metres (stored as float32).
+        faces: (F, 3) vertex indices.
+        normals: optional (N, 3) vertex normals (stored as float32); without them Mitsuba shades with
+            face normals only if the shape dict asks for it (see :func:`shape_dict`).
+
+    Returns:
+        Path of the PLY file.
+    """
+    v = np.ascontiguousarray(vertices, dtype="<f4").reshape(-1, 3)
+    f = np.ascontiguousarray(faces, dtype="<i4").reshape(-1, 3)
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(f"face indices outside [0, {len(v)})")
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if normals is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    vrec = np.empty(len(v), dtype=fields)
+    vrec["x"], vrec["y"], vrec["z"] = v.T
+    if normals is not None:
+        n = np.ascontiguousarray(normals, dtype="<f4").reshape(-1, 3)
+        vrec["nx"], vrec["ny"], vrec["nz"] = n.T
+    frec = np.empty(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    frec["n"] = 3
+    frec["i"] = f
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(v)}"]
+    header += [f"property float {name}" for name, _ in fields]
+    header += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header", ""]
+    data = "\n".join(header).encode("ascii") + vrec.tobytes() + frec.tobytes()
+    folder = mesh_cache_dir()
+    path = folder / f"{hashlib.sha256(data).hexdigest()[:32]}.ply"
+    if path.is_file() and path.stat().st_size == len(data):
+        return path
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=".ply")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _cylinder(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Capped cylinder with per-corner normals: smooth (radial) on the side, flat on the caps."""
+    v, f = obj.triangle_mesh()
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    fn /= np.linalg.norm(fn, axis=1, keepdims=True)
+    corners = v[f].reshape(-1, 3)                                   # unmerged: 3 vertices per face
+    normals = np.repeat(fn, 3, axis=0)
+    side = np.repeat(np.abs(fn[:, 2]) < 0.5, 3)
+    radial = corners[side].copy()
+    radial[:, 2] = 0.0
+    normals[side] = radial / np.linalg.norm(radial, axis=1, keepdims=True)
+    return corners, np.arange(len(corners)).reshape(-1, 3), normals
+
+
+def _ellipsoid(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    import trimesh
+
+    tm = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
+    unit = np.asarray(tm.vertices, np.float64)
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    return unit * obj.radius, np.asarray(tm.faces, np.int64), unit
+
+
+def shape_dict(obj) -> dict:
+    """Mitsuba shape dict of one object, with its BSDF.
+
+    - sphere -> ``sphere`` with ``to_world`` = the object's transform times its radius (an icosphere mesh
+      when the scale is not uniform: Mitsuba's sphere takes no non-uniform scale);
+    - box -> ``cube`` (the [-1, 1]^3 cube) with ``to_world`` including the size / 2 scale;
+    - rectangle -> ``rectangle`` ([-1, 1]^2 in the local xy plane, normal +z), size / 2 scale included;
+    - cylinder -> capped triangle mesh (``ObjectConfig.triangle_mesh``), radial normals on the side;
+    - mesh -> the file's triangles (trimesh, ``force="mesh"``), shaded with face normals.
+
+    Triangle meshes are ``ply`` dicts of a cached file (see the module docs).
+
+    Args:
+        obj: ``lftransfer.scenes.ObjectConfig``.
+
+    Returns:
+        A dict for ``mi.load_dict`` (inside a scene dict).
+    """
+    mi = mitsuba()
+    m = obj.to_world()
+    bsdf = bsdf_dict(obj.material)
+
+    def transform(matrix: np.ndarray):
+        return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
+
+    if obj.shape == "box":
+        return {"type": "cube", "to_world": transform(m @ np.diag([*(np.asarray(obj.size) / 2), 1.0])),
+                "bsdf": bsdf}
+    if obj.shape == "rectangle":
+        sx, sy = np.asarray(obj.size) / 2
+        return {"type": "rectangle", "to_world": transform(m @ np.diag([sx, sy, 1.0, 1.0])), "bsdf": bsdf}
+    if obj.shape == "sphere" and np.ptp(obj.scale3) <= 1e-12 * obj.scale3.max():
+        return {"type": "sphere", "to_world": transform(m @ np.diag([obj.radius] * 3 + [1.0])), "bsdf": bsdf}
+    if obj.shape == "sphere":
+        v, f, n = _ellipsoid(obj)
+        return {"type": "ply", "filename": str(write_ply(v, f, n)), "to_world": transform(m), "bsdf": bsdf}
+    if obj.shape == "cylinder":
+        v, f, n = _cylinder(obj)
+        return {"type": "ply", "filename": str(write_ply(v, f, n)), "to_world": transform(m), "bsdf": bsdf}
+    if obj.shape == "mesh":
+        v, f = obj.triangle_mesh()
+        return {"type": "ply", "filename": str(write_ply(v, f)), "face_normals": True, "to_world": transform(m),
+                "bsdf": bsdf}
+    raise ValueError(f"{obj.name}: unknown shape {obj.shape!r}")
+
+
+def object_keys(objects: Sequence) -> list[str]:
+    """Scene-dict keys (= Mitsuba shape ids) of objects, in order (rule in the module docs).
+
+    Args:
+        objects: ``ObjectConfig`` list (only ``name`` is read).
+
+    Returns:
+        One unique key per object, e.g. ``["red_block", "green_cube", "red_block_2"]``.
+    """
+    used = set(_RESERVED_KEYS)
+    keys = []
+    for obj in objects:
+        base = re.sub(r"[^a-z0-9]+", "_", str(obj.name).lower()).strip("_") or "object"
+        key, n = base, 1
+        while key in used:
+            n += 1
+            key = f"{base}_{n}"
+        used.add(key)
+        keys.append(key)
+    return keys
+
+
+def scene_dict(objects: Sequence, *, extra: dict | None = None) -> dict:
+    """Mitsuba scene dict of objects, plus extra entries.
+
+    Args:
+        objects: ``ObjectConfig`` list; each becomes ``key: shape_dict(obj)`` with ``key`` from
+            :func:`object_keys`.
+        extra: more entries (sensors, emitters, integrators, shapes), added as they are.
+
+    Returns:
+        ``{"type": "scene", ...}``; loads with ``mi.load_dict(d, optimize=False)``.
+
+    Raises:
+        ValueError: an extra key equals ``type`` or an object's key.
+    """
+    d: dict = {"type": "scene"}
+    for key, obj in zip(object_keys(objects), objects):
+        d[key] = shape_dict(obj)
+    for key, value in (extra or {}).items():
+        if key in d:
+            raise ValueError(f"scene_dict: extra entry {key!r} clashes with an object's key or 'type'")
+        d[key] = value
+    return d

@@ -1,0 +1,102 @@
+"""Pictures and the JSON report of a run: the Fig. 4 bounce panel, light field images, composite."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lftransfer.imageio_utils import to_display, write_exr, write_png
+
+
+def display_scale(image: np.ndarray, percentile: float = 99.5, target: float = 0.9) -> float:
+    """Factor that maps the image's ``percentile`` brightness to ``target`` of the display range."""
+    level = float(np.percentile(image, percentile))
+    return target / level if level > 0 else 1.0
+
+
+def _label(tile: np.ndarray, text: str) -> np.ndarray:
+    out = tile.copy()
+    scale = max(0.4, tile.shape[1] / 700)
+    thick = max(1, int(round(scale * 1.5)))
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+    cv2.rectangle(out, (0, 0), (tw + 12, th + base + 12), (0, 0, 0), -1)
+    cv2.putText(out, text, (6, th + 6), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), thick, cv2.LINE_AA)
+    return out
+
+
+def _resize(image: np.ndarray, width: int) -> np.ndarray:
+    h = int(round(image.shape[0] * width / image.shape[1]))
+    return cv2.resize(image, (width, h), interpolation=cv2.INTER_AREA)
+
+
+def bounce_panel(result, ground_truth: np.ndarray, composite_rgb: np.ndarray, *, tile_width: int = 512) -> np.ndarray:
+    """The paper's Fig. 4 as one picture.
+
+    Rows: real side (direct, bounce 1, ...), synthetic side (direct, bounce 1, ...), then the composite and the
+    ground truth. Each tile is shown at its own display scale, written on it relative to the direct image.
+
+    Returns:
+        (H, W, 3) uint8 sRGB.
+    """
+    base_real = display_scale(result.bounces[0].real_view)
+    base_syn = display_scale(result.bounces[0].synthetic_view.rgb)
+    base = min(base_real, base_syn)
+    rows = []
+    for side in ("real", "synthetic"):
+        tiles = []
+        for b in result.bounces:
+            img = b.real_view if side == "real" else b.synthetic_view.rgb
+            if img is None:
+                img = np.zeros_like(result.real_view)
+            img = np.clip(img, 0.0, None)
+            s = base if b.index == 0 else display_scale(img)
+            title = f"{side} {'direct' if b.index == 0 else f'bounce {b.index}'}  x{s / base:.3g}"
+            tiles.append(_label(_resize(to_display(img, s), tile_width), title))
+        rows.append(np.concatenate(tiles, axis=1))
+    last = [_label(_resize(to_display(composite_rgb, base), tile_width), "composite  x1"),
+            _label(_resize(to_display(ground_truth, base), tile_width), "ground truth (path traced)  x1")]
+    width = rows[0].shape[1]
+    last_row = np.concatenate(last, axis=1)
+    if last_row.shape[1] < width:
+        last_row = np.pad(last_row, ((0, 0), (0, width - last_row.shape[1]), (0, 0)))
+    rows.append(last_row[:, :width])
+    return np.concatenate(rows, axis=0)
+
+
+def write_json(path: str | Path, data: dict) -> Path:
+    """Write JSON atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".json", dir=path.parent)
+    with os.fdopen(fd, "w") as fh:
+        json.dump(data, fh, indent=2, sort_keys=False)
+        fh.write("\n")
+    os.replace(tmp, path)
+    return path
+
+
+def write_outputs(out: str | Path, result, ground_truth: np.ndarray, composite_rgb: np.ndarray, report: dict,
+                  captured_raw: np.ndarray | None = None, camera_bits: int = 12) -> list[Path]:
+    """Write every output file of a run into ``out``; returns their paths."""
+    out = Path(out)
+    scale = min(display_scale(result.bounces[0].real_view), display_scale(result.bounces[0].synthetic_view.rgb))
+    files = [
+        write_png(out / "composite.png", to_display(composite_rgb, scale)),
+        write_exr(out / "composite.exr", composite_rgb),
+        write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
+        write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32)),
+        write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb)),
+        write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)
+                  if result.projected_image.dtype == np.uint8 else
+                  (result.projected_image >> 8).astype(np.uint8)),
+    ]
+    if captured_raw is not None:
+        raw = captured_raw.astype(np.float64) / (2 ** camera_bits - 1)
+        files.append(write_png(out / "captured_lf.png", np.round(np.clip(raw * 0.9 / max(np.percentile(raw, 99.9), 1e-9), 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)))
+    files.append(write_json(out / "report.json", report))
+    return files

@@ -1,0 +1,149 @@
+"""``SimRig``: a digital twin of the light field transfer rig.
+
+It owns a hidden truth (the real objects and their materials, the point light, the true lens array and device
+models, noise) and renders the real world physically with Mitsuba:
+
+- the projector's lenslets are direction-dependent area lights (their aperture is the lattice cell), all
+  summed at every shading point, with shadow rays (:class:`lftransfer.render.lights.LightFieldLight`);
+- each LF camera pixel averages the radiance arriving along its ray direction over its lenslet's aperture;
+- real-to-real interreflections come from path tracing inside the real half-space;
+- the lens array is a black absorber just behind the interface plane;
+- the LF camera adds shot and read noise, applies its response and quantises to its bit depth.
+
+The Monte Carlo sampling of the real world uses the same seed for every capture, like a deterministic physical
+process: its error then cancels when captures are differenced; sensor noise does not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lftransfer.lightfield import LensletCodec
+from lftransfer.render.camera import sensor_dict
+from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
+from lftransfer.rig.model import RigModel, nominal_rig
+
+
+class SimRig:
+    """Simulated rig for a scene (``lftransfer.scenes.SceneConfig``).
+
+    Args:
+        scene: the scene; its ``real`` objects become the hidden real world.
+        truth: true rig model; defaults to the rig file's nominal values.
+        capture_spp: rays per LF camera pixel (points on the lenslet aperture).
+        view_spp: rays per view camera pixel.
+        projector_samples: angular resolution (per axis) at which each projector lenslet's emission is
+            resampled from the projector image.
+        aperture_samples: points per projector lenslet aperture for each shading point.
+        seed: seed of the hidden truth's noise.
+
+    Example:
+        >>> rig = SimRig(load_scene(builtin_scene("fig4")))       # doctest: +SKIP
+        >>> raw = rig.capture_lf()                                  # (1536, 2048, 3) uint16
+    """
+
+    def __init__(self, scene, *, truth: RigModel | None = None, capture_spp: int = 4, view_spp: int = 4,
+                 projector_samples: int = 64, aperture_samples: int = 2, seed: int | None = None) -> None:
+        from lftransfer.backend import mitsuba
+
+        mi = mitsuba()
+        self._scene = scene
+        self._truth = truth or nominal_rig(scene.rig)
+        self._seed = int(scene.rig.seed if seed is None else seed)
+        self._rng = np.random.default_rng(self._seed + 7)
+        self.capture_spp = int(capture_spp)
+        self.view_spp = int(view_spp)
+        self.aperture_samples = int(aperture_samples)
+        array = self._truth.array
+        xmin, xmax, ymin, ymax = array.extent()
+        absorber = {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
+            .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
+        }
+        self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": absorber},
+                                       max_depth=scene.render.max_depth)
+        self._point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
+        cam = self._truth.camera
+        self._cam_shape = (cam.device.height, cam.device.width)
+        px = np.stack(np.meshgrid(np.arange(cam.device.width), np.arange(cam.device.height)), -1).reshape(-1, 2)
+        k, d = cam.device.pixel_to_ray(array, px.astype(np.float64))
+        self._pix = np.flatnonzero(k >= 0)                      # camera pixels behind a lenslet
+        self._pix_lenslet = k[self._pix]
+        self._pix_dir = d[self._pix].astype(np.float32)         # (P, 3), d_z > 0
+        prj = self._truth.projector
+        self._prj_shape = (prj.device.height, prj.device.width)
+        self._prj_codec = LensletCodec(array, prj.device, projector_samples, projector_samples)
+        self._prj_encoder = self._truth.encoder(projector_samples, projector_samples)
+        self._projector_light: LightFieldLight | None = None
+        self._view = scene.view
+        self._view_sensor = mi.load_dict(sensor_dict(self._view.origin, self._view.target, self._view.up,
+                                                     self._view.fov_deg, *self._view.resolution))
+
+    # -- the Rig protocol ---------------------------------------------------------------------------------
+    @property
+    def projector_shape(self) -> tuple[int, int]:
+        return self._prj_shape
+
+    @property
+    def lf_camera_shape(self) -> tuple[int, int]:
+        return self._cam_shape
+
+    def project(self, image: np.ndarray) -> None:
+        """Show a projector image ((H, W, 3) unsigned integers of the projector's bit depth)."""
+        image = np.asarray(image)
+        expected = (*self._prj_shape, 3)
+        if image.shape != expected or image.dtype.kind != "u":
+            raise ValueError(f"projector image must be {expected} unsigned integers, got {image.shape} {image.dtype}")
+        radiance = self._prj_encoder.emitted(image)                # (H, W, 3) radiance of each projector pixel
+        lf = self._prj_codec.image_to_lightfield(radiance)          # what each lenslet emits, per direction
+        self._projector_light = None
+        if np.any(lf.data != 0):
+            self._projector_light = LightFieldLight(lf, side="real", model="area",
+                                                    aperture_samples=self.aperture_samples, seed=self._seed + 3)
+
+    def _lights(self):
+        return [self._point_light] + ([self._projector_light] if self._projector_light is not None else [])
+
+    def capture_lf(self) -> np.ndarray:
+        """LF camera image ((H, W, 3) uint16, ``bits``-bit codes) of the real world as it is lit now."""
+        array = self._truth.array
+        centres = array.centres[self._pix_lenslet]                 # (P, 2)
+        offsets = aperture_offsets(array, len(self._pix), self.capture_spp, seed=self._seed + 101)  # (P, S, 2)
+        acc = np.zeros((len(self._pix), 3), np.float64)
+        origins = np.zeros((len(self._pix), 3), np.float32)
+        for s in range(self.capture_spp):
+            origins[:, :2] = centres + offsets[:, s]
+            radiance, _, _ = self._real.render_rays(origins, self._pix_dir, self._lights(), seed=self._seed + s)
+            acc += radiance
+        image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
+        image[self._pix] = acc / self.capture_spp
+        image = image.reshape(*self._cam_shape, 3)
+        return self._expose(image)
+
+    def _expose(self, radiance: np.ndarray) -> np.ndarray:
+        """Radiance image -> noisy, quantised camera codes (shot noise, read noise, response, bit depth)."""
+        cam = self._truth.camera
+        rig = self._scene.rig
+        signal = cam.exposure * radiance
+        if cam.vignetting is not None:
+            signal = signal * cam.vignetting[..., None]
+        electrons = np.clip(signal, 0, None) * rig.full_well
+        noisy = self._rng.poisson(electrons) / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
+        code = cam.response.encode(np.clip(noisy, 0.0, 1.0))
+        levels = 2 ** cam.bits - 1
+        return np.round(code * levels).astype(np.uint16)
+
+    def capture_view(self) -> np.ndarray:
+        """View camera image ((H, W, 3) float32 linear radiance) of the real world as it is lit now."""
+        w, h = self._view.resolution
+        img = self._real.render_view(self._view_sensor, w, h, self._lights(), spp=self.view_spp, seed=self._seed)
+        return img.rgb
+
+    # -- for verification only (never used by the pipeline) ------------------------------------------------
+    @property
+    def truth(self) -> RigModel:
+        """The hidden true rig model. Only verification code may read it."""
+        return self._truth

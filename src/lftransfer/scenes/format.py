@@ -1,0 +1,667 @@
+"""The scene file format: pydantic models of a TOML scene and its loader.
+
+A scene file describes the light field interface hardware (``[rig]``), the view camera (``[view]``), the one
+point light (``[light]``), render settings (``[render]``) and the objects of the two half-spaces
+(``[[real]]`` at z > 0, known only to the simulated rig; ``[[synthetic]]`` at z < 0, rendered). Units are
+metres, degrees and linear RGB. ``docs/scene-format.md`` is the reference of every field.
+
+This module does not import Mitsuba: :mod:`lftransfer.render.shapes` turns the validated objects into
+Mitsuba scene dicts.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import numbers
+import re
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import numpy as np
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    ValidationError,
+    Tag,
+    ValidationInfo,
+    field_validator,
+)
+
+__all__ = [
+    "SceneError",
+    "RigConfig",
+    "ViewConfig",
+    "LightConfig",
+    "RenderConfig",
+    "DiffuseMaterial",
+    "GlossyMaterial",
+    "MetalMaterial",
+    "Material",
+    "ObjectConfig",
+    "SceneConfig",
+    "load_scene",
+    "builtin_scene",
+    "builtin_scenes",
+    "with_overrides",
+    "read_mesh",
+]
+
+
+class SceneError(ValueError):
+    """An invalid scene file.
+
+    The message reads ``"<file>: <field path>: <what was expected, what was found>"``, e.g.
+    ``"fig4.toml: real[0].material.roughness: Input should be less than or equal to 1, found 1.5"``.
+    """
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Field types
+
+def _number(value: Any) -> Any:
+    """Reject strings and booleans where a number is expected (pydantic's lax mode would convert them)."""
+    if isinstance(value, (str, bool)):
+        raise ValueError(f"expected a number, found {type(value).__name__} {value!r}")
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        return float(value)
+    return value
+
+
+_Num = BeforeValidator(_number)
+Float = Annotated[float, _Num, Field(allow_inf_nan=False)]
+PosFloat = Annotated[float, _Num, Field(gt=0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, _Num, Field(ge=0, allow_inf_nan=False)]
+Unit = Annotated[float, _Num, Field(ge=0, le=1, allow_inf_nan=False)]
+PosInt = Annotated[int, _Num, Field(gt=0)]
+Vec3 = Annotated[list[Float], Field(min_length=3, max_length=3)]
+PosVec3 = Annotated[list[PosFloat], Field(min_length=3, max_length=3)]
+NonNegVec3 = Annotated[list[NonNegFloat], Field(min_length=3, max_length=3)]
+RGBUnit = Annotated[list[Unit], Field(min_length=3, max_length=3)]
+Size2 = Annotated[list[PosInt], Field(min_length=2, max_length=2)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=False)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Hardware, camera, light, render settings
+
+class RigConfig(_Model):
+    """Nominal values of the light field interface hardware (lens array, LF camera, projector).
+
+    Attributes:
+        lattice: lens lattice, ``"hex"`` or ``"rect"``.
+        rows, cols: number of lenslets.
+        pitch_mm: lens pitch, millimetres.
+        focal_mm: lenslet focal length, millimetres.
+        aperture: ``"cell"`` (apertures tile the lattice cells) or ``"round"`` (disks of diameter pitch).
+        lf_camera, projector: [width, height] in pixels.
+        angular_samples: U = V of the light field grid.
+        lf_camera_bits, projector_bits: bit depth of the device codes.
+        camera_gamma: per-channel camera response, code = signal^(1/gamma).
+        projector_gamma: per-channel projector response, radiance = code^gamma.
+        exposure: normalised camera signal per unit radiance (per W m^-2 sr^-1).
+        projector_max_radiance: radiance of a full-code projector pixel, W m^-2 sr^-1.
+        read_noise: standard deviation of the read noise, fraction of full scale.
+        full_well: electrons at full scale (sets the shot noise).
+        seed: seed of the simulated noise.
+    """
+
+    lattice: Literal["hex", "rect"] = "hex"
+    rows: PosInt = 10
+    cols: PosInt = 12
+    pitch_mm: PosFloat = 25.4
+    focal_mm: PosFloat = 25.4
+    aperture: Literal["cell", "round"] = "cell"
+    lf_camera: Size2 = Field(default_factory=lambda: [2048, 1536])
+    projector: Size2 = Field(default_factory=lambda: [1024, 768])
+    angular_samples: PosInt = 48
+    lf_camera_bits: Annotated[int, _Num, Field(ge=1, le=16)] = 12
+    projector_bits: Annotated[int, _Num, Field(ge=1, le=16)] = 8
+    camera_gamma: PosVec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+    projector_gamma: PosVec3 = Field(default_factory=lambda: [2.2, 2.2, 2.2])
+    exposure: PosFloat = 0.25
+    projector_max_radiance: PosFloat = 4.0
+    read_noise: NonNegFloat = 0.001
+    full_well: PosFloat = 20000.0
+    seed: Annotated[int, _Num, Field(ge=0)] = 0
+
+    @property
+    def pitch(self) -> float:
+        """Lens pitch in metres."""
+        return self.pitch_mm * 1e-3
+
+    @property
+    def focal_length(self) -> float:
+        """Lenslet focal length in metres."""
+        return self.focal_mm * 1e-3
+
+
+class ViewConfig(_Model):
+    """The view camera, a pinhole that sees both half-spaces.
+
+    Attributes:
+        resolution: [width, height] in pixels.
+        origin, target: camera position and the point it looks at, metres.
+        up: up vector (need not be unit length, must not be parallel to the viewing direction).
+        fov_deg: horizontal field of view, degrees, in (0, 180).
+    """
+
+    resolution: Size2 = Field(default_factory=lambda: [1024, 768])
+    origin: Vec3 = Field(default_factory=lambda: [0.55, 0.22, 0.0])
+    target: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    up: Vec3 = Field(default_factory=lambda: [0.0, 1.0, 0.0])
+    fov_deg: Annotated[float, _Num, Field(gt=0, lt=180)] = 35.0
+
+    @field_validator("target")
+    @classmethod
+    def _target_differs(cls, target: list[float], info: ValidationInfo) -> list[float]:
+        origin = info.data.get("origin")
+        if origin is not None and np.allclose(origin, target, rtol=0, atol=1e-12):
+            raise ValueError(f"target must differ from origin, found both {target}")
+        return target
+
+    @field_validator("up")
+    @classmethod
+    def _up_not_parallel(cls, up: list[float], info: ValidationInfo) -> list[float]:
+        origin, target = info.data.get("origin"), info.data.get("target")
+        u = np.asarray(up, float)
+        if np.linalg.norm(u) == 0:
+            raise ValueError("up must be a non-zero vector, found [0, 0, 0]")
+        if origin is not None and target is not None:
+            d = np.asarray(target, float) - np.asarray(origin, float)
+            if np.linalg.norm(np.cross(d / np.linalg.norm(d), u / np.linalg.norm(u))) < 1e-6:
+                raise ValueError(f"up must not be parallel to the viewing direction {d.tolist()}, found {up}")
+        return up
+
+
+class LightConfig(_Model):
+    """The point light. It is real (the simulated rig has it) and the renderer uses a virtual twin.
+
+    Attributes:
+        position: metres.
+        intensity: radiant intensity per RGB channel, W/sr.
+    """
+
+    position: Vec3
+    intensity: NonNegVec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+
+class RenderConfig(_Model):
+    """Render settings.
+
+    Attributes:
+        lighting_model: how the incident light field lights the synthetic scene: ``"area"`` (lenslet apertures
+            sampled), ``"point"`` (the paper's projective point lights) or ``"prefiltered"``.
+        aperture_samples: area model: samples per lenslet aperture.
+        spp: samples per pixel of view renders and per light field sample.
+        max_depth: path depth (surface interactions) inside each half-space.
+        gt_spp: samples per pixel of the path-traced ground truth.
+    """
+
+    lighting_model: Literal["area", "point", "prefiltered"] = "area"
+    aperture_samples: PosInt = 4
+    spp: PosInt = 4
+    max_depth: PosInt = 3
+    gt_spp: PosInt = 256
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Materials
+
+class DiffuseMaterial(_Model):
+    """Lambertian reflector.
+
+    Attributes:
+        albedo: diffuse reflectance per RGB channel, in [0, 1].
+    """
+
+    type: Literal["diffuse"] = "diffuse"
+    albedo: RGBUnit = Field(default_factory=lambda: [0.5, 0.5, 0.5])
+
+
+class GlossyMaterial(_Model):
+    """Diffuse base under a rough dielectric coating (Mitsuba ``roughplastic``, GGX, IOR 1.49).
+
+    Attributes:
+        albedo: diffuse reflectance of the base, in [0, 1].
+        specular: multiplier of the coating's Fresnel reflection, in [0, 1].
+        roughness: GGX alpha in [0, 1]; 0 is a smooth coating.
+    """
+
+    type: Literal["glossy"] = "glossy"
+    albedo: RGBUnit = Field(default_factory=lambda: [0.5, 0.5, 0.5])
+    specular: RGBUnit = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+    roughness: Unit = 0.1
+
+
+class MetalMaterial(_Model):
+    """Rough conductor with a given reflectance (Mitsuba ``roughconductor``, material ``none``, GGX).
+
+    Attributes:
+        specular: reflectance per RGB channel, in [0, 1].
+        roughness: GGX alpha in [0, 1]; 0 is a mirror.
+    """
+
+    type: Literal["metal"] = "metal"
+    specular: RGBUnit = Field(default_factory=lambda: [0.9, 0.9, 0.9])
+    roughness: Unit = 0.1
+
+
+def _material_tag(value: Any) -> str | None:
+    """The material's ``type``; a table without one is diffuse."""
+    tag = value.get("type", "diffuse") if isinstance(value, dict) else getattr(value, "type", None)
+    return tag if isinstance(tag, str) else None
+
+
+Material = Annotated[
+    Union[Annotated[DiffuseMaterial, Tag("diffuse")], Annotated[GlossyMaterial, Tag("glossy")],
+          Annotated[MetalMaterial, Tag("metal")]],
+    Discriminator(_material_tag, custom_error_type="material_type",
+                  custom_error_message="a material table needs type = 'diffuse', 'glossy' or 'metal'"),
+]
+_MATERIAL_TAGS = {"diffuse", "glossy", "metal"}
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Objects
+
+ShapeName = Literal["sphere", "box", "rectangle", "cylinder", "mesh"]
+_SIZE_COMPONENTS = {"box": 3, "rectangle": 2}
+_NEEDS = {"sphere": {"radius"}, "box": {"size"}, "rectangle": {"size"}, "cylinder": {"radius", "height"},
+          "mesh": {"file"}}
+CYLINDER_SECTIONS = 64          # facets around a cylinder's triangle mesh
+
+
+@functools.lru_cache(maxsize=32)
+def _read_mesh(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    mesh = trimesh.load(path, force="mesh")
+    vertices = np.array(mesh.vertices, dtype=np.float64)
+    faces = np.array(mesh.faces, dtype=np.int64)
+    if faces.ndim != 2 or len(faces) == 0:
+        raise ValueError("the file holds no triangles")
+    vertices.setflags(write=False)
+    faces.setflags(write=False)
+    return vertices, faces
+
+
+def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of a mesh file (OBJ, PLY, STL, ...), cached by path, size and modification time.
+
+    Args:
+        path: the file.
+
+    Returns:
+        vertices (N, 3) float64 in the file's units (metres) and faces (F, 3) int64; read-only arrays.
+    """
+    st = Path(path).stat()
+    return _read_mesh(str(Path(path).resolve()), st.st_mtime_ns, st.st_size)
+
+
+def _rotation(rotate_deg) -> np.ndarray:
+    """R = Rz @ Ry @ Rx: rotations about the world x, then y, then z axes (degrees)."""
+    ax, ay, az = np.radians(np.asarray(rotate_deg, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+class ObjectConfig(_Model):
+    """One object of a half-space: a primitive or a mesh, a transform and a material.
+
+    The object's local geometry (centred at its local origin) is scaled by ``scale``, rotated about the world
+    x, then y, then z axes by ``rotate_deg`` and translated by ``translate``.
+
+    Attributes:
+        name: a label; Mitsuba shape ids are derived from it (see :mod:`lftransfer.render.shapes`).
+        shape: ``"sphere"``, ``"box"``, ``"rectangle"``, ``"cylinder"`` or ``"mesh"``.
+        size: box: full edge lengths [sx, sy, sz]; rectangle: [sx, sy] (in its local xy plane, normal +z);
+            metres.
+        radius: sphere and cylinder radius, metres.
+        height: cylinder height along its local z axis (capped, centred at the origin), metres.
+        file: mesh file (OBJ/PLY/STL); relative paths are relative to the scene file; stored absolute.
+        translate: metres.
+        rotate_deg: Euler angles about x, then y, then z (world axes), degrees.
+        scale: uniform factor or [sx, sy, sz], applied first.
+        material: diffuse, glossy or metal (chosen by its ``type``).
+    """
+
+    name: Annotated[str, Field(min_length=1)]
+    shape: ShapeName
+    size: list[PosFloat] | None = Field(default=None, validate_default=True)
+    radius: PosFloat | None = Field(default=None, validate_default=True)
+    height: PosFloat | None = Field(default=None, validate_default=True)
+    file: Path | None = Field(default=None, validate_default=True)
+    translate: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rotate_deg: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    scale: Union[float, list[float]] = 1.0
+    material: Material = Field(default_factory=DiffuseMaterial)
+
+    # --- validation -------------------------------------------------------------------------------------------
+    @staticmethod
+    def _check_presence(field: str, value: Any, info: ValidationInfo) -> None:
+        shape = info.data.get("shape")
+        if shape is None:
+            return
+        if field in _NEEDS[shape] and value is None:
+            raise ValueError(f"a {shape} needs '{field}', found none")
+        if field not in _NEEDS[shape] and value is not None:
+            raise ValueError(f"'{field}' does not apply to a {shape} (it takes {sorted(_NEEDS[shape])}), "
+                             f"found {value!r}")
+
+    @field_validator("size")
+    @classmethod
+    def _size(cls, value: list[float] | None, info: ValidationInfo) -> list[float] | None:
+        cls._check_presence("size", value, info)
+        shape = info.data.get("shape")
+        if value is not None and shape in _SIZE_COMPONENTS and len(value) != _SIZE_COMPONENTS[shape]:
+            raise ValueError(f"a {shape} size has {_SIZE_COMPONENTS[shape]} components, found {len(value)}: {value}")
+        return value
+
+    @field_validator("radius", "height")
+    @classmethod
+    def _radius_height(cls, value: float | None, info: ValidationInfo) -> float | None:
+        cls._check_presence(info.field_name, value, info)
+        return value
+
+    @field_validator("file", mode="plain")
+    @classmethod
+    def _file(cls, value: Any, info: ValidationInfo) -> Path | None:
+        if value is not None and not isinstance(value, (str, Path)):
+            raise ValueError(f"expected a file path string, found {type(value).__name__} {value!r}")
+        cls._check_presence("file", value, info)
+        if value is None:
+            return None
+        path = Path(value).expanduser()
+        if not path.is_absolute():
+            base = (info.context or {}).get("base_dir")
+            path = Path(base) / path if base is not None else path
+        path = path.resolve()
+        if not path.is_file():
+            raise ValueError(f"mesh file does not exist: {path}")
+        try:
+            read_mesh(path)
+        except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
+            raise ValueError(f"cannot read a triangle mesh from {path}: {exc}") from None
+        return path
+
+    @field_validator("scale", mode="plain")
+    @classmethod
+    def _scale(cls, value: Any) -> float | list[float]:
+        def positive(x: Any) -> float:
+            if isinstance(x, (str, bool)) or not isinstance(x, numbers.Real):
+                raise ValueError(f"scale must be a number or 3 numbers, found {type(x).__name__} {x!r}")
+            if not math.isfinite(float(x)) or float(x) <= 0:
+                raise ValueError(f"scale must be positive, found {x!r}")
+            return float(x)
+
+        if isinstance(value, (list, tuple, np.ndarray)):
+            if len(value) != 3:
+                raise ValueError(f"scale needs 1 or 3 components, found {len(value)}: {list(value)}")
+            return [positive(x) for x in value]
+        return positive(value)
+
+    # --- geometry ---------------------------------------------------------------------------------------------
+    @property
+    def scale3(self) -> np.ndarray:
+        """Scale factors (3,) along the local axes."""
+        return np.broadcast_to(np.asarray(self.scale, dtype=np.float64), (3,)).copy()
+
+    def rotation(self) -> np.ndarray:
+        """Rotation matrix (3, 3) of ``rotate_deg`` (x, then y, then z about the world axes)."""
+        return _rotation(self.rotate_deg)
+
+    def to_world(self) -> np.ndarray:
+        """Object-to-world matrix: scale, then rotate about x, y, z, then translate.
+
+        The primitive's own extent (``size``, ``radius``, ``height``) is not included: the local geometry is
+        the actual-size object centred at the origin.
+
+        Returns:
+            (4, 4) float64 homogeneous matrix, metres.
+        """
+        m = np.eye(4)
+        m[:3, :3] = self.rotation() @ np.diag(self.scale3)
+        m[:3, 3] = self.translate
+        return m
+
+    def triangle_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """Local-space triangles of a cylinder (capped, ``CYLINDER_SECTIONS`` facets) or a mesh object.
+
+        Returns:
+            vertices (N, 3) float64 in local coordinates (metres, before :meth:`to_world`), faces (F, 3) int64.
+
+        Raises:
+            ValueError: for the other shapes.
+        """
+        if self.shape == "cylinder":
+            import trimesh
+
+            tm = trimesh.creation.cylinder(radius=self.radius, height=self.height, sections=CYLINDER_SECTIONS)
+            return np.asarray(tm.vertices, np.float64), np.asarray(tm.faces, np.int64)
+        if self.shape == "mesh":
+            return read_mesh(self.file)
+        raise ValueError(f"{self.name}: a {self.shape} is not a triangle mesh")
+
+    def bounds(self) -> np.ndarray:
+        """World-space axis-aligned bounding box.
+
+        Exact for boxes, rectangles, spheres (ellipsoids under non-uniform scale) and cylinders (the true
+        cylinder, not its facets); the transformed vertices' extent for meshes.
+
+        Returns:
+            (2, 3) float64: [min corner, max corner], metres.
+        """
+        m = self.to_world()
+        a, t = m[:3, :3], m[:3, 3]
+        if self.shape in ("box", "rectangle"):
+            half = np.zeros(3)
+            half[: len(self.size)] = np.asarray(self.size) / 2
+            ext = np.abs(a) @ half
+        elif self.shape == "sphere":
+            ext = self.radius * np.linalg.norm(a, axis=1)
+        elif self.shape == "cylinder":
+            ext = np.abs(a[:, 2]) * self.height / 2 + self.radius * np.hypot(a[:, 0], a[:, 1])
+        else:
+            v = self.triangle_mesh()[0] @ a.T + t
+            return np.stack([v.min(0), v.max(0)])
+        return np.stack([t - ext, t + ext])
+
+
+def _in_half_space(side: str):
+    def check(obj: ObjectConfig) -> ObjectConfig:
+        lo, hi = obj.bounds()
+        if side == "real" and lo[2] <= 0:
+            raise ValueError(f"a real object must lie in z > 0; '{obj.name}' spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
+        if side == "synthetic" and hi[2] >= 0:
+            raise ValueError(f"a synthetic object must lie in z < 0; '{obj.name}' spans z in "
+                             f"[{lo[2]:.4g}, {hi[2]:.4g}] m")
+        return obj
+
+    return AfterValidator(check)
+
+
+RealObject = Annotated[ObjectConfig, _in_half_space("real")]
+SyntheticObject = Annotated[ObjectConfig, _in_half_space("synthetic")]
+
+
+class SceneConfig(_Model):
+    """A whole scene.
+
+    Attributes:
+        rig: light field interface hardware (defaults: the paper's rig).
+        view: the view camera.
+        light: the point light (required).
+        render: render settings.
+        real: objects of the real half-space (bounding boxes in z > 0).
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        source: the TOML file it was loaded from, or None.
+    """
+
+    rig: RigConfig = Field(default_factory=RigConfig)
+    view: ViewConfig = Field(default_factory=ViewConfig)
+    light: LightConfig
+    render: RenderConfig = Field(default_factory=RenderConfig)
+    real: list[RealObject] = Field(default_factory=list)
+    synthetic: list[SyntheticObject] = Field(default_factory=list, validate_default=True)
+    source: Path | None = None
+
+    @field_validator("synthetic")
+    @classmethod
+    def _some_object(cls, value: list[ObjectConfig], info: ValidationInfo) -> list[ObjectConfig]:
+        real = info.data.get("real")
+        if real is not None and not real and not value:
+            raise ValueError("a scene needs at least one [[real]] or [[synthetic]] object, found none")
+        return value
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Loading
+
+def _field_path(loc: tuple) -> str:
+    parts: list[str] = []
+    for i, item in enumerate(loc):
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+            continue
+        if item in _MATERIAL_TAGS and i > 0 and loc[i - 1] == "material":
+            continue            # the discriminated union's tag, not a field
+        if item.startswith("function-") or item.startswith("list["):
+            continue
+        parts.append(("." if parts else "") + item)
+    return "".join(parts) or "<scene>"
+
+
+def _describe(err: dict) -> str:
+    path = _field_path(tuple(err.get("loc", ())))
+    msg = err.get("msg", "invalid")
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    if err.get("type") == "extra_forbidden":
+        msg = "unknown key (not a field of this table)"
+    elif err.get("type") == "missing":
+        msg = "required field is missing"
+    text = f"{path}: {msg}"
+    if err.get("type") == "material_type" and isinstance(err.get("input"), dict):
+        text += f", found type = {err['input'].get('type')!r}"
+    if err.get("type") not in ("value_error", "missing", "assertion_error") and "input" in err:
+        found = err["input"]
+        if not isinstance(found, (dict, BaseModel)):
+            text += f", found {found!r}"
+    return text
+
+
+def _scene_error(name: str, exc: ValidationError) -> SceneError:
+    errors = exc.errors(include_url=False)
+    text = f"{name}: {_describe(errors[0])}"
+    if len(errors) > 1:
+        text += f" (and {len(errors) - 1} more: " + "; ".join(_describe(e) for e in errors[1:4])
+        text += "; ..." if len(errors) > 4 else ""
+        text += ")"
+    return SceneError(text)
+
+
+def load_scene(path: str | Path) -> SceneConfig:
+    """Read and validate a scene TOML file.
+
+    Args:
+        path: the file; mesh paths inside it are relative to its folder.
+
+    Returns:
+        The validated scene, with ``source`` set to the file's absolute path.
+
+    Raises:
+        SceneError: unreadable file, malformed TOML or an invalid field; one message naming the file and the
+            field path (e.g. ``real[0].material.roughness``).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read the scene file: {exc.strerror or exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: <toml>: malformed TOML: {exc}") from None
+    if "source" in data:
+        raise SceneError(f"{path}: source: not a scene field (it is set by the loader), found {data['source']!r}")
+    data["source"] = path.resolve()
+    try:
+        return SceneConfig.model_validate(data, context={"base_dir": path.resolve().parent})
+    except ValidationError as exc:
+        raise _scene_error(str(path), exc) from None
+
+
+def with_overrides(scene: SceneConfig, **changes: Any) -> SceneConfig:
+    """A copy of a scene with some fields changed, validated again.
+
+    Table-valued fields (``rig``, ``view``, ``light``, ``render``) given as dicts are merged into the current
+    table; other values (including whole config objects and the object lists) replace it.
+
+    Args:
+        scene: the scene.
+        **changes: e.g. ``view={"resolution": [256, 192]}``, ``render={"gt_spp": 16}``,
+            ``rig=scene.rig.model_copy(update=...)``, ``synthetic=[]``.
+
+    Returns:
+        A new validated SceneConfig.
+
+    Raises:
+        SceneError: unknown field or invalid value (message names the scene's file, or ``<scene>``).
+    """
+    data = scene.model_dump()
+    for key, value in changes.items():
+        if isinstance(value, BaseModel):
+            value = value.model_dump()
+        elif isinstance(value, (list, tuple)):
+            value = [v.model_dump() if isinstance(v, BaseModel) else v for v in value]
+        if isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = {**data[key], **value}
+        else:
+            data[key] = value
+    base = scene.source.parent if scene.source else None
+    try:
+        return SceneConfig.model_validate(data, context={"base_dir": base})
+    except ValidationError as exc:
+        raise _scene_error(str(scene.source) if scene.source else "<scene>", exc) from None
+
+
+_BUILTIN_PACKAGE = "lftransfer.scenes"
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the scene files shipped with the package (``fig4``, ...), sorted."""
+    root = resources.files(_BUILTIN_PACKAGE)
+    return sorted(p.name[: -len(".toml")] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def builtin_scene(name: str = "fig4") -> Path:
+    """Path of a scene TOML shipped with the package.
+
+    Args:
+        name: scene name without ``.toml`` (``"fig4"`` is the paper's Fig. 4 scene).
+
+    Returns:
+        The file's path (pass it to :func:`load_scene`).
+
+    Raises:
+        SceneError: unknown name; the message lists the available scenes.
+    """
+    available = builtin_scenes()
+    if not re.fullmatch(r"[A-Za-z0-9_\-]+", name or "") or name not in available:
+        raise SceneError(f"{name}: no built-in scene of that name; available: {', '.join(available)}")
+    return Path(str(resources.files(_BUILTIN_PACKAGE) / f"{name}.toml"))

@@ -1,0 +1,262 @@
+"""The bounce loop of light field transfer (DESIGN.md section 4).
+
+Light transport is linear, so the real scene's response to a projected light field is separated from its
+response to the real point light by differencing two captures, and each bounce can be inspected alone:
+
+- direct: R_0 = decode(capture(black)); Ls_0, S_0 rendered with the virtual point light only;
+- bounce n >= 1: R_n = (decode(capture(encode(g_n Ls_{n-1}))) - R_0) / g_n, the gain g_n filling the
+  projector's range; Ls_n, S_n rendered with the synthetic scene lit by R_{n-1} only;
+- final frame: real view = view camera while the projector shows encode(Ls_0 + ... + Ls_{N-1});
+  synthetic view = S_0 + ... + S_N.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from lftransfer.lightfield import LightField
+from lftransfer.render.camera import sensor_dict
+from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
+from lftransfer.rig.base import Rig
+from lftransfer.rig.model import RigModel
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class TransferSettings:
+    """How a transfer runs.
+
+    Attributes:
+        bounces: N, light field exchanges after the direct frame.
+        angular_samples: U = V of the light field grid.
+        lighting_model: how the captured light field lights the synthetic scene ("area", "point", "prefiltered").
+        aperture_samples: lenslet aperture points per shading point (area model).
+        lf_spp: rays per light field sample when rendering the outgoing light field.
+        view_spp: rays per view pixel for synthetic renders.
+        projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
+        bounce_views: also capture the real view for every bounce (for the Fig. 4 panel).
+        seed: Monte Carlo seed of the synthetic renders.
+    """
+
+    bounces: int = 2
+    angular_samples: int = 48
+    lighting_model: str = "area"
+    aperture_samples: int = 4
+    lf_spp: int = 4
+    view_spp: int = 4
+    projector_fill: float = 0.95
+    bounce_views: bool = True
+    seed: int = 0
+
+
+@dataclass
+class Bounce:
+    """One bounce's images and light fields.
+
+    Attributes:
+        index: n (0 = direct light).
+        real_lf: R_n, light field captured from the real scene due to this bounce (K, V, U, 3).
+        synthetic_lf: Ls_n, light field the synthetic scene sends back, or None where not needed.
+        synthetic_view: S_n, view render of the synthetic scene due to this bounce.
+        real_view: the real scene's view image due to this bounce (differenced), when captured.
+        projector_gain: g_n used to capture R_n (None for n = 0).
+    """
+
+    index: int
+    real_lf: LightField
+    synthetic_lf: LightField | None
+    synthetic_view: ViewImage
+    real_view: np.ndarray | None = None
+    projector_gain: float | None = None
+
+    @property
+    def real_energy(self) -> float:
+        """Radiant flux of R_n through the array, W (mean over RGB)."""
+        return float(np.mean(self.real_lf.power()))
+
+    @property
+    def synthetic_energy(self) -> float:
+        """Radiant flux of Ls_n through the array, W (mean over RGB); 0 when Ls_n was not rendered."""
+        return 0.0 if self.synthetic_lf is None else float(np.mean(self.synthetic_lf.power()))
+
+
+@dataclass
+class TransferResult:
+    """Everything a transfer produced.
+
+    Attributes:
+        bounces: direct light and each bounce, index 0..N.
+        real_view: final real view, (H, W, 3) float32, projector showing encode(sum of Ls_0..Ls_{N-1}).
+        real_view_direct: real view with the projector black (for the 0-bounce composite).
+        synthetic_view: sum of S_0..S_N (rgb) with the coverage alpha of S_0.
+        projected_image: the final projector image (device integers).
+        projected_lf: sum of Ls_0..Ls_{N-1}.
+        clipped_fraction: fraction of lit light field samples above the projector's range in the final frame.
+        captured_raw: the LF camera image of the direct frame (device integers).
+        timings_s: seconds per stage.
+    """
+
+    bounces: list[Bounce]
+    real_view: np.ndarray
+    real_view_direct: np.ndarray
+    synthetic_view: ViewImage
+    projected_image: np.ndarray
+    projected_lf: LightField
+    clipped_fraction: float
+    captured_raw: np.ndarray
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.totals: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, stage: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.totals[stage] = self.totals.get(stage, 0.0) + time.perf_counter() - t0
+
+
+def projector_gain(lf: LightField, max_radiance: float, fill: float = 0.95) -> float:
+    """Gain g that brings the brightest sample of ``lf`` to ``fill`` of the projector's full radiance."""
+    peak = float(np.max(lf.data))
+    return fill * max_radiance / peak if peak > 0 else 1.0
+
+
+def real_response(rig: Rig, decoder, encoder, incident: LightField, direct: LightField, gain: float, *,
+                  timer: Callable | None = None) -> LightField:
+    """The real scene's response to a light field, separated by differencing.
+
+    R = (decode(capture(encode(g * incident))) - direct) / g, where ``direct`` is the decoded capture with the
+    projector black. The gain g puts a weak light field into the projector's range and is divided out again.
+
+    Args:
+        rig: the rig (project, capture_lf).
+        decoder: raw LF camera image -> LightField.
+        encoder: LightField -> projector image.
+        incident: light field to project (K, V, U, 3).
+        direct: R_0, decoded capture with the projector black.
+        gain: g > 0.
+        timer: optional stage timer (a context manager factory taking a stage name).
+
+    Returns:
+        LightField of the real scene's response (K, V, U, 3).
+    """
+    if not gain > 0:
+        raise ValueError(f"projector gain must be > 0, got {gain}")
+    time_it = timer or (lambda _stage: nullcontext())
+    with time_it("encode"):
+        pattern = encoder(incident * gain)
+    rig.project(pattern)
+    with time_it("capture"):
+        raw = rig.capture_lf()
+    with time_it("decode"):
+        return (decoder(raw) - direct) / gain
+
+
+def count_steps(settings: TransferSettings) -> int:
+    """Number of progress callbacks :func:`run_transfer` makes (for progress bars)."""
+    per_bounce = 3 + (1 if settings.bounce_views else 0)
+    return 4 + settings.bounces * per_bounce + 2
+
+
+def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = TransferSettings(), *,
+                 progress: Progress | None = None) -> TransferResult:
+    """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
+
+    Args:
+        rig: the rig (only its :class:`~lftransfer.rig.base.Rig` methods are used).
+        model: what the pipeline knows of the rig (nominal or calibrated), never the rig's hidden truth.
+        scene: ``lftransfer.scenes.SceneConfig``; its ``synthetic`` objects, ``light`` and ``view`` are used.
+        settings: see :class:`TransferSettings`.
+        progress: called with a short description at the start of each step.
+
+    Returns:
+        TransferResult with every bounce kept.
+    """
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    step = progress or (lambda _msg: None)
+    timer = _Timer()
+    U = V = settings.angular_samples
+    decoder = model.decoder(U, V)
+    encoder = model.encoder(U, V)
+    synthetic = HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
+    point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
+    view = scene.view
+    width, height = view.resolution
+    sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, width, height))
+    black = np.zeros((*rig.projector_shape, 3), np.uint8 if model.projector.bits <= 8 else np.uint16)
+
+    def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
+        with timer("render_lightfield"):
+            ls = synthetic.render_lightfield(model.array, lights, U, V, model="area" if settings.lighting_model == "area" else "point",
+                                             spp=settings.lf_spp, seed=seed)
+        with timer("render_view"):
+            s = synthetic.render_view(sensor, width, height, lights, spp=settings.view_spp, seed=seed)
+        return ls, s
+
+    # Direct light.
+    step("capture direct (projector black)")
+    rig.project(black)
+    with timer("capture"):
+        raw0 = rig.capture_lf()
+    step("capture view, projector black")
+    with timer("capture_view"):
+        real_view_direct = rig.capture_view()
+    with timer("decode"):
+        r0 = decoder(raw0)
+    step("render synthetic direct")
+    ls0, s0 = render_synthetic([point_light], settings.seed)
+    bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
+    step("direct done")
+
+    for n in range(1, settings.bounces + 1):
+        prev = bounces[n - 1]
+        # Real side: project g Ls_{n-1}, capture, difference.
+        gain = projector_gain(prev.synthetic_lf, model.projector.max_radiance, settings.projector_fill)
+        step(f"bounce {n}: project Ls_{n - 1} (gain {gain:.3g}), capture the real response")
+        rn = real_response(rig, decoder, encoder, prev.synthetic_lf, r0, gain, timer=timer)
+        real_view_n = None
+        if settings.bounce_views:
+            step(f"bounce {n}: capture real view")
+            with timer("capture_view"):
+                real_view_n = (rig.capture_view() - real_view_direct) / gain
+        # Synthetic side: lit by R_{n-1} only.
+        step(f"bounce {n}: render synthetic lit by R_{n - 1}")
+        incident = LightFieldLight(prev.real_lf, side="synthetic", model=settings.lighting_model,
+                                   aperture_samples=settings.aperture_samples, seed=settings.seed + n)
+        lsn, sn = render_synthetic([incident], settings.seed + 1000 * n)
+        bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
+        step(f"bounce {n} done")
+
+    # Final frame.
+    step("final frame: project the sum of the synthetic light fields")
+    projected = bounces[0].synthetic_lf.copy()
+    for b in bounces[1:-1]:
+        projected = projected + b.synthetic_lf
+    with timer("encode"):
+        pattern = encoder(projected)
+    lit = projected.data[projected.data > 0]
+    clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
+    rig.project(pattern)
+    with timer("capture_view"):
+        real_view = rig.capture_view()
+    rig.project(black)
+    step("final frame captured")
+    rgb = sum(b.synthetic_view.rgb for b in bounces)
+    synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
+    return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
+                          synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
+                          clipped_fraction=clipped, captured_raw=raw0, timings_s=timer.totals)

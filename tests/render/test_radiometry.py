@@ -1,0 +1,111 @@
+"""Lenslet radiometry against analytic irradiance (DESIGN.md section 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lftransfer.lightfield import LightField
+from lftransfer.optics import LensArray
+from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.renderer import HalfSpaceRenderer
+from lftransfer.scenes.format import ObjectConfig
+
+PITCH = 0.02
+ALBEDO = 0.6
+
+
+def _plane(z: float, facing: str) -> ObjectConfig:
+    """A large diffuse square at height z, normal towards the array."""
+    rot = [0.0, 0.0, 0.0] if facing == "+z" else [180.0, 0.0, 0.0]
+    return ObjectConfig.model_validate({"name": "plane", "shape": "rectangle", "size": [0.6, 0.6],
+                                        "translate": [0.0, 0.0, z], "rotate_deg": rot,
+                                        "material": {"type": "diffuse", "albedo": [ALBEDO] * 3}})
+
+
+def _disk_lightfield(radiance: float, U: int = 16) -> LightField:
+    """One round lenslet (radius PITCH/2) of uniform radiance over u, v in [-1, 1]."""
+    array = LensArray(lattice="rect", rows=1, cols=1, pitch=PITCH, focal_length=PITCH / 2, aperture="round")
+    lf = LightField.zeros(array, U, U)
+    lf.data[...] = radiance
+    return lf
+
+
+def _radiance_at(renderer, x, lights, towards):
+    """Radiance leaving point x (on a surface) towards direction ``towards``, by one traced ray."""
+    o = np.asarray(x, float) + 0.01 * np.asarray(towards, float)
+    rad, hit, _ = renderer.render_rays(o[None], -np.asarray(towards, float)[None], lights)
+    assert hit[0]
+    return rad[0]
+
+
+@pytest.mark.parametrize("model", ["area", "point", "prefiltered"])
+@pytest.mark.parametrize("side", ["synthetic", "real"])
+def test_01_uniform_disk_over_parallel_plane(variant, model, side):
+    """E = pi L R^2 / (R^2 + h^2) for the area model, pi L R^2 / h^2 for the point model."""
+    L, R, h = 3.0, PITCH / 2, 0.02
+    z = -h if side == "synthetic" else h
+    renderer = HalfSpaceRenderer([_plane(z, "+z" if side == "synthetic" else "-z")], max_depth=1)
+    light = LightFieldLight(_disk_lightfield(L), side=side, model=model, aperture_samples=512, jitter=False)
+    up = np.array([0.0, 0.0, 1.0 if side == "synthetic" else -1.0])
+    measured = _radiance_at(renderer, [0.0, 0.0, z], [light], up)
+    exact_area = np.pi * L * R**2 / (R**2 + h**2)
+    exact_point = np.pi * L * R**2 / h**2
+    # The prefiltered model blurs the angular texture by the aperture's angle but keeps the point light's
+    # 1 / r^2 falloff: for a uniform radiance it equals the point model.
+    expected = (exact_area if model == "area" else exact_point) * ALBEDO / np.pi
+    np.testing.assert_allclose(measured, expected, rtol=0.01)
+    assert abs(exact_point - exact_area) / exact_area > 0.2   # the case separates the two models
+
+
+def test_02_point_light_inverse_square(variant):
+    renderer = HalfSpaceRenderer([_plane(-0.3, "+z")], max_depth=1)
+    light = PointLight(np.array([0.0, 0.0, 0.0]), np.array([2.0, 1.0, 0.5]))
+    measured = _radiance_at(renderer, [0.1, 0.0, -0.3], [light], [0.0, 0.0, 1.0])
+    r2 = 0.1**2 + 0.3**2
+    cos = 0.3 / np.sqrt(r2)
+    np.testing.assert_allclose(measured, np.array([2.0, 1.0, 0.5]) * cos / r2 * ALBEDO / np.pi, rtol=1e-4)
+
+
+def test_03_point_model_matches_mitsuba_projector_emitter(variant):
+    """Our projective point light equals Mitsuba's ``projector`` emitter with T = I cos^3 / (pi scale)."""
+    import mitsuba as mi
+
+    from lftransfer.render.shapes import scene_dict
+
+    U, h = 32, 0.05
+    lf = _disk_lightfield(1.0, U)
+    u = lf.u
+    uu, vv = np.meshgrid(u, lf.v)
+    lf.data[0] = np.stack([1 + uu, 1 + vv, 2 + uu * vv], -1)        # direction-dependent radiance
+    d = lf.directions()
+    cos = d[..., 2]
+    intensity = lf.data[0] * lf.array.aperture_area * cos[..., None]     # I(w) = L A cos
+    texture = intensity * cos[..., None] ** 3 / np.pi                     # Mitsuba convention, scale = 1
+    # Projector at the lenslet looking along -z (synthetic side), light travelling along -d: with
+    # look_at(o, o - z, up = y), texture column c maps to u = a (1 - 2 (c + 0.5) / U) and row r to v as in the
+    # light field (first row = most negative v): so only the columns are reversed.
+    tex = np.ascontiguousarray(texture[:, ::-1, :])
+    a = lf.array.half_width
+    fov = np.degrees(2 * np.arctan(a))
+    plane = _plane(-h, "+z")
+    d_scene = scene_dict([plane], extra={
+        "proj": {"type": "projector", "irradiance": {"type": "bitmap", "bitmap": mi.Bitmap(tex.astype(np.float32)),
+                                                      "filter_type": "nearest", "raw": True},
+                 "fov": float(fov), "scale": 1.0,
+                 "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=[0, 0, -1], up=[0, 1, 0])},
+    })
+    scene = mi.load_dict(d_scene, parallel=False)
+    renderer = HalfSpaceRenderer([plane], max_depth=1)
+    ours = LightFieldLight(lf, side="synthetic", model="point")
+    # Compare at a few points of the plane, away from texel borders.
+    for (i, j) in [(16, 16), (8, 20), (25, 5)]:
+        x = np.array([-h * u[i], -h * lf.v[j], -h])       # the ray (k=0, d_ij) continued to z = -h
+        expected_ours = _radiance_at(renderer, x, [ours], [0, 0, 1])
+        o = [float(c) for c in x + [0, 0, 0.01]]
+        ray = mi.Ray3f(mi.Point3f(*o), mi.Vector3f(0, 0, -1))
+        si = scene.ray_intersect(ray)
+        ds, weight = scene.emitters()[0].sample_direction(si, mi.Point2f(0.5, 0.5))
+        f = si.bsdf().eval(mi.BSDFContext(), si, si.to_local(ds.d))
+        theirs = np.array(f * weight).ravel()
+        np.testing.assert_allclose(expected_ours, theirs, rtol=0.03)

@@ -1,0 +1,58 @@
+"""Window-model geometry: light crossing the interface through lenslet k goes on straight."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lftransfer.lightfield import LightField
+from lftransfer.optics import LensArray
+from lftransfer.render.lights import LightFieldLight
+from lftransfer.render.renderer import HalfSpaceRenderer
+from lftransfer.scenes.format import ObjectConfig
+
+
+def _plane(z, rot):
+    return ObjectConfig.model_validate({"name": "plane", "shape": "rectangle", "size": [1.0, 1.0],
+                                        "translate": [0.0, 0.0, z], "rotate_deg": rot,
+                                        "material": {"type": "diffuse", "albedo": [0.5, 0.5, 0.5]}})
+
+
+def _brightest_point(renderer, lights, z, facing, half=0.06, n=121):
+    xs = np.linspace(-half, half, n)
+    gx, gy = np.meshgrid(xs, xs)
+    pts = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)], -1)
+    o = pts + 0.01 * np.asarray(facing)
+    rad, hit, _ = renderer.render_rays(o, np.broadcast_to(-np.asarray(facing, float), o.shape), lights)
+    assert hit.all()
+    i = int(np.argmax(rad.sum(1)))
+    return pts[i, :2], xs[1] - xs[0]
+
+
+def test_01_single_ray_continues_straight_on_both_sides(variant):
+    array = LensArray(lattice="hex", rows=3, cols=3, pitch=0.0254, focal_length=0.0254)
+    U = 16
+    lf = LightField.zeros(array, U, U)
+    k, j, i = 4, 11, 3
+    lf.data[k, j, i] = 1.0
+    u, v = lf.u[i], lf.v[j]
+    c = array.centres[k]
+    h = 0.08
+    step = h * 2 * array.half_width / U          # one angular sample, seen at distance h
+    # Captured real light (travelling along -d) continues into the synthetic half-space: c - h (u, v).
+    synth = HalfSpaceRenderer([_plane(-h, [0, 0, 0])], max_depth=1)
+    p, dx = _brightest_point(synth, [LightFieldLight(lf, "synthetic", model="point")], -h, [0, 0, 1])
+    np.testing.assert_allclose(p, c - h * np.array([u, v]), atol=step + dx)
+    # Projected light (travelling along +d) lands in the real half-space at c + h (u, v).
+    real = HalfSpaceRenderer([_plane(h, [180, 0, 0])], max_depth=1)
+    p, dx = _brightest_point(real, [LightFieldLight(lf, "real", model="point")], h, [0, 0, -1])
+    np.testing.assert_allclose(p, c + h * np.array([u, v]), atol=step + dx)
+
+
+def test_02_points_on_the_wrong_side_get_no_light(variant):
+    array = LensArray(lattice="rect", rows=1, cols=1, pitch=0.02, focal_length=0.02)
+    lf = LightField.zeros(array, 8, 8)
+    lf.data[...] = 1.0
+    real = HalfSpaceRenderer([_plane(0.05, [180, 0, 0])], max_depth=1)
+    rad, hit, _ = real.render_rays(np.array([[0.0, 0.0, 0.04]]), np.array([[0.0, 0.0, 1.0]]),
+                                   [LightFieldLight(lf, "synthetic", model="area")])
+    assert hit[0] and np.all(rad == 0)

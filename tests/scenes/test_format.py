@@ -1,0 +1,237 @@
+"""The scene format: the Fig. 4 file, transforms and bounds, and errors that name the file and the field."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lftransfer.scenes import (
+    DiffuseMaterial,
+    GlossyMaterial,
+    ObjectConfig,
+    SceneConfig,
+    SceneError,
+    builtin_scene,
+    load_scene,
+    with_overrides,
+)
+
+LIGHT = "[light]\nposition = [0.1, 0.2, 0.0]\n"
+BOX = "[[real]]\nname = 'a'\nshape = 'box'\nsize = [0.1, 0.1, 0.1]\ntranslate = [0.0, 0.0, 0.2]\n"
+
+
+def _write(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _error(tmp_path: Path, text: str, name: str = "bad_scene.toml") -> str:
+    path = _write(tmp_path, text, name)
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    return str(info.value)
+
+
+def _obj(**kw) -> ObjectConfig:
+    return ObjectConfig.model_validate({"name": "o", **kw})
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The Fig. 4 scene
+
+def test_fig4_loads_with_the_values_written():
+    scene = load_scene(builtin_scene("fig4"))
+    assert scene.source == builtin_scene().resolve()
+    rig = scene.rig
+    assert (rig.lattice, rig.rows, rig.cols, rig.aperture) == ("hex", 10, 12, "cell")
+    assert rig.pitch == pytest.approx(0.0254) and rig.focal_length == pytest.approx(0.0254)
+    assert rig.lf_camera == [2048, 1536] and rig.projector == [1024, 768]
+    assert (rig.angular_samples, rig.lf_camera_bits, rig.projector_bits) == (48, 12, 8)
+    assert rig.projector_gamma == [2.2] * 3 and rig.full_well == 20000
+    assert scene.view.origin == [0.55, 0.22, 0.0] and scene.view.fov_deg == 35.0
+    assert scene.light.position == [0.12, 0.22, 0.0] and scene.light.intensity == [1.0, 1.0, 1.0]
+    assert scene.render.lighting_model == "area" and scene.render.gt_spp == 256
+    (red,), (green,) = scene.real, scene.synthetic
+    assert red.name == "red block" and red.shape == "box" and red.size == [0.08, 0.06, 0.05]
+    assert red.translate == [0.0, -0.005, 0.10] and red.rotate_deg == [0.0, -30.0, 0.0]
+    assert isinstance(red.material, DiffuseMaterial) and red.material.albedo == [0.8, 0.22, 0.15]
+    assert green.name == "green cube" and green.size == [0.06] * 3 and green.translate == [0.0, 0.0, -0.10]
+    assert green.rotate_deg == [0.0, 30.0, 0.0] and green.material.albedo == [0.2, 0.75, 0.25]
+
+
+def test_fig4_keeps_the_exchange_inside_the_lenslet_window():
+    """The facing faces are far enough apart along z that centre-to-face-corner rays stay within |u|, |v| <= 0.5."""
+    scene = load_scene(builtin_scene("fig4"))
+    (lo_r, hi_r), (lo_g, hi_g) = scene.real[0].bounds(), scene.synthetic[0].bounds()
+    gap = lo_r[2] - hi_g[2]
+    lateral = np.maximum(np.abs(hi_r - lo_g), np.abs(hi_g - lo_r))[:2] / 2
+    assert gap > 0.1 and np.all(lateral / gap <= 0.5)
+
+
+def test_defaults_equal_the_documented_values(tmp_path):
+    scene = load_scene(_write(tmp_path, LIGHT + BOX))
+    fig4 = load_scene(builtin_scene())
+    assert scene.rig == fig4.rig and scene.view == fig4.view and scene.render == fig4.render
+    assert scene.synthetic == [] and scene.real[0].material == DiffuseMaterial(albedo=[0.5, 0.5, 0.5])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Transforms and bounds
+
+def test_to_world_order_scale_rotate_translate():
+    obj = _obj(shape="box", size=[0.1, 0.2, 0.3], translate=[1.0, 2.0, 3.0], rotate_deg=[90.0, 0.0, 90.0],
+               scale=[2.0, 1.0, 1.0])
+    m = obj.to_world()
+    assert m.shape == (4, 4) and m.dtype == np.float64
+    # local corner (0.05, 0.1, 0.15): scale -> (0.1, 0.1, 0.15); Rx(90) -> (0.1, -0.15, 0.1);
+    # Rz(90) -> (0.15, 0.1, 0.1); translate -> (1.15, 2.1, 3.1).
+    corner = m @ np.array([0.05, 0.1, 0.15, 1.0])
+    np.testing.assert_allclose(corner[:3], [1.15, 2.1, 3.1], atol=1e-12)
+    np.testing.assert_allclose(m[3], [0, 0, 0, 1])
+
+
+def test_bounds_of_rotated_box():
+    obj = _obj(shape="box", size=[0.08, 0.06, 0.05], translate=[0.0, -0.005, 0.10], rotate_deg=[0.0, -30.0, 0.0])
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    hx, hz = 0.04 * c + 0.025 * s, 0.04 * s + 0.025 * c
+    np.testing.assert_allclose(obj.bounds(), [[-hx, -0.035, 0.10 - hz], [hx, 0.025, 0.10 + hz]], atol=1e-12)
+    # every corner lies inside, and some corner touches each face of the box
+    corners = np.array([[x, y, z, 1] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.025, 0.025)])
+    w = (obj.to_world() @ corners.T).T[:, :3]
+    np.testing.assert_allclose([w.min(0), w.max(0)], obj.bounds(), atol=1e-12)
+
+
+def test_bounds_of_sphere_and_ellipsoid():
+    ball = _obj(shape="sphere", radius=0.03, translate=[0.1, 0.2, 0.3], rotate_deg=[10.0, 20.0, 30.0])
+    np.testing.assert_allclose(ball.bounds(), [[0.07, 0.17, 0.27], [0.13, 0.23, 0.33]], atol=1e-12)
+    egg = _obj(shape="sphere", radius=1.0, scale=[2.0, 1.0, 1.0], rotate_deg=[0.0, 0.0, 90.0])
+    np.testing.assert_allclose(egg.bounds(), [[-1, -2, -1], [1, 2, 1]], atol=1e-12)
+
+
+def test_bounds_of_rotated_cylinder():
+    upright = _obj(shape="cylinder", radius=0.02, height=0.1, translate=[0.0, 0.0, 0.5])
+    np.testing.assert_allclose(upright.bounds(), [[-0.02, -0.02, 0.45], [0.02, 0.02, 0.55]], atol=1e-12)
+    tilted = _obj(shape="cylinder", radius=0.02, height=0.1, rotate_deg=[45.0, 0.0, 0.0])
+    e = 0.05 * math.sqrt(0.5) + 0.02 * math.sqrt(0.5)
+    np.testing.assert_allclose(tilted.bounds(), [[-0.02, -e, -e], [0.02, e, e]], atol=1e-12)
+    # the analytic box contains the facetted mesh and is tight to it
+    v, _ = tilted.triangle_mesh()
+    w = v @ tilted.to_world()[:3, :3].T
+    assert np.all(w.min(0) >= tilted.bounds()[0] - 1e-12) and np.all(w.max(0) <= tilted.bounds()[1] + 1e-12)
+    np.testing.assert_allclose([w.min(0), w.max(0)], tilted.bounds(), atol=2e-5)
+
+
+def test_mesh_path_relative_to_scene_file_and_bounds(tmp_path):
+    import trimesh
+
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=[0.02, 0.04, 0.06]).export(tmp_path / "meshes" / "b.obj")
+    text = LIGHT + "[[synthetic]]\nname = 'm'\nshape = 'mesh'\nfile = 'meshes/b.obj'\ntranslate = [0, 0, -0.1]\n"
+    scene = load_scene(_write(tmp_path, text))
+    obj = scene.synthetic[0]
+    assert obj.file == (tmp_path / "meshes" / "b.obj").resolve()
+    np.testing.assert_allclose(obj.bounds(), [[-0.01, -0.02, -0.13], [0.01, 0.02, -0.07]], atol=1e-9)
+
+
+def test_with_overrides_revalidates():
+    scene = load_scene(builtin_scene())
+    small = with_overrides(scene, view={"resolution": [64, 48]}, render={"gt_spp": 8})
+    assert small.view.resolution == [64, 48] and small.view.fov_deg == 35.0 and small.render.gt_spp == 8
+    assert scene.view.resolution == [1024, 768]
+    with pytest.raises(SceneError, match=r"fig4\.toml: view\.resolution\[0\]"):
+        with_overrides(scene, view={"resolution": [0, 48]})
+    with pytest.raises(SceneError, match=r"synthetic\[0\]: a synthetic object must lie in z < 0"):
+        with_overrides(scene, synthetic=[scene.real[0]])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Errors: one SceneError naming the file and the field path
+
+@pytest.mark.parametrize("text, path, what", [
+    (LIGHT + BOX + "colour = 1\n", "real[0].colour", "unknown key"),
+    (LIGHT + "[rig]\nrows = 'ten'\n" + BOX, "rig.rows", "expected a number"),
+    (LIGHT + "[view]\nfov_deg = [35]\n" + BOX, "view.fov_deg", "found [35]"),
+    (LIGHT + BOX.replace("[0.1, 0.1, 0.1]", "[0.1, -0.1, 0.1]"), "real[0].size[1]", "greater than 0"),
+    (LIGHT + BOX + "[real.material]\nalbedo = [0.5, 1.2, 0.5]\n", "real[0].material.albedo[1]",
+     "less than or equal to 1"),
+    (LIGHT + BOX + "[real.material]\ntype = 'glossy'\nroughness = 1.5\n", "real[0].material.roughness",
+     "less than or equal to 1"),
+    (LIGHT + BOX + "[real.material]\nalbedo = [0.5, 0.5]\n", "real[0].material.albedo", "at least 3"),
+    (LIGHT + BOX + "[real.material]\ntype = 'plastic'\n", "real[0].material", "plastic"),
+    (LIGHT + BOX.replace("size = [0.1, 0.1, 0.1]\n", ""), "real[0].size", "a box needs 'size'"),
+    (LIGHT + BOX.replace("[0.1, 0.1, 0.1]", "[0.1, 0.1]"), "real[0].size", "3 components"),
+    (LIGHT + BOX + "radius = 0.1\n", "real[0].radius", "does not apply to a box"),
+    (LIGHT + "[[real]]\nname = 'm'\nshape = 'mesh'\nfile = 'nope.obj'\ntranslate = [0, 0, 0.2]\n",
+     "real[0].file", "does not exist"),
+    (LIGHT + BOX.replace("[0.0, 0.0, 0.2]", "[0.0, 0.0, 0.04]"), "real[0]", "must lie in z > 0"),
+    (LIGHT + BOX + "[[synthetic]]\nname = 's'\nshape = 'sphere'\nradius = 0.05\ntranslate = [0, 0, -0.04]\n",
+     "synthetic[0]", "must lie in z < 0"),
+    (LIGHT + BOX + "scale = [1, 2]\n", "real[0].scale", "1 or 3 components"),
+    (LIGHT + BOX + "scale = -1\n", "real[0].scale", "positive"),
+    (LIGHT, "synthetic", "at least one"),
+    (BOX, "light", "required field is missing"),
+    (LIGHT + "[rig]\nlattice = 'square'\n" + BOX, "rig.lattice", "'hex' or 'rect'"),
+    (LIGHT + "[view]\ntarget = [0.55, 0.22, 0.0]\n" + BOX, "view.target", "must differ from origin"),
+    (LIGHT + BOX + "source = 'x'\n", "real[0].source", "unknown key"),
+    (LIGHT + "[rig]\nrows = 10\n[[real]\nname = 'a'\n", "<toml>", "malformed TOML"),
+])
+def test_bad_input_names_file_and_field(tmp_path, text, path, what):
+    message = _error(tmp_path, text)
+    assert message.startswith(f"{tmp_path / 'bad_scene.toml'}: {path}: "), message
+    assert what in message, message
+
+
+def test_one_error_summarises_the_others(tmp_path):
+    message = _error(tmp_path, LIGHT + BOX + "colour = 1\n[rig]\nrows = 0\n")
+    assert message.count("bad_scene.toml") == 1 and "rig.rows" in message and "real[0].colour" in message
+    assert "and 1 more" in message
+
+
+def test_missing_file_and_unknown_builtin(tmp_path):
+    with pytest.raises(SceneError, match="nothing.toml: cannot read"):
+        load_scene(tmp_path / "nothing.toml")
+    with pytest.raises(SceneError, match="available: .*fig4"):
+        builtin_scene("fig5")
+
+
+def test_model_validate_applies_the_same_rules():
+    with pytest.raises(ValueError, match="must lie in z > 0"):
+        SceneConfig.model_validate({"light": {"position": [0, 0, 0]},
+                                    "real": [{"name": "x", "shape": "sphere", "radius": 0.1}]})
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Property test: material ranges
+
+_finite = st.floats(min_value=-10, max_value=10, allow_nan=False)
+
+
+@settings(max_examples=40, deadline=None)
+@given(albedo=st.lists(_finite, min_size=3, max_size=3), roughness=_finite,
+       kind=st.sampled_from(["diffuse", "glossy", "metal"]))
+def test_material_ranges(tmp_path_factory, albedo, roughness, kind):
+    lines = [f"type = '{kind}'"]
+    if kind != "metal":
+        lines.append(f"albedo = [{', '.join(repr(a) for a in albedo)}]")
+    else:
+        lines.append(f"specular = [{', '.join(repr(a) for a in albedo)}]")
+    if kind != "diffuse":
+        lines.append(f"roughness = {roughness!r}")
+    text = LIGHT + BOX + "[real.material]\n" + "\n".join(lines) + "\n"
+    path = _write(tmp_path_factory.mktemp("h"), text)
+    valid = all(0 <= a <= 1 for a in albedo) and (kind == "diffuse" or 0 <= roughness <= 1)
+    if valid:
+        material = load_scene(path).real[0].material
+        assert material.type == kind
+        if kind == "glossy":
+            assert isinstance(material, GlossyMaterial) and material.roughness == roughness
+    else:
+        with pytest.raises(SceneError) as info:
+            load_scene(path)
+        assert str(info.value).startswith(f"{path}: real[0].material.")
