@@ -6,10 +6,14 @@ import numpy as np
 
 
 def composite(synthetic_rgb: np.ndarray, alpha: np.ndarray, real_rgb: np.ndarray) -> np.ndarray:
-    """alpha * synthetic + (1 - alpha) * real (real objects are assumed not to occlude synthetic ones).
+    """The "over" operator: alpha * synthetic + (1 - alpha) * real.
+
+    Real objects are assumed not to occlude synthetic ones. Renders average all rays of a pixel, those that
+    miss counting as black, so their colour is already multiplied by alpha: the composite is
+    synthetic + (1 - alpha) * real.
 
     Args:
-        synthetic_rgb: (H, W, 3) float radiance of the synthetic render.
+        synthetic_rgb: (H, W, 3) float radiance of the synthetic render, premultiplied by alpha.
         alpha: (H, W) float coverage of the synthetic render in [0, 1].
         real_rgb: (H, W, 3) float radiance of the real view.
 
@@ -20,4 +24,4 @@ def composite(synthetic_rgb: np.ndarray, alpha: np.ndarray, real_rgb: np.ndarray
         raise ValueError(f"composite: shapes differ: synthetic {synthetic_rgb.shape}, alpha {alpha.shape}, "
                          f"real {real_rgb.shape}")
     a = np.clip(alpha, 0.0, 1.0)[..., None]
-    return (a * synthetic_rgb + (1.0 - a) * real_rgb).astype(np.float32)
+    return (synthetic_rgb + (1.0 - a) * real_rgb).astype(np.float32)

@@ -111,6 +111,7 @@ class LensletCodec:
         valid &= (np.abs(u) <= a + tol) & (np.abs(v) <= a + tol)
         fi = np.clip((u + a) / (2.0 * a) * U - 0.5, 0.0, U - 1)
         fj = np.clip((v + a) / (2.0 * a) * V - 0.5, 0.0, V - 1)
+        self._pixel_owner = np.where(valid, k, -1).reshape(H, W)   # lenslet whose grid data the pixel shows
         inv_x = np.where(valid, fi, _OUTSIDE)
         inv_y = np.where(valid, np.maximum(k, 0) * V + fj, _OUTSIDE)
         self.inv_map_x = inv_x.reshape(H, W).astype(np.float32)
@@ -133,7 +134,9 @@ class LensletCodec:
         self._forward = _Remap(self.map_x, self.map_y, (H, W))
 
     def _footprint(self, x: np.ndarray, y: np.ndarray, k: np.ndarray):
-        """Bilinear footprint of points: own-lenslet flags and weights of the four surrounding pixels.
+        """Bilinear footprint of points: ownership flags and weights of the four surrounding pixels.
+
+        A pixel is owned by lenslet k when it lies behind k and its ray is inside the angular grid.
 
         Args:
             x, y: ``(N,)`` pixel coordinates (finite).
@@ -142,7 +145,7 @@ class LensletCodec:
         Returns:
             ``own (N, 4) bool``, ``weight (N, 4) float64``, ``x0, y0 (N,) int64`` (top-left corner).
         """
-        H, W = self.pixel_lenslet.shape
+        H, W = self._pixel_owner.shape
         x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
         tx, ty = x - x0, y - y0
         own = np.empty((len(x), 4), bool)
@@ -150,7 +153,7 @@ class LensletCodec:
         for c, (dx, dy) in enumerate(_CORNERS):
             xx, yy = x0 + dx, y0 + dy
             inside = (xx >= 0) & (xx < W) & (yy >= 0) & (yy < H)
-            lens = np.where(inside, self.pixel_lenslet[np.clip(yy, 0, H - 1), np.clip(xx, 0, W - 1)], -1)
+            lens = np.where(inside, self._pixel_owner[np.clip(yy, 0, H - 1), np.clip(xx, 0, W - 1)], -1)
             own[:, c] = lens == k
             weight[:, c] = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
         return own, weight, x0, y0
@@ -160,9 +163,11 @@ class LensletCodec:
 
         A sample whose ray lands wholly off its lenslet's pixels (distortion can push border samples out of
         the cell) is pulled towards the lenslet's centre pixel until it touches one of them. A sample whose
-        bilinear footprint (the four surrounding pixels) includes pixels of another lenslet, or of none, is
-        then moved onto the centre of its own footprint pixel with the largest bilinear weight, so that light
-        of a neighbour (from the far side of its angular range) does not leak in at cell borders.
+        bilinear footprint (the four surrounding pixels) includes pixels not owned by its lenslet (another
+        lenslet's, none, or rays outside the [-a, a]^2 grid) is then moved onto the centre of its own
+        footprint pixel with the largest bilinear weight, so that light of a neighbour (from the far side of
+        its angular range) does not leak in at cell borders. Moves are below one pixel except for the pulled
+        samples.
 
         Args:
             px: ``(N, 2)`` pixel coordinates (col, row) of the samples (NaN allowed).
@@ -176,10 +181,11 @@ class LensletCodec:
         x, y, kf = px[finite, 0], px[finite, 1], k[finite]
         centre = np.column_stack([self.array.centres[kf], np.ones(len(kf))]) @ self.device.homography.T
         cx, cy = centre[:, 0] / centre[:, 2], centre[:, 1] / centre[:, 2]
+        lost = np.arange(len(x))
         for _ in range(_MAX_PULL_STEPS):
-            own, _, _, _ = self._footprint(x, y, kf)
-            lost = ~np.any(own, axis=1)
-            if not np.any(lost):
+            own, _, _, _ = self._footprint(x[lost], y[lost], kf[lost])
+            lost = lost[~np.any(own, axis=1)]
+            if len(lost) == 0:
                 break
             dx, dy = cx[lost] - x[lost], cy[lost] - y[lost]
             dist = np.hypot(dx, dy)

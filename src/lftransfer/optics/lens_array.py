@@ -203,7 +203,7 @@ class LensArray:
         finite = np.all(np.isfinite(flat), axis=1)
         k = np.full(len(flat), -1, dtype=np.int64)
         if np.any(finite):
-            _, idx = self._tree.query(flat[finite])
+            _, idx = self._tree.query(flat[finite], workers=-1)
             idx = idx.astype(np.int64)
             inside = self.in_cell(flat[finite] - self.centres[idx])
             k[finite] = np.where(inside, idx, -1)
