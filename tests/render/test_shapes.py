@@ -108,14 +108,14 @@ def test_scene_loads_and_rays_hit_the_right_objects(variant, objects):
     red = objects[0]
     c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
     for x in (-0.02, 0.0, 0.03):
-        # the face z = -0.025 (local), rotated by -30 deg about y: world points satisfy z = 0.1 + (x * s - 0.025) / c
+        # the face z = -0.025 (local), rotated by -30 deg about y: world points satisfy z = z0 + (x * s - 0.025) / c
         si = _cast(mi, scene, [x, -0.005, 0.0], [0, 0, 1])
         assert _shape_key(mi, scene, si) == "red_block"
-        assert float(np.array(si.t).ravel()[0]) == pytest.approx(0.1 + (x * s - 0.025) / c, abs=1e-5)
+        assert float(np.array(si.t).ravel()[0]) == pytest.approx(red.translate[2] + (x * s - 0.025) / c, abs=1e-5)
     # and the rotated synthetic cube's +z face (normal (s, 0, c)), cast along -z
     si = _cast(mi, scene, [0.01, 0.0, 0.0], [0, 0, -1])
     assert _shape_key(mi, scene, si) == "green_cube"
-    assert float(np.array(si.t).ravel()[0]) == pytest.approx(0.1 - (0.03 - 0.01 * s) / c, abs=1e-5)
+    assert float(np.array(si.t).ravel()[0]) == pytest.approx(-objects[1].translate[2] - (0.03 - 0.01 * s) / c, abs=1e-5)
 
 
 def test_bsdfs_of_loaded_shapes(variant, objects):
@@ -125,7 +125,8 @@ def test_bsdfs_of_loaded_shapes(variant, objects):
     keys = object_keys(objects)
     scene = mi.load_dict(scene_dict(objects), optimize=False)
     shapes = {s.id(): s for s in scene.shapes()}
-    expected = {"red_block": ("SmoothDiffuse", [0.8, 0.22, 0.15]), "green_cube": ("SmoothDiffuse", [0.2, 0.75, 0.25]),
+    fig4 = {o.name: o.material.albedo for o in load_scene(builtin_scene("fig4")).real + load_scene(builtin_scene("fig4")).synthetic}
+    expected = {"red_block": ("SmoothDiffuse", fig4["red block"]), "green_cube": ("SmoothDiffuse", fig4["green cube"]),
                 "mesh": ("SmoothDiffuse", [0.1, 0.2, 0.3]), "egg": ("SmoothDiffuse", [0.5] * 3),
                 "ball_1": ("RoughPlastic", None), "can": ("SmoothConductor", None),
                 "red_block_2": ("SmoothDiffuse", None)}

@@ -131,7 +131,7 @@ class RigConfig(_Model):
     camera_gamma: PosVec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
     projector_gamma: PosVec3 = Field(default_factory=lambda: [2.2, 2.2, 2.2])
     exposure: PosFloat = 0.25
-    projector_max_radiance: PosFloat = 4.0
+    projector_max_radiance: PosFloat = 8.0
     read_noise: NonNegFloat = 0.001
     full_well: PosFloat = 20000.0
     seed: Annotated[int, _Num, Field(ge=0)] = 0
@@ -213,7 +213,7 @@ class RenderConfig(_Model):
     aperture_samples: PosInt = 4
     spp: PosInt = 4
     max_depth: PosInt = 3
-    gt_spp: PosInt = 256
+    gt_spp: PosInt = 1024
 
 
 # --------------------------------------------------------------------------------------------------------------
