@@ -213,7 +213,7 @@ class RenderConfig(_Model):
     aperture_samples: PosInt = 4
     spp: PosInt = 4
     max_depth: PosInt = 3
-    gt_spp: PosInt = 1024
+    gt_spp: PosInt = 2048
 
 
 # --------------------------------------------------------------------------------------------------------------

@@ -1,0 +1,44 @@
+"""The ``lft`` command: bad input gets a clear error, not a traceback."""
+
+from __future__ import annotations
+
+from typer.testing import CliRunner
+
+from lftransfer.cli import app
+
+runner = CliRunner()
+
+
+def _text(result) -> str:
+    return " ".join((result.output or "").split())
+
+
+def test_01_missing_scene_file(tmp_path):
+    result = runner.invoke(app, ["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert "nope.toml" in _text(result) and "no such file" in _text(result)
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+
+
+def test_02_invalid_scene_names_file_and_field(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[light]\nposition = [0, 0.2, 0]\nintensity = [1, 1, 1]\n'
+                   '[[real]]\nname = "b"\nshape = "box"\nsize = [0.1, 0.1]\ntranslate = [0, 0, 0.2]\n')
+    result = runner.invoke(app, ["run", str(bad), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    text = " ".join(_text(result).split())
+    assert "bad.toml" in text and "real[0].size" in text
+    assert not (tmp_path / "out").exists()
+
+
+def test_03_unknown_lighting_model(tmp_path):
+    from lftransfer.scenes import builtin_scene
+
+    result = runner.invoke(app, ["run", str(builtin_scene("fig4")), "--lighting-model", "magic",
+                                 "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "--lighting-model" in _text(result)
+
+
+def test_04_help_lists_commands():
+    result = runner.invoke(app, ["--help"])
+    assert result.exit_code == 0 and "demo" in result.output and "run" in result.output
