@@ -8,16 +8,14 @@ import numpy as np
 import pytest
 
 from lftransfer.pipeline import RunOptions, run_scene
-from lftransfer.scenes import builtin_scene, load_scene
+from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 
 def small_fig4():
-    scene = load_scene(builtin_scene("fig4"))
-    rig = scene.rig.model_copy(update={"rows": 6, "cols": 7, "lf_camera": [448, 336], "projector": [224, 168],
-                                       "angular_samples": 12})
-    view = scene.view.model_copy(update={"resolution": [192, 144]})
-    render = scene.render.model_copy(update={"gt_spp": 128, "spp": 4})
-    return scene.model_copy(update={"rig": rig, "view": view, "render": render})
+    return with_overrides(load_scene(builtin_scene("fig4")),
+                          rig={"rows": 6, "cols": 7, "lf_camera": [448, 336], "projector": [224, 168],
+                               "angular_samples": 12},
+                          view={"resolution": [192, 144]}, render={"gt_spp": 128, "spp": 4})
 
 
 @pytest.mark.slow

@@ -6,7 +6,7 @@ This is what ``lft run`` and ``lft demo`` call. It reports progress through a ca
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -44,23 +44,26 @@ class RunOptions:
 
 
 def quick_scene(scene):
-    """The same scene at a small resolution (for ``--quick`` and tests): every device at a quarter size."""
-    rig = scene.rig.model_copy(update={
-        "lf_camera": [scene.rig.lf_camera[0] // 4, scene.rig.lf_camera[1] // 4],
-        "projector": [scene.rig.projector[0] // 4, scene.rig.projector[1] // 4],
-        "angular_samples": max(8, scene.rig.angular_samples // 3),
-    })
-    view = scene.view.model_copy(update={"resolution": [scene.view.resolution[0] // 4, scene.view.resolution[1] // 4]})
-    render = scene.render.model_copy(update={"gt_spp": max(16, scene.render.gt_spp // 4)})
-    return scene.model_copy(update={"rig": rig, "view": view, "render": render})
+    """The same scene at a small resolution (for ``--quick``): every device at a quarter size."""
+    from lftransfer.scenes import with_overrides
+
+    rig, view, render = scene.rig, scene.view, scene.render
+    return with_overrides(
+        scene,
+        rig={"lf_camera": [rig.lf_camera[0] // 4, rig.lf_camera[1] // 4],
+             "projector": [rig.projector[0] // 4, rig.projector[1] // 4],
+             "angular_samples": max(8, rig.angular_samples // 3)},
+        view={"resolution": [view.resolution[0] // 4, view.resolution[1] // 4]},
+        render={"gt_spp": max(16, render.gt_spp // 4)},
+    )
 
 
 def count_run_steps(scene, options: RunOptions) -> int:
-    """Progress steps of :func:`run_scene`, for a progress bar."""
-    settings = TransferSettings(bounces=options.bounces)
-    n_models = 1 + len(_other_models(scene, options))
-    return 2 + count_steps(settings) + (n_models - 1) * count_steps(TransferSettings(bounces=options.bounces,
-                                                                                     bounce_views=False)) + 6 + 2
+    """Progress steps of :func:`run_scene` (set-up, transfer, 6 ground-truth renders unless cached, reruns with
+    the other lighting models, writing), for a progress bar."""
+    primary = count_steps(TransferSettings(bounces=options.bounces))
+    other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
+    return 1 + primary + 6 + len(_other_models(scene, options)) * other + 1
 
 
 def _other_models(scene, options: RunOptions) -> list[str]:
@@ -110,8 +113,8 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     by_model = {primary: {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}}
     for other in _other_models(scene, options):
         t = time.perf_counter()
-        alt = run_transfer(rig, model, scene, TransferSettings(**{**settings.__dict__, "lighting_model": other,
-                                                                  "bounce_views": False}), progress=step)
+        alt = run_transfer(rig, model, scene, replace(settings, lighting_model=other, bounce_views=False),
+                           progress=step)
         m = evaluate(alt, gt)
         by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
         timings[f"transfer_{other}_model"] = time.perf_counter() - t

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -71,6 +72,31 @@ class CameraModel:
     def levels(self) -> int:
         """Largest code value, ``2^bits - 1``."""
         return 2**self.bits - 1
+
+    def expose(self, radiance_image: np.ndarray, noise: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+        """The forward model of the camera: radiance per pixel -> raw codes.
+
+        ``signal = exposure * L * vignetting``, then ``noise(signal)`` if given, clipped to [0, 1], through
+        ``response.encode``, quantised.
+
+        Args:
+            radiance_image: ``(H, W, 3)`` float radiance, W m^-2 sr^-1.
+            noise: optional sensor noise model, normalised signal -> noisy normalised signal.
+
+        Returns:
+            ``(H, W, 3) uint16`` raw codes.
+        """
+        img = np.asarray(radiance_image)
+        expected = (self.device.height, self.device.width, 3)
+        if img.shape != expected:
+            raise ValueError(f"radiance image has shape {img.shape}, expected {expected}")
+        signal = self.exposure * img.astype(np.float64)
+        if self.vignetting is not None:
+            signal = signal * self.vignetting[..., None]
+        if noise is not None:
+            signal = noise(signal)
+        code = self.response.encode(np.clip(signal, 0.0, 1.0))
+        return np.round(code * self.levels).astype(np.uint16)
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,25 +177,8 @@ class LightFieldDecoder:
         return self.codec.image_to_lightfield(self.radiance_image(raw))
 
     def expose(self, radiance_image: np.ndarray) -> np.ndarray:
-        """The noiseless forward model of the camera: radiance per pixel -> raw codes.
-
-        ``signal = exposure * L * vignetting``, clipped to [0, 1], through ``response.encode``, quantised.
-
-        Args:
-            radiance_image: ``(H, W, 3)`` float radiance, W m^-2 sr^-1.
-
-        Returns:
-            ``(H, W, 3) uint16`` raw codes.
-        """
-        img = np.asarray(radiance_image)
-        expected = (self.camera.device.height, self.camera.device.width, 3)
-        if img.shape != expected:
-            raise ValueError(f"radiance image has shape {img.shape}, expected {expected}")
-        signal = self.camera.exposure * img.astype(np.float64)
-        if self.camera.vignetting is not None:
-            signal = signal * self.camera.vignetting[..., None]
-        code = self.camera.response.encode(np.clip(signal, 0.0, 1.0))
-        return np.round(code * self.camera.levels).astype(np.uint16)
+        """The noiseless forward model of the camera (see :meth:`CameraModel.expose`)."""
+        return self.camera.expose(radiance_image)
 
 
 class LightFieldEncoder:

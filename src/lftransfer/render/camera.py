@@ -55,8 +55,8 @@ def view_rays(sensor, width: int, height: int, spp: int, seed: int = 0) -> tuple
     ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                mi.Point2f(px.ravel().astype(np.float32), py.ravel().astype(np.float32)),
                                mi.Point2f(0.5, 0.5))
-    o = np.array(ray.o, dtype=np.float32)
+    # Mitsuba starts camera rays at the near clip plane; ours start at the centre of projection, so that hit
+    # distances are depths from the camera.
+    centre = np.array(sensor.world_transform().translation(), dtype=np.float32).ravel()[:3]
     d = np.array(ray.d, dtype=np.float32)
-    if o.shape != (3, n):
-        o = np.broadcast_to(o.reshape(3, -1), (3, n))
-    return np.ascontiguousarray(o.T), np.ascontiguousarray(d.T)
+    return np.ascontiguousarray(np.broadcast_to(centre, (n, 3))), np.ascontiguousarray(d.T)

@@ -121,20 +121,13 @@ class SimRig:
         image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
         image[self._pix] = acc / self.capture_spp
         image = image.reshape(*self._cam_shape, 3)
-        return self._expose(image)
+        return self._truth.camera.expose(image, noise=self._sensor_noise)
 
-    def _expose(self, radiance: np.ndarray) -> np.ndarray:
-        """Radiance image -> noisy, quantised camera codes (shot noise, read noise, response, bit depth)."""
-        cam = self._truth.camera
+    def _sensor_noise(self, signal: np.ndarray) -> np.ndarray:
+        """Shot noise (Poisson in electrons, ``full_well`` at full scale) plus Gaussian read noise."""
         rig = self._scene.rig
-        signal = cam.exposure * radiance
-        if cam.vignetting is not None:
-            signal = signal * cam.vignetting[..., None]
         electrons = np.clip(signal, 0, None) * rig.full_well
-        noisy = self._rng.poisson(electrons) / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
-        code = cam.response.encode(np.clip(noisy, 0.0, 1.0))
-        levels = 2 ** cam.bits - 1
-        return np.round(code * levels).astype(np.uint16)
+        return self._rng.poisson(electrons) / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
 
     def capture_view(self) -> np.ndarray:
         """View camera image ((H, W, 3) float32 linear radiance) of the real world as it is lit now."""
