@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lftransfer.optics.device import as_rays
 from lftransfer.optics.lens_array import LensArray
 
 __all__ = ["LightField"]
@@ -129,12 +130,7 @@ class LightField:
         Returns:
             ``(N, 3) float32`` radiance.
         """
-        k = np.asarray(k)
-        d = np.asarray(d, dtype=np.float64)
-        if k.ndim != 1 or d.shape != (len(k), 3):
-            raise ValueError(f"k must have shape (N,) and d shape (N, 3), got {k.shape} and {d.shape}")
-        if not np.issubdtype(k.dtype, np.integer):
-            raise ValueError(f"k must be an integer array, got dtype {k.dtype}")
+        k, d = as_rays(k, d)
         a, f = self.array.half_width, self.array.focal_length
         U, V = self.U, self.V
         out = np.zeros((len(k), 3), np.float32)

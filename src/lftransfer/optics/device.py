@@ -46,6 +46,25 @@ def _undistort_scale(rd2: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> np.ndar
 
 
 @dataclass(frozen=True, eq=False)
+def as_rays(k, d) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a batch of interface rays.
+
+    Args:
+        k: ``(N,)`` integer lenslet indices.
+        d: ``(N, 3)`` directions.
+
+    Returns:
+        ``k`` as an integer array and ``d`` as float64.
+    """
+    k = np.asarray(k)
+    d = np.asarray(d, dtype=np.float64)
+    if k.ndim != 1 or d.shape != (len(k), 3):
+        raise ValueError(f"k must have shape (N,) and d shape (N, 3), got {k.shape} and {d.shape}")
+    if not np.issubdtype(k.dtype, np.integer):
+        raise ValueError(f"k must be an integer array, got dtype {k.dtype}")
+    return k, d
+
+
 class LensletDevice:
     """A camera or projector behind the array that images the lenslets' focal plane (z = -f).
 
@@ -163,12 +182,7 @@ class LensletDevice:
             ``(N, 2) float64`` pixel coordinates (col, row); NaN where ``k`` is out of range or d_z <= 0.
         """
         self._check(array)
-        k = np.asarray(k)
-        d = np.asarray(d, dtype=np.float64)
-        if k.ndim != 1 or d.shape != (len(k), 3):
-            raise ValueError(f"k must have shape (N,) and d shape (N, 3), got {k.shape} and {d.shape}")
-        if not np.issubdtype(k.dtype, np.integer):
-            raise ValueError(f"k must be an integer array, got dtype {k.dtype}")
+        k, d = as_rays(k, d)
         valid = (k >= 0) & (k < array.K) & (d[:, 2] > 0)
         kv = k[valid].astype(np.int64)
         dv = d[valid]
