@@ -45,7 +45,6 @@ def _undistort_scale(rd2: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> np.ndar
     return s
 
 
-@dataclass(frozen=True, eq=False)
 def as_rays(k, d) -> tuple[np.ndarray, np.ndarray]:
     """Validate a batch of interface rays.
 
@@ -65,6 +64,7 @@ def as_rays(k, d) -> tuple[np.ndarray, np.ndarray]:
     return k, d
 
 
+@dataclass(frozen=True, eq=False)
 class LensletDevice:
     """A camera or projector behind the array that images the lenslets' focal plane (z = -f).
 
