@@ -52,6 +52,7 @@ class _Remap:
         self.src_shape = src_shape
         self.use_cv = max(*src_shape, *self.map_x.shape) < _CV_MAX
         if self.use_cv:
+            # fixed point: m1 = integer top-left pixel (x0, y0), m2 = 1/32-px fraction index (ty * 32 + tx)
             self._m1, self._m2 = cv2.convertMaps(self.map_x, self.map_y, cv2.CV_16SC2)
 
     def __call__(self, src: np.ndarray) -> np.ndarray:
@@ -63,6 +64,59 @@ class _Remap:
                 out = out[..., None]
             return out
         return _bilinear_numpy(src, self.map_x, self.map_y)
+
+
+class _PatchSampler:
+    """The forward remap split in two: gather the 2 x 2 source pixels it reads, then interpolate them.
+
+    ``gather(src)`` copies, for every destination sample, the 2 x 2 block of source pixels that the bilinear
+    remap reads (0 outside the source) into its own block of a small "patch" image (nearest-neighbour
+    ``cv2.remap``, no arithmetic). ``interpolate(patch)`` then applies the same fixed-point bilinear weights as
+    the full remap. For any per-pixel function f, ``interpolate(f(gather(src)))`` equals
+    ``remap(f(src))`` exactly (when f(0-border) is the border value 0), at the cost of evaluating f on 4
+    pixels per sample instead of on the whole source image.
+    """
+
+    def __init__(self, remap: _Remap) -> None:
+        m1, m2 = remap._m1, remap._m2                       # (R, C, 2) int16 top-left pixels, (R, C) fractions
+        R, C = m2.shape
+        self.shape = (R, C)
+        gather = np.empty((2 * R, 2 * C, 2), np.int16)     # patch pixel (2r + dy, 2c + dx) <- source pixel
+        x0, y0 = m1[..., 0].astype(np.int32), m1[..., 1].astype(np.int32)
+        for dy in (0, 1):
+            for dx in (0, 1):
+                # x0 + 1 is at most 32767 (source sizes are below it); outside coordinates stay outside
+                gather[dy::2, dx::2, 0] = np.clip(x0 + dx, -_CV_MAX, _CV_MAX)
+                gather[dy::2, dx::2, 1] = np.clip(y0 + dy, -_CV_MAX, _CV_MAX)
+        self._gather = gather
+        cc, rr = np.meshgrid(np.arange(C, dtype=np.int16) * 2, np.arange(R, dtype=np.int16) * 2)
+        self._m1 = np.ascontiguousarray(np.stack([cc, rr], axis=-1))
+        self._m2 = m2
+
+    @staticmethod
+    def fits(remap: _Remap) -> bool:
+        """Whether the patch image of ``remap`` stays within ``cv2.remap``'s size limit."""
+        return remap.use_cv and 2 * max(remap.map_x.shape) < _CV_MAX
+
+    def gather(self, src: np.ndarray) -> np.ndarray:
+        """``(2R, 2C[, ch])`` patch image of the source pixels read by the remap (border value 0).
+
+        Args:
+            src: Source image in a dtype that ``cv2.remap`` takes (uint8, uint16, int16, float32, float64).
+        """
+        out = cv2.remap(src, self._gather, None, interpolation=cv2.INTER_NEAREST,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if src.ndim == 3 and out.ndim == 2:
+            out = out[..., None]
+        return out
+
+    def interpolate(self, patch: np.ndarray) -> np.ndarray:
+        """``(R, C[, ch]) float32`` bilinear result from a float32 patch image (as the full remap would give)."""
+        out = cv2.remap(patch, self._m1, self._m2, interpolation=cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if patch.ndim == 3 and out.ndim == 2:
+            out = out[..., None]
+        return out
 
 
 class LensletCodec:
@@ -132,6 +186,8 @@ class LensletCodec:
         self.map_x = fwd[:, 0].reshape(K * V, U).astype(np.float32)
         self.map_y = fwd[:, 1].reshape(K * V, U).astype(np.float32)
         self._forward = _Remap(self.map_x, self.map_y, (H, W))
+        self._patches: _PatchSampler | None = None
+        self._inv_norm3: np.ndarray | None = None
 
     def _footprint(self, x: np.ndarray, y: np.ndarray, k: np.ndarray):
         """Bilinear footprint of points: ownership flags and weights of the four surrounding pixels.
@@ -201,6 +257,40 @@ class LensletCodec:
         px[finite, 0], px[finite, 1] = x, y
         return px
 
+    # ------------------------------------------------------------ fast paths for the device codecs
+    @property
+    def patch_sampler(self) -> _PatchSampler | None:
+        """The forward map as gather + interpolate (:class:`_PatchSampler`), None when images are too large."""
+        if self._patches is None and _PatchSampler.fits(self._forward):
+            self._patches = _PatchSampler(self._forward)
+        return self._patches
+
+    def patches_to_lightfield(self, patch: np.ndarray) -> LightField:
+        """Finish :meth:`image_to_lightfield` from ``f(patch_sampler.gather(image))`` (float32, 3 channels).
+
+        Equals ``image_to_lightfield(f(image))`` for any per-pixel f with ``f(0) = 0``.
+        """
+        out = self.patch_sampler.interpolate(np.ascontiguousarray(patch, dtype=np.float32))
+        out = out.reshape(self.array.K, self.V, self.U, 3)
+        out *= self.mask[None, :, :, None]
+        return LightField(out, self.array)
+
+    def lightfield_to_unnormalised(self, lf: LightField) -> np.ndarray:
+        """:meth:`lightfield_to_image` without the final renormalisation: ``(H, W, 3) float32`` remap result.
+
+        ``lightfield_to_image(lf) == lightfield_to_unnormalised(lf) * inv_norm3`` (see :attr:`inv_norm3`).
+        """
+        self._check_lightfield(lf)
+        src = np.multiply(lf.data, self.mask[None, :, :, None], dtype=np.float32)
+        return self._inverse(src.reshape(self.array.K * self.V, self.U, 3))
+
+    @property
+    def inv_norm3(self) -> np.ndarray:
+        """``(H, W, 3) float32`` renormalisation factor of :meth:`lightfield_to_image`, per channel (contiguous)."""
+        if self._inv_norm3 is None:
+            self._inv_norm3 = np.ascontiguousarray(np.repeat(self._inv_norm[..., None], 3, axis=-1))
+        return self._inv_norm3
+
     def _check_lightfield(self, lf: LightField) -> None:
         if not isinstance(lf, LightField):
             raise ValueError(f"expected a LightField, got {type(lf).__name__}")
@@ -238,7 +328,6 @@ class LensletCodec:
         Returns:
             ``(H, W, 3) float32`` device image.
         """
-        self._check_lightfield(lf)
-        src = (lf.data * self.mask[None, :, :, None]).reshape(self.array.K * self.V, self.U, 3)
-        img = self._inverse(src)
-        return (img * self._inv_norm[..., None]).astype(np.float32, copy=False)
+        img = self.lightfield_to_unnormalised(lf)
+        img *= self._inv_norm[..., None]
+        return img

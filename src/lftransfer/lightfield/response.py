@@ -54,6 +54,28 @@ class ResponseCurve:
         x = _rgb(linear, "linear")
         return self._apply(x, 1.0 / np.asarray(self.gamma))
 
+    @property
+    def uniform(self) -> bool:
+        """Whether all three channels share one gamma (then per-channel tables collapse to one)."""
+        return self.gamma[0] == self.gamma[1] == self.gamma[2]
+
+    def decode_table(self, levels: int, size: int = 65536) -> np.ndarray:
+        """Decoded value of every integer code, as a lookup table for raw images.
+
+        Entry ``[c, n]`` is ``decode(float32(n) / float32(levels))`` in float32 for channel c, i.e. bit for bit
+        what :meth:`decode` gives for the float32 code ``n / levels`` (codes above ``levels`` clip to 1).
+
+        Args:
+            levels: Largest code value, ``2^bits - 1``.
+            size: Number of entries (65536 covers every uint16 code).
+
+        Returns:
+            ``(3, size) float32`` table.
+        """
+        n = np.minimum(np.arange(size), levels).astype(np.float32) / np.float32(levels)
+        lin = self.decode(np.ascontiguousarray(np.broadcast_to(n[:, None], (size, 3))))
+        return np.ascontiguousarray(lin.T, dtype=np.float32)
+
     def decode(self, code: np.ndarray) -> np.ndarray:
         """Normalised code value -> linear signal, ``clip(code, 0, 1) ** gamma``.
 

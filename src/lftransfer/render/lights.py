@@ -42,8 +42,12 @@ class PointLight:
     position: np.ndarray
     intensity: np.ndarray
 
-    def illuminate(self, scene, si, active, seed: int = 0):
-        """Reflected radiance towards ``-si.wi`` from this light at the points ``si`` (mi.Color3f, (N,))."""
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+        """Light from this light at the points ``si`` (mi.Color3f, (N,)).
+
+        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted), or with ``irradiance=True`` the
+        irradiance on the surface with normal ``si.n`` (W m^-2), for caches of diffuse shading.
+        """
         mi = mitsuba()
         import drjit as dr
 
@@ -52,9 +56,19 @@ class PointLight:
         r2 = dr.squared_norm(w)
         wn = w * dr.rsqrt(r2)
         visible = active & ~scene.ray_test(si.spawn_ray_to(p), active)
-        f = si.bsdf().eval(mi.BSDFContext(), si, si.to_local(wn), visible)
+        f = _weight(si, wn, visible, irradiance)
         intensity = mi.Color3f(*[float(c) for c in self.intensity])
         return dr.select(visible, f * intensity / r2, 0.0)
+
+
+def _weight(si, wn, active, irradiance: bool):
+    """BSDF value times cosine for direction ``wn`` (world, towards the light), or the plain cosine."""
+    mi = mitsuba()
+    import drjit as dr
+
+    if irradiance:
+        return mi.Color3f(dr.maximum(dr.dot(si.n, wn), 0.0))
+    return si.bsdf().eval(mi.BSDFContext(), si, si.to_local(wn), active)
 
 
 class LightFieldLight:
@@ -192,10 +206,12 @@ class LightFieldLight:
         return out
 
     # -- shading ----------------------------------------------------------------------------------------
-    def illuminate(self, scene, si, active, seed: int = 0):
-        """Reflected radiance towards ``-si.wi`` at the points ``si`` from every lenslet (mi.Color3f, (N,)).
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+        """Light from every lenslet at the points ``si`` (mi.Color3f, (N,)).
 
-        ``seed`` varies the random aperture points (area model with jitter) between calls.
+        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted), or with ``irradiance=True`` the
+        irradiance on the surface with normal ``si.n``. ``seed`` varies the random aperture points (area model
+        with jitter) between calls.
         """
         mi = mitsuba()
         import drjit as dr
@@ -208,8 +224,6 @@ class LightFieldLight:
         side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
         active = mi.Bool(active) & side_ok
         sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
-        bsdf = si.bsdf()
-        ctx = mi.BSDFContext()
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
         M, pool = self.M, self.pool
         weight = self.area / M
@@ -243,7 +257,7 @@ class LightFieldLight:
                 radiance = self._bilinear(k, u, v, active)
             lit = active & dr.any(radiance != 0.0)
             visible = lit & ~scene.ray_test(si.spawn_ray_to(p), lit)
-            f = bsdf.eval(ctx, si, si.to_local(wn), visible)
+            f = _weight(si, wn, visible, irradiance)
             acc += dr.select(visible, f * radiance * (cos_p * weight / r2), 0.0)
             return i + 1, acc
 

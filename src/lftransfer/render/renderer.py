@@ -75,6 +75,15 @@ class HalfSpaceRenderer:
         self.max_depth = int(max_depth)
         self.scene = mi.load_dict(scene_dict(self.objects, extra=extra_shapes), parallel=False)
 
+    def _rays(self, key: tuple, make):
+        """Primary rays are the same from frame to frame: build them once per key (a small memo)."""
+        memo = self.__dict__.setdefault("_ray_memo", {})
+        if key not in memo:
+            if len(memo) >= 8:
+                memo.pop(next(iter(memo)))
+            memo[key] = make()
+        return memo[key]
+
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Radiance (N, 3), hit mask (N,) and distance (N,) for arbitrary rays (see :func:`trace`)."""
@@ -95,16 +104,21 @@ class HalfSpaceRenderer:
             LightField (K, V, U, 3) float32, masked samples zero.
         """
         lf = LightField.zeros(array, U, V)
-        dirs = lf.directions().reshape(-1, 3)                                    # (V*U, 3)
-        if side == "synthetic":
-            dirs = -dirs
         K, S, N = array.K, spp, V * U
-        origins = np.zeros((K, N, S, 3), np.float32)
-        origins[..., :2] = array.centres.astype(np.float32)[:, None, None, :]
-        if model == "area":
-            origins[..., :2] += aperture_offsets(array, K * N, S, seed).reshape(K, N, S, 2)
-        directions = np.broadcast_to(dirs[None, :, None, :], origins.shape)
-        radiance, _, _ = self.render_rays(origins.reshape(-1, 3), directions.reshape(-1, 3), lights, seed=seed)
+
+        def make():
+            dirs = lf.directions().reshape(-1, 3).astype(np.float32)             # (V*U, 3)
+            if side == "synthetic":
+                dirs = -dirs
+            origins = np.zeros((K, N, S, 3), np.float32)
+            origins[..., :2] = array.centres.astype(np.float32)[:, None, None, :]
+            if model == "area":
+                origins[..., :2] += aperture_offsets(array, K * N, S, seed).reshape(K, N, S, 2)
+            directions = np.broadcast_to(dirs[None, :, None, :], origins.shape)
+            return origins.reshape(-1, 3), np.ascontiguousarray(directions.reshape(-1, 3))
+
+        origins, directions = self._rays(("lf", array, U, V, side, model == "area", spp, seed), make)
+        radiance, _, _ = self.render_rays(origins, directions, lights, seed=seed)
         data = radiance.reshape(K, V, U, S, 3).mean(axis=3)
         data *= lf.mask()[None, :, :, None]
         lf.data[...] = data
@@ -115,7 +129,8 @@ class HalfSpaceRenderer:
         """Render the view camera (``sensor`` from :func:`lftransfer.render.camera.sensor_dict`)."""
         from lftransfer.render.camera import view_rays
 
-        o, d = view_rays(sensor, width, height, spp, seed)
+        o, d = self._rays(("view", id(sensor), width, height, spp, seed),
+                          lambda: view_rays(sensor, width, height, spp, seed))
         radiance, hit, dist = self.render_rays(o, d, lights, seed=seed)
         rgb = radiance.reshape(height, width, spp, 3).mean(axis=2)
         hits = hit.reshape(height, width, spp)

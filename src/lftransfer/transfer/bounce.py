@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.lightfield import LightField
+from lftransfer.render import fast
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
@@ -42,6 +43,9 @@ class TransferSettings:
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
         bounce_views: also capture the real view for every bounce (for the Fig. 4 panel).
+        renderer: "exact" (path tracing, every lenslet summed at every ray), "fast" (irradiance cached at the
+            vertices of a fine tessellation, diffuse materials only, see :mod:`lftransfer.render.fast`) or
+            "auto" (fast where the synthetic scene allows it).
         seed: Monte Carlo seed of the synthetic renders.
     """
 
@@ -53,6 +57,7 @@ class TransferSettings:
     view_spp: int = 4
     projector_fill: float = 0.95
     bounce_views: bool = True
+    renderer: str = "auto"
     seed: int = 0
 
 
@@ -127,6 +132,15 @@ class _Timer:
             self.totals[stage] = self.totals.get(stage, 0.0) + time.perf_counter() - t0
 
 
+def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
+    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see :class:`TransferSettings`)."""
+    if kind not in ("auto", "fast", "exact"):
+        raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
+    if kind == "fast" or (kind == "auto" and fast.supports(scene.synthetic)):
+        return fast.CachedRenderer(scene.synthetic)
+    return HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
+
+
 def projector_gain(lf: LightField, max_radiance: float, fill: float = 0.95) -> float:
     """Gain g that brings the brightest sample of ``lf`` to ``fill`` of the projector's full radiance."""
     peak = float(np.max(lf.data))
@@ -192,7 +206,7 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     U = V = settings.angular_samples
     decoder = model.decoder(U, V)
     encoder = model.encoder(U, V)
-    synthetic = HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
+    synthetic = synthetic_renderer(scene, settings.renderer)
     point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
     view = scene.view
     width, height = view.resolution
