@@ -103,6 +103,48 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
     _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache)
 
 
+@app.command()
+def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", help="Scene TOML (default: Fig. 4)."),
+          json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
+          iterations: int = typer.Option(10, min=1, help="Timed pipeline iterations."),
+          lighting_model: str = typer.Option("area", help="Lighting model of the fast path."),
+          peer: bool = typer.Option(True, help="Also time Mitsuba's path integrator on the same job."),
+          quick: bool = typer.Option(False, "--quick", help="Quarter resolution.")) -> None:
+    """Time one light field transfer iteration (decode, relight, render, encode, view, composite)."""
+    from lftransfer.bench.iteration import BenchSettings, run_bench
+    from lftransfer.pipeline import quick_scene
+    from lftransfer.render.lights import LIGHTING_MODELS
+    from lftransfer.report import write_json
+    from lftransfer.scenes import builtin_scene
+
+    if lighting_model not in LIGHTING_MODELS:
+        _fail(f"--lighting-model: expected one of {', '.join(LIGHTING_MODELS)}, got {lighting_model!r}")
+    if scene_file is not None and not scene_file.exists():
+        _fail(f"{scene_file}: no such file")
+    scene = _load(scene_file or builtin_scene("fig4"))
+    if quick:
+        scene = quick_scene(scene)
+    with Progress(TextColumn("[bold]{task.description:<70}"), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("starting", total=None)
+        result = run_bench(scene, BenchSettings(iterations=iterations, lighting_model=lighting_model, peer=peer),
+                           progress=lambda msg: bar.update(task, description=msg[:70]))
+    table = Table(title="light field transfer iteration")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("pipeline iteration (median)", f"{result['pipeline_iteration_ms']:.1f} ms")
+    for stage, t in result["stages_ms"].items():
+        table.add_row(f"  {stage}", f"{t['median']:.1f} ms")
+    table.add_row("capture (rig, not in the iteration)", f"{result['capture_ms']:.0f} ms")
+    table.add_row("fast vs exact composite PSNR", f"{result['fast_vs_exact_psnr_db']:.1f} dB")
+    if "peer_ratio" in result:
+        table.add_row("peer (Mitsuba path, projectors)", f"{result['peer_ms']:.0f} ms at {result['peer_spp']} spp")
+        table.add_row("peer ratio", f"{result['peer_ratio']:.0f}x")
+    table.add_row("variant, peak RSS", f"{result['variant']}, {result['peak_rss_mb']:.0f} MB")
+    Console().print(table)
+    if json_out is not None:
+        write_json(json_out, result)
+
+
 def main() -> None:  # pragma: no cover
     logging.basicConfig(level=logging.WARNING)
     app()

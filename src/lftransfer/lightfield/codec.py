@@ -151,6 +151,8 @@ class LensletCodec:
         K, H, W = array.K, device.height, device.width
         grid = LightField.zeros(array, U, V)
         self.mask = grid.mask()
+        # the mask as float32 per channel: multiplying by it is the bool multiply, bit for bit, ~8x faster
+        self._mask3 = np.ascontiguousarray(np.repeat(self.mask[:, :, None], 3, axis=-1), dtype=np.float32)
         a = array.half_width
 
         # ---- inverse map: every device pixel -> fractional grid index
@@ -268,12 +270,12 @@ class LensletCodec:
     def patches_to_lightfield(self, patch: np.ndarray) -> LightField:
         """Finish :meth:`image_to_lightfield` from ``f(patch_sampler.gather(image))`` (float32, 3 channels).
 
-        Equals ``image_to_lightfield(f(image))`` for any per-pixel f with ``f(0) = 0``.
+        Equals ``image_to_lightfield(f(image))`` for any per-pixel f with ``f(0) = 0``. Masked samples read
+        nothing (their map lies far outside the image, so the remap gives its border value 0 there): the
+        masking multiply of :meth:`image_to_lightfield` would not change them and is left out.
         """
         out = self.patch_sampler.interpolate(np.ascontiguousarray(patch, dtype=np.float32))
-        out = out.reshape(self.array.K, self.V, self.U, 3)
-        out *= self.mask[None, :, :, None]
-        return LightField(out, self.array)
+        return LightField(out.reshape(self.array.K, self.V, self.U, 3), self.array)
 
     def lightfield_to_unnormalised(self, lf: LightField) -> np.ndarray:
         """:meth:`lightfield_to_image` without the final renormalisation: ``(H, W, 3) float32`` remap result.
@@ -281,7 +283,7 @@ class LensletCodec:
         ``lightfield_to_image(lf) == lightfield_to_unnormalised(lf) * inv_norm3`` (see :attr:`inv_norm3`).
         """
         self._check_lightfield(lf)
-        src = np.multiply(lf.data, self.mask[None, :, :, None], dtype=np.float32)
+        src = np.multiply(lf.data, self._mask3)
         return self._inverse(src.reshape(self.array.K * self.V, self.U, 3))
 
     @property
@@ -316,7 +318,7 @@ class LensletCodec:
         if not np.issubdtype(image.dtype, np.floating):
             raise ValueError(f"image must be a float array (linear values), got dtype {image.dtype}")
         out = self._forward(image).reshape(self.array.K, self.V, self.U, 3)
-        out *= self.mask[None, :, :, None]
+        out *= self._mask3
         return LightField(out, self.array)
 
     def lightfield_to_image(self, lf: LightField) -> np.ndarray:

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -34,6 +35,147 @@ def _check_codes(image: np.ndarray, device: LensletDevice, what: str) -> np.ndar
     if not np.issubdtype(image.dtype, np.integer):
         raise ValueError(f"{what} must hold integer codes (uint8/uint16), got dtype {image.dtype}")
     return image
+
+
+def _as_cv_codes(codes: np.ndarray, levels: int) -> np.ndarray:
+    """Integer codes in a dtype ``cv2.remap`` and the lookup tables take (uint8/uint16), same decoded values.
+
+    Codes outside ``[0, levels]`` decode like the nearest end of the range, so other integer dtypes are
+    clipped to it first.
+    """
+    if codes.dtype not in (np.uint8, np.uint16):
+        codes = np.clip(codes.astype(np.int64, copy=False), 0, levels).astype(np.uint16)
+    return np.ascontiguousarray(codes)
+
+
+def _lookup(tables: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """``tables[c][codes[..., c]]`` per channel; ``tables`` is ``(1, n)`` (shared by the channels) or ``(3, n)``.
+
+    ``codes`` must be below n (uint16 codes with n = 65536); mode="wrap" then changes nothing and spares
+    numpy's bounds-checking buffer.
+    """
+    if codes.dtype != np.intp:
+        codes = codes.astype(np.intp)
+    out = np.empty(codes.shape, tables.dtype)
+    if len(tables) == 1:
+        return np.take(tables[0], codes, out=out, mode="wrap")
+    for c in range(3):
+        out[..., c] = np.take(tables[c], codes[..., c], mode="wrap")
+    return out
+
+
+class _LinearCodes:
+    """Exact arithmetic for a linear response (gamma = 1): ``float32(min(n, levels)) / levels * gain``.
+
+    This is the decode table's entry for every code n bit for bit (``x ** 1 = x``, the divide and multiply are
+    correctly rounded float32 operations) but costs a conversion instead of a gather. :meth:`build` checks
+    that equality over all 65536 codes and gives None where it does not hold.
+    """
+
+    def __init__(self, levels: int, gain: np.float32) -> None:
+        self.levels, self.gain = levels, np.float32(gain)
+
+    @classmethod
+    def build(cls, camera: "CameraModel", table: np.ndarray, gain: np.float32) -> "_LinearCodes | None":
+        if not (camera.response.uniform and camera.response.gamma[0] == 1.0 and len(table) == 1):
+            return None
+        lin = cls(camera.levels, gain)
+        return lin if np.array_equal(lin(np.arange(65536, dtype=np.uint16)), table[0]) else None
+
+    def __call__(self, codes: np.ndarray) -> np.ndarray:
+        codes = np.minimum(codes, np.uint16(self.levels))     # uint16 codes; above levels decode as levels
+        x = codes.astype(np.float32)
+        x /= np.float32(self.levels)
+        x *= self.gain
+        return x
+
+
+def _encode_float(projector: "ProjectorModel", img: np.ndarray) -> np.ndarray:
+    """The reference projector quantiser: float32 radiance -> codes (float32, rounded), see LightFieldEncoder."""
+    linear = np.clip(img / np.float32(projector.max_radiance), 0.0, 1.0)
+    code = projector.response.encode(linear)
+    return np.round(code * np.float32(projector.levels))
+
+
+_F32_INF_BITS = 0x7F800000   # bit pattern of +inf: positive finite float32s lie below it
+_LITTLE_ENDIAN = sys.byteorder == "little"
+
+
+class _Quantiser:
+    """Exact lookup-table version of :func:`_encode_float` for float32 images.
+
+    The map x -> code of :func:`_encode_float` is a non-decreasing step function of the float32 x, so it is
+    fixed by the codes at the bin edges and the x where it steps. Bins are ranges of float32 bit patterns
+    (``bits >> shift``, i.e. exponent and the top mantissa bits: relative width ``2^(shift - 23)``, which suits
+    a power law). ``shift`` is chosen so that no bin holds more than one step; then
+    ``code(x) = low[bin] + (x >= step[bin])`` with ``step`` NaN (never reached) in bins without a step. The
+    steps are found by bisection on the reference function itself, so the table reproduces it bit for bit
+    (negative values and -0 give 0, values above ``max_radiance`` and +inf the top code).
+    """
+
+    def __init__(self, low: np.ndarray, step: np.ndarray, shift: int) -> None:
+        self.low, self.step, self.shift = low, step, shift
+
+    @classmethod
+    def build(cls, projector: "ProjectorModel", shifts=(16, 15, 14, 13, 12)) -> "_Quantiser | None":
+        """The table for a projector, with the coarsest bins that work; None if no shift in ``shifts`` does."""
+        channels = 1 if projector.response.uniform else 3
+        for shift in shifts:
+            table = cls._tables(projector, shift, channels)
+            if table is not None:
+                return cls(*table, shift)
+        return None
+
+    @staticmethod
+    def _tables(projector: "ProjectorModel", shift: int, channels: int):
+        def codes(bits: np.ndarray) -> np.ndarray:        # (N, 3) uint32 bit patterns -> (N, 3) int64 codes
+            x = np.ascontiguousarray(bits, dtype=np.uint32).view(np.float32)
+            return _encode_float(projector, x).astype(np.int64)
+
+        n_pos = _F32_INF_BITS >> shift                      # bins of positive finite floats
+        lo_bits = np.repeat((np.arange(n_pos, dtype=np.uint32) << np.uint32(shift))[:, None], 3, axis=1)
+        hi_bits = lo_bits + np.uint32((1 << shift) - 1)
+        lo, hi = codes(lo_bits), codes(hi_bits)
+        if np.any(hi - lo > 1) or np.any(hi < lo):
+            return None
+        step = np.full((n_pos, 3), np.nan, np.float32)
+        rows = np.flatnonzero(np.any(hi > lo, axis=1))
+        a, b = lo_bits[rows].astype(np.int64), hi_bits[rows].astype(np.int64)   # codes(a) = lo, codes(b) = hi
+        target = hi[rows]
+        for _ in range(shift + 1):
+            mid = (a + b) // 2
+            up = codes(mid) >= target
+            b, a = np.where(up, mid, b), np.where(up, a, mid)
+        found = (hi[rows] > lo[rows])
+        step_rows = b.astype(np.uint32).view(np.float32)
+        step[rows] = np.where(found, step_rows, np.nan)
+        n_all = 1 << (32 - shift)
+        low = np.zeros((n_all, 3), np.int64)                # negative floats (sign bit set) -> code 0
+        low[:n_pos] = lo
+        low[n_pos:n_all // 2] = projector.levels            # +inf and NaN -> top code
+        full_step = np.full((n_all, 3), np.nan, np.float32)
+        full_step[:n_pos] = step
+        low = np.ascontiguousarray(low[:, :channels].T.astype(projector.dtype))
+        full_step = np.ascontiguousarray(full_step[:, :channels].T)
+        return low, full_step
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        """Codes of a C-contiguous ``(H, W, 3) float32`` image."""
+        if self.shift == 16 and _LITTLE_ENDIAN:
+            idx = y.view(np.uint16)[..., 1::2]              # the high 16 bits of every float, no arithmetic
+        else:
+            idx = y.view(np.uint32) >> np.uint32(self.shift)
+        idx = idx.astype(np.intp)                           # once, not inside each np.take
+        # every index is below the table size 2^(32 - shift): mode="wrap" changes nothing, skips the buffer
+        if len(self.low) == 1:
+            code = np.take(self.low[0], idx, mode="wrap")
+            code += y >= np.take(self.step[0], idx, mode="wrap")
+            return code
+        code = np.empty(y.shape, self.low.dtype)
+        for c in range(3):
+            code[..., c] = np.take(self.low[c], idx[..., c], mode="wrap")
+            code[..., c] += y[..., c] >= np.take(self.step[c], idx[..., c], mode="wrap")
+        return code
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +292,19 @@ class LightFieldDecoder:
             if camera.vignetting is None else camera.vignetting
         gain = camera.exposure * vig.astype(np.float64)
         self._inv_gain = np.where(gain > 0, 1.0 / np.where(gain > 0, gain, 1.0), 0.0).astype(np.float32)
+        # response inversion as a table over all uint16 codes; with no vignetting the (uniform) gain is folded
+        # in: float32(table * g) is exactly the product the per-pixel path forms
+        table = camera.response.decode_table(camera.levels)
+        table = table[:1] if camera.response.uniform else table
+        self._uniform_gain = camera.vignetting is None
+        if self._uniform_gain:
+            table = table * self._inv_gain[0, 0]
+        self._table = np.ascontiguousarray(table, dtype=np.float32)
+        self._linear = _LinearCodes.build(camera, self._table, self._inv_gain[0, 0]) if self._uniform_gain else None
+        self._patches = self.codec.patch_sampler          # None where the images are too large for cv2.remap
+        self._patch_gain = None
+        if self._patches is not None and not self._uniform_gain:
+            self._patch_gain = self._patches.gather(self._inv_gain)[..., None]
 
     def radiance_image(self, raw: np.ndarray) -> np.ndarray:
         """Raw codes -> per-pixel radiance, ``decode(raw / (2^bits - 1)) / (exposure * vignetting)``.
@@ -161,9 +316,10 @@ class LightFieldDecoder:
             ``(H, W, 3) float32`` radiance, W m^-2 sr^-1 (0 where vignetting is 0).
         """
         raw = _check_codes(raw, self.camera.device, "raw camera image")
-        code = raw.astype(np.float32) / np.float32(self.camera.levels)
-        linear = self.camera.response.decode(code)
-        return (linear * self._inv_gain[..., None]).astype(np.float32, copy=False)
+        radiance = _lookup(self._table, _as_cv_codes(raw, self.camera.levels))
+        if not self._uniform_gain:
+            radiance *= self._inv_gain[..., None]
+        return radiance
 
     def __call__(self, raw: np.ndarray) -> LightField:
         """Decode a raw camera image.
@@ -174,7 +330,16 @@ class LightFieldDecoder:
         Returns:
             LightField ``(K, V, U, 3) float32`` radiance.
         """
-        return self.codec.image_to_lightfield(self.radiance_image(raw))
+        if self._patches is None:
+            return self.codec.image_to_lightfield(self.radiance_image(raw))
+        # response and gain only on the pixels the codec's bilinear map reads (4 per sample), then the same
+        # interpolation: equal to image_to_lightfield(radiance_image(raw)), without touching the other pixels
+        raw = _check_codes(raw, self.camera.device, "raw camera image")
+        codes = self._patches.gather(_as_cv_codes(raw, self.camera.levels))
+        patch = _lookup(self._table, codes) if self._linear is None else self._linear(codes)
+        if self._patch_gain is not None:
+            patch *= self._patch_gain
+        return self.codec.patches_to_lightfield(patch)
 
     def expose(self, radiance_image: np.ndarray) -> np.ndarray:
         """The noiseless forward model of the camera (see :meth:`CameraModel.expose`)."""
@@ -195,6 +360,7 @@ class LightFieldEncoder:
         """
         self.array, self.projector = array, projector
         self.codec = LensletCodec(array, projector.device, U, V)
+        self._quantiser = _Quantiser.build(projector)      # None: no table fine enough (e.g. 16-bit codes)
 
     def __call__(self, lf: LightField) -> np.ndarray:
         """Encode a light field for the projector.
@@ -207,10 +373,11 @@ class LightFieldEncoder:
         Returns:
             ``(H, W, 3)`` uint8 (bits <= 8) or uint16 codes.
         """
-        img = self.codec.lightfield_to_image(lf)
-        linear = np.clip(img / np.float32(self.projector.max_radiance), 0.0, 1.0)
-        code = self.projector.response.encode(linear)
-        return np.round(code * np.float32(self.projector.levels)).astype(self.projector.dtype)
+        if self._quantiser is None:
+            return _encode_float(self.projector, self.codec.lightfield_to_image(lf)).astype(self.projector.dtype)
+        img = self.codec.lightfield_to_unnormalised(lf)
+        img *= self.codec.inv_norm3                      # = lightfield_to_image(lf), bit for bit
+        return self._quantiser(img)
 
     def emitted(self, image: np.ndarray) -> np.ndarray:
         """Radiance each projector pixel makes its lenslet emit (inverse of :meth:`__call__` up to quantisation).

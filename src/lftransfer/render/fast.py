@@ -11,7 +11,7 @@ times albedo / pi.
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`):
 only diffuse materials (for glossy or metal objects use the exact path), one reflection inside the half-space
 (interreflections between synthetic objects are dropped), and irradiance varies linearly across triangles of
-size ``max_edge`` (4 mm by default, six times finer than a lenslet).
+size ``max_edge`` (6 mm by default, four times finer than a lenslet).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from lftransfer.render.integrator import Light
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import bsdf_dict, object_keys
 
-DEFAULT_MAX_EDGE = 0.004  # m
+DEFAULT_MAX_EDGE = 0.006  # m
 
 
 def supports(objects: Sequence) -> bool:
@@ -142,17 +142,25 @@ class CachedRenderer(HalfSpaceRenderer):
         mi = mitsuba()
         import drjit as dr
 
-        v, n = self.vertices, self.normals
-        si = dr.zeros(mi.SurfaceInteraction3f, len(v))
-        si.p = mi.Point3f(v[:, 0], v[:, 1], v[:, 2])
-        si.n = mi.Normal3f(n[:, 0], n[:, 1], n[:, 2])
-        si.sh_frame = mi.Frame3f(si.n)
-        si.wi = mi.Vector3f(0, 0, 1)
-        total = mi.Color3f(0.0)
+        m = len(self.vertices)
+        total = [np.zeros(m, np.float32) for _ in range(3)]
         for light in lights:
-            total += light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=True)
-        dr.eval(total)
-        self._irradiance = [total.x, total.y, total.z]
+            # Shade only the vertices this light can reach (a light field through the array reaches those
+            # facing it on its side of the plane).
+            idx = np.flatnonzero(light.may_light(self.vertices, self.normals)) if hasattr(light, "may_light") \
+                else np.arange(m)
+            if len(idx) == 0:
+                continue
+            v, n = self.vertices[idx], self.normals[idx]
+            si = dr.zeros(mi.SurfaceInteraction3f, len(idx))
+            si.p = mi.Point3f(v[:, 0], v[:, 1], v[:, 2])
+            si.n = mi.Normal3f(n[:, 0], n[:, 1], n[:, 2])
+            si.sh_frame = mi.Frame3f(si.n)
+            si.wi = mi.Vector3f(0, 0, 1)
+            e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=True), np.float32)
+            for c in range(3):
+                total[c][idx] += e[c]
+        self._irradiance = [mi.Float(t) for t in total]
         self._lit_by = tuple(lights)
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,

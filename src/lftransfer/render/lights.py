@@ -138,6 +138,21 @@ class LightFieldLight:
         self._ox = mi.Float(offsets[:, 0])
         self._oy = mi.Float(offsets[:, 1])
 
+    def may_light(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Which surface points can receive any light through the array at all (a cheap conservative test).
+
+        Args:
+            points: (N, 3) positions; normals: (N, 3) unit normals.
+
+        Returns:
+            (N,) bool: on this light's side of the plane and facing some part of the array.
+        """
+        xmin, xmax, ymin, ymax = self.lightfield.array.extent()
+        corners = np.array([[xmin, ymin, 0.0], [xmin, ymax, 0.0], [xmax, ymin, 0.0], [xmax, ymax, 0.0]])
+        side = points[:, 2] > 0 if self.side == "real" else points[:, 2] < 0
+        facing = (np.einsum("nd,cnd->cn", normals, corners[:, None, :] - points[None]) > 0).any(axis=0)
+        return side & facing
+
     # -- texture lookups ---------------------------------------------------------------------------------
     def _bilinear(self, k, u, v, active):
         """Bilinear radiance lookup of lenslet k at (u, v); zero outside [-a, a]^2."""
@@ -256,6 +271,8 @@ class LightFieldLight:
             else:
                 radiance = self._bilinear(k, u, v, active)
             lit = active & dr.any(radiance != 0.0)
+            if irradiance:   # no shadow ray towards lenslets behind the surface
+                lit &= dr.dot(si.n, wn) > 0.0
             visible = lit & ~scene.ray_test(si.spawn_ray_to(p), lit)
             f = _weight(si, wn, visible, irradiance)
             acc += dr.select(visible, f * radiance * (cos_p * weight / r2), 0.0)
