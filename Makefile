@@ -3,7 +3,7 @@ VENV  ?= .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test quick setup clean
+.PHONY: demo test quick bench setup clean
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml scripts/bootstrap.sh
@@ -15,6 +15,9 @@ demo: $(STAMP)
 
 quick: $(STAMP)
 	$(VENV)/bin/lft demo --quick --out out/quick
+
+bench: $(STAMP)
+	$(VENV)/bin/lft bench --json out/bench.json
 
 test: $(STAMP)
 	$(PY) -m pytest -q tests

@@ -22,11 +22,12 @@ def _fail(message: str) -> None:
 
 
 def _run(scene, out: Path, bounces: int, lighting_model: Optional[str], compare: bool, gt_spp: Optional[int],
-         use_cache: bool) -> dict:
+         use_cache: bool, renderer: str = "auto") -> dict:
     from lftransfer.pipeline import RunOptions, count_run_steps, run_scene
 
     options = RunOptions(bounces=bounces, lighting_model=lighting_model,
-                         compare_models=("area", "point") if compare else (), gt_spp=gt_spp, use_cache=use_cache)
+                         compare_models=("area", "point") if compare else (), gt_spp=gt_spp, use_cache=use_cache,
+                         renderer=renderer)
     total = count_run_steps(scene, options)
     with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console, transient=False) as bar:
@@ -56,6 +57,11 @@ def _summary(report: dict, out: Path) -> None:
     Console().print(table)
 
 
+def _check_renderer(renderer: str) -> None:
+    if renderer not in ("auto", "fast", "exact"):
+        _fail(f"--renderer: expected one of auto, fast, exact, got {renderer!r}")
+
+
 def _load(path: Path):
     from lftransfer.scenes import SceneError, load_scene
 
@@ -69,7 +75,8 @@ def _load(path: Path):
 def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
          quick: bool = typer.Option(False, "--quick", help="Quarter resolution, fewer samples (seconds, not minutes)."),
          bounces: int = typer.Option(2, min=0, help="Number of bounces."),
-         no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again.")) -> None:
+         no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again."),
+         renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact.")) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets) on the simulated rig and check it."""
     from lftransfer.pipeline import quick_scene
     from lftransfer.scenes import builtin_scene
@@ -77,7 +84,8 @@ def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
     scene = _load(builtin_scene("fig4"))
     if quick:
         scene = quick_scene(scene)
-    _run(scene, out, bounces, None, True, None, not no_cache)
+    _check_renderer(renderer)
+    _run(scene, out, bounces, None, True, None, not no_cache, renderer)
 
 
 @app.command()
@@ -88,7 +96,8 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
         compare: bool = typer.Option(False, "--compare-models", help="Also measure the other lighting model."),
         gt_spp: Optional[int] = typer.Option(None, help="Ground-truth samples per pixel."),
         quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
-        no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again.")) -> None:
+        no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again."),
+        renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact.")) -> None:
     """Run light field transfer on any scene file with the simulated rig."""
     from lftransfer.pipeline import quick_scene
     from lftransfer.render.lights import LIGHTING_MODELS
@@ -100,7 +109,8 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
     scene = _load(scene_file)
     if quick:
         scene = quick_scene(scene)
-    _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache)
+    _check_renderer(renderer)
+    _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache, renderer)
 
 
 @app.command()

@@ -16,7 +16,7 @@ from lftransfer.composite import composite
 from lftransfer.report import write_outputs
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.sim import SimRig
-from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
+from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
 from lftransfer.verify import evaluate, render_ground_truth
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
@@ -33,6 +33,7 @@ class RunOptions:
         gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
+        renderer: synthetic renderer, "auto" (fast path where the scene allows), "fast" or "exact".
     """
 
     bounces: int = 2
@@ -41,6 +42,7 @@ class RunOptions:
     gt_spp: int | None = None
     capture_spp: int = 4
     use_cache: bool = True
+    renderer: str = "auto"
 
 
 def quick_scene(scene):
@@ -101,7 +103,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
                                 lighting_model=primary, aperture_samples=render.aperture_samples,
-                                lf_spp=render.spp, view_spp=render.spp)
+                                lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
     result = run_transfer(rig, model, scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
@@ -140,6 +142,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
             "metrics": metrics["metric_resolution"],
         },
         "gt_spp": options.gt_spp or render.gt_spp,
+        "renderer": resolve_renderer(scene, options.renderer),
         "variant": variant(),
         "scene": str(scene.source) if scene.source else None,
     }

@@ -2,6 +2,14 @@
 
 - :class:`LightFieldDecoder`: raw LF camera image (uint16 codes) -> :class:`LightField` of radiance.
 - :class:`LightFieldEncoder`: :class:`LightField` of radiance -> projector image (uint8/uint16 codes).
+
+Both are on the interactive transfer loop, so they avoid float work per device pixel where they can, with
+results equal bit for bit to the plain float formulas in their docstrings (tests/lightfield/test_codec_fast.py):
+
+- decode: the response is inverted through a table over all codes (gain folded in when there is no
+  vignetting), only for the 2 x 2 pixels each light field sample reads (:class:`~.codec._PatchSampler`);
+- encode: the renormalised remap result goes through :class:`_Quantiser`, an exact table of the quantiser
+  ``round(levels * encode(clip(L / max_radiance, 0, 1)))`` indexed by the float's bit pattern.
 """
 
 from __future__ import annotations
@@ -121,7 +129,8 @@ class _Quantiser:
         """The table for a projector, with the coarsest bins that work; None if no shift in ``shifts`` does."""
         channels = 1 if projector.response.uniform else 3
         for shift in shifts:
-            table = cls._tables(projector, shift, channels)
+            with np.errstate(over="ignore", invalid="ignore"):   # huge floats / max_radiance overflow to inf
+                table = cls._tables(projector, shift, channels)
             if table is not None:
                 return cls(*table, shift)
         return None
@@ -316,7 +325,8 @@ class LightFieldDecoder:
             ``(H, W, 3) float32`` radiance, W m^-2 sr^-1 (0 where vignetting is 0).
         """
         raw = _check_codes(raw, self.camera.device, "raw camera image")
-        radiance = _lookup(self._table, _as_cv_codes(raw, self.camera.levels))
+        codes = _as_cv_codes(raw, self.camera.levels)
+        radiance = _lookup(self._table, codes) if self._linear is None else self._linear(codes)
         if not self._uniform_gain:
             radiance *= self._inv_gain[..., None]
         return radiance

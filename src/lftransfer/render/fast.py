@@ -59,6 +59,8 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
         v, f = obj.triangle_mesh()
         mesh = trimesh.Trimesh(vertices=v, faces=f, process=False)
     stretch = float(np.max(obj.scale3))           # local lengths grow at most this much in the world
+    if smooth:   # curved: the facets are the geometry too, keep them within 0.1 % of the radius (edge <= r / 10)
+        max_edge = min(max_edge, 0.1 * obj.radius * float(np.min(obj.scale3)))
     while mesh.edges_unique_length.max() * stretch > max_edge:
         mesh = mesh.subdivide()
         if smooth:   # keep subdivided vertices on the sphere

@@ -132,11 +132,18 @@ class _Timer:
             self.totals[stage] = self.totals.get(stage, 0.0) + time.perf_counter() - t0
 
 
-def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
-    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see :class:`TransferSettings`)."""
+def resolve_renderer(scene, kind: str = "auto") -> str:
+    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene."""
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
-    if kind == "fast" or (kind == "auto" and fast.supports(scene.synthetic)):
+    if kind == "auto":
+        return "fast" if fast.supports(scene.synthetic) else "exact"
+    return kind
+
+
+def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
+    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see :class:`TransferSettings`)."""
+    if resolve_renderer(scene, kind) == "fast":
         return fast.CachedRenderer(scene.synthetic)
     return HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
 
