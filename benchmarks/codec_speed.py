@@ -18,7 +18,7 @@ import time
 import cv2
 import numpy as np
 
-from lftransfer.lightfield import CameraModel, LightField, ResponseCurve
+from lftransfer.lightfield import LightField, ResponseCurve
 from lftransfer.rig.model import nominal_rig
 from lftransfer.scenes import builtin_scene, load_scene
 

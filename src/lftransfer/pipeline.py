@@ -10,7 +10,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
 
 from lftransfer.composite import composite
 from lftransfer.report import write_outputs

@@ -57,7 +57,6 @@ def test_03_projected_light_reaches_the_real_scene(variant):
     """A projected light field makes the real scene brighter; black projection changes nothing."""
     scene = _scene(intensity=0.01)
     rig = SimRig(scene, capture_spp=1)
-    model = nominal_rig(scene.rig)
     black = np.zeros((150, 150, 3), np.uint8)
     rig.project(black)
     a = rig.capture_lf().astype(float)

@@ -28,7 +28,6 @@ from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.sim import SimRig
-from lftransfer.transfer.bounce import projector_gain, real_response
 from lftransfer.verify import psnr
 
 Progress = Callable[[str], None]
@@ -98,7 +97,7 @@ def run_bench(scene, settings: BenchSettings = BenchSettings(), *, progress: Pro
     black = np.zeros((*rig.projector_shape, 3), model.projector.dtype)
     rig.project(black)
     t = time.perf_counter()
-    raw_direct = rig.capture_lf()
+    rig.capture_lf()
     capture_s = [time.perf_counter() - t]
     real_view = rig.capture_view()
     ls0 = fast.render_lightfield(model.array, [point_light], U, V, model="point", spp=1)

@@ -188,7 +188,6 @@ class LightFieldLight:
 
     def _box(self, k, u, v, half, active):
         """Mean radiance of lenslet k over the (u, v) box of half-width ``half``, from the summed-area table."""
-        mi = mitsuba()
         import drjit as dr
 
         U, V, a = self.U, self.V, self.a

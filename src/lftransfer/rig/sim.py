@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from lftransfer.lightfield import LensletCodec
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
@@ -75,8 +74,8 @@ class SimRig:
         self._pix_dir = d[self._pix].astype(np.float32)         # (P, 3), d_z > 0
         prj = self._truth.projector
         self._prj_shape = (prj.device.height, prj.device.width)
-        self._prj_codec = LensletCodec(array, prj.device, projector_samples, projector_samples)
         self._prj_encoder = self._truth.encoder(projector_samples, projector_samples)
+        self._prj_codec = self._prj_encoder.codec                 # projector pixels <-> emitted light field
         self._projector_light: LightFieldLight | None = None
         self._view = scene.view
         self._view_sensor = mi.load_dict(sensor_dict(self._view.origin, self._view.target, self._view.up,
