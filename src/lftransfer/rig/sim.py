@@ -134,6 +134,40 @@ class SimRig:
         img = self._real.render_view(self._view_sensor, w, h, self._lights(), spp=self.view_spp, seed=self._seed)
         return img.rgb
 
+    # -- calibration actions (paper, section 4.2) -------------------------------------------------------------
+    def capture_collimated(self, spot_sigma_px: float = 1.2) -> np.ndarray:
+        """LF camera image of a collimated light source on the array's axis (real world lights off).
+
+        Every lenslet focuses the on-axis plane wave onto its focal point, so the camera sees one spot per
+        lenslet at the image of its optical centre; spots are as bright as the lenslet's aperture collects,
+        times vignetting, with sensor noise.
+
+        Args:
+            spot_sigma_px: standard deviation of each spot's blur, camera pixels.
+
+        Returns:
+            (H, W, 3) uint16 camera codes.
+        """
+        array, cam = self._truth.array, self._truth.camera
+        k = np.arange(array.K)
+        spots = cam.device.ray_to_pixel(array, k, np.tile([0.0, 0.0, 1.0], (array.K, 1)))    # (K, 2)
+        h, w = self._cam_shape
+        r = int(np.ceil(4 * spot_sigma_px))
+        off = np.arange(-r, r + 1)
+        cx, cy = np.round(spots[:, 0]).astype(int), np.round(spots[:, 1]).astype(int)
+        xs = cx[:, None, None] + off[None, None, :]                       # (K, 1, n)
+        ys = cy[:, None, None] + off[None, :, None]                       # (K, n, 1)
+        weight = np.exp(-((xs - spots[:, 0, None, None]) ** 2 + (ys - spots[:, 1, None, None]) ** 2)
+                        / (2 * spot_sigma_px ** 2))
+        xs, ys = np.broadcast_arrays(xs, ys)
+        inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        image = np.zeros((h, w), np.float64)
+        np.add.at(image, (ys[inside], xs[inside]), np.broadcast_to(weight, xs.shape)[inside])
+        # Peak at 70 % of full scale before vignetting (the exposure of this calibration shot).
+        peak = 0.7 / (cam.exposure * np.max(weight))
+        radiance = np.repeat((image * peak)[..., None], 3, axis=2).astype(np.float32)
+        return cam.expose(radiance, noise=self._sensor_noise)
+
     # -- for verification only (never used by the pipeline) ------------------------------------------------
     @property
     def truth(self) -> RigModel:

@@ -1,0 +1,100 @@
+"""Hidden truths for the simulated rig: a rig as built, away from the rig file's nominal values.
+
+A real rig never matches its drawing: the lens array sits rotated and shifted, its pitch is off by a fraction
+of a percent, each Fresnel lenslet distorts a little, the camera and the projector do not face the focal plane
+squarely, responses differ per channel, and the camera vignettes. :func:`perturbed_rig` draws all of that from a
+seed; the simulated rig renders with it, and the pipeline must recover it by calibration (only verification
+code may read it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from lftransfer.lightfield import CameraModel, ProjectorModel, ResponseCurve
+from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.rig.model import RigModel, nominal_rig
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """Sizes of the deviations from the nominal rig (each drawn uniformly in +-size unless said otherwise).
+
+    Attributes:
+        rotation_deg: in-plane rotation of the lens array.
+        offset_m: in-plane offset of the lens array, per axis.
+        pitch_rel: relative pitch error (focal length scales with it).
+        k1, k2: per-lenslet radial distortion, drawn around (k1_mean, 0) with these spreads.
+        k1_mean: mean radial distortion of the Fresnel lenslets.
+        view_tilt_deg: how far the camera and projector look away from the focal plane's normal.
+        gamma_rel: relative deviation of each channel's response exponent.
+        vignetting: relative fall-off of the camera's sensitivity at the image corners.
+    """
+
+    rotation_deg: float = 2.0
+    offset_m: float = 0.003
+    pitch_rel: float = 0.01
+    k1: float = 0.02
+    k2: float = 0.005
+    k1_mean: float = -0.04
+    view_tilt_deg: float = 3.0
+    gamma_rel: float = 0.1
+    vignetting: float = 0.3
+
+
+def _tilted(device: LensletDevice, tilt_deg: float, rng: np.random.Generator) -> LensletDevice:
+    """The same device looking at the focal plane from a little off its normal (a homography of a rotation)."""
+    w, h = device.width, device.height
+    f = 1.2 * max(w, h)                                  # focal length of the device in pixels (about 45 deg)
+    ax, ay = np.radians(rng.uniform(-tilt_deg, tilt_deg, 2))
+    rx = np.array([[1, 0, 0], [0, np.cos(ax), -np.sin(ax)], [0, np.sin(ax), np.cos(ax)]])
+    ry = np.array([[np.cos(ay), 0, np.sin(ay)], [0, 1, 0], [-np.sin(ay), 0, np.cos(ay)]])
+    k = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    warp = k @ rx @ ry @ np.linalg.inv(k)                # image of the tilted view, about the image centre
+    return replace(device, homography=warp @ device.homography)
+
+
+def _vignetting(width: int, height: int, falloff: float) -> np.ndarray:
+    """(H, W) float32 relative sensitivity: 1 at the centre, 1 - falloff at the corners (cos^4-like)."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    r2 = ((x - (width - 1) / 2) ** 2 + (y - (height - 1) / 2) ** 2) / (((width - 1) / 2) ** 2 + ((height - 1) / 2) ** 2)
+    return (1.0 - falloff * r2).astype(np.float32)
+
+
+def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigModel:
+    """A rig as built: the rig file's nominal rig with deviations drawn from ``seed``.
+
+    Args:
+        rig: ``lftransfer.scenes.RigConfig`` (nominal values).
+        seed: random seed of the deviations.
+        size: sizes of the deviations.
+
+    Returns:
+        RigModel of the true rig.
+    """
+    rng = np.random.default_rng(seed)
+    nominal = nominal_rig(rig)
+    scale = 1.0 + rng.uniform(-size.pitch_rel, size.pitch_rel)
+    array = LensArray(lattice=rig.lattice, rows=rig.rows, cols=rig.cols, pitch=rig.pitch * scale,
+                      focal_length=rig.focal_length * scale, aperture=rig.aperture,
+                      offset=tuple(rng.uniform(-size.offset_m, size.offset_m, 2)),
+                      rotation=float(np.radians(rng.uniform(-size.rotation_deg, size.rotation_deg))))
+    K = array.K
+
+    def distortion():
+        return np.stack([size.k1_mean + rng.uniform(-size.k1, size.k1, K), rng.uniform(-size.k2, size.k2, K)], 1)
+
+    def gamma(nominal_gamma):
+        return tuple(float(g * (1 + rng.uniform(-size.gamma_rel, size.gamma_rel))) for g in nominal_gamma)
+
+    cam, prj = nominal.camera, nominal.projector
+    cam_device = _tilted(replace(cam.device, distortion=distortion()), size.view_tilt_deg, rng)
+    prj_device = _tilted(replace(prj.device, distortion=distortion()), size.view_tilt_deg, rng)
+    camera = CameraModel(device=cam_device, bits=cam.bits, response=ResponseCurve(gamma(rig.camera_gamma)),
+                         exposure=cam.exposure, vignetting=_vignetting(cam_device.width, cam_device.height,
+                                                                       size.vignetting))
+    projector = ProjectorModel(device=prj_device, bits=prj.bits, response=ResponseCurve(gamma(rig.projector_gamma)),
+                               max_radiance=prj.max_radiance)
+    return RigModel(array=array, camera=camera, projector=projector)
