@@ -15,6 +15,7 @@ from lftransfer.composite import composite
 from lftransfer.report import write_outputs
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.sim import SimRig
+from lftransfer.rig.truth import perturbed_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
 from lftransfer.verify import evaluate, render_ground_truth
 
@@ -33,6 +34,10 @@ class RunOptions:
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
         renderer: synthetic renderer, "auto" (fast path where the scene allows), "fast" or "exact".
+        truth_seed: None: the simulated rig is built exactly as the rig file says; a seed: it is built with
+            deviations drawn from that seed (:func:`lftransfer.rig.truth.perturbed_rig`).
+        oracle: give the pipeline the simulated rig's true model instead of the rig file's (a verification
+            baseline: what perfect calibration would reach).
     """
 
     bounces: int = 2
@@ -42,6 +47,8 @@ class RunOptions:
     capture_spp: int = 4
     use_cache: bool = True
     renderer: str = "auto"
+    truth_seed: int | None = None
+    oracle: bool = False
 
 
 def quick_scene(scene):
@@ -95,8 +102,11 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     step("set up the simulated rig")
-    rig = SimRig(scene, capture_spp=options.capture_spp)
-    model = nominal_rig(scene.rig)          # what the pipeline knows of the rig: the rig file's values
+    truth = None if options.truth_seed is None else perturbed_rig(scene.rig, options.truth_seed)
+    rig = SimRig(scene, truth=truth, capture_spp=options.capture_spp)
+    # What the pipeline knows of the rig: the rig file's values (calibration replaces them), or, as a
+    # verification baseline only, the hidden truth.
+    model = rig.truth if options.oracle else nominal_rig(scene.rig)
     timings["setup"] = time.perf_counter() - t0
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
@@ -142,6 +152,8 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         },
         "gt_spp": options.gt_spp or render.gt_spp,
         "renderer": resolve_renderer(scene, options.renderer),
+        "truth_seed": options.truth_seed,
+        "rig_model": "true (oracle)" if options.oracle else "nominal (rig file)",
         "variant": variant(),
         "scene": str(scene.source) if scene.source else None,
     }
