@@ -168,6 +168,36 @@ class SimRig:
         radiance = np.repeat((image * peak)[..., None], 3, axis=2).astype(np.float32)
         return cam.expose(radiance, noise=self._sensor_noise)
 
+    def capture_focal_plane(self, image: np.ndarray, diffuser: float = 0.5) -> np.ndarray:
+        """LF camera image while the projector shows ``image`` onto a diffuser at the lenslets' focal plane.
+
+        Both devices image that plane, so the camera sees the projector's pixels directly (through its own
+        homography and the projector's); the diffuser passes the fraction ``diffuser`` of the light.
+
+        Returns:
+            (H, W, 3) uint16 camera codes.
+        """
+        import cv2
+
+        image = np.asarray(image)
+        expected = (*self._prj_shape, 3)
+        if image.shape[:2] != self._prj_shape:
+            raise ValueError(f"projector image must be {expected}, got {image.shape}")
+        if image.ndim == 2:
+            image = np.repeat(image[..., None], 3, axis=2)
+        cam, prj = self._truth.camera.device, self._truth.projector.device
+        if not hasattr(self, "_focal_map"):
+            h, w = self._cam_shape
+            px = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1).reshape(-1, 2).astype(np.float64)
+            q = np.concatenate([px, np.ones((len(px), 1))], 1) @ np.linalg.inv(cam.homography).T
+            p = q @ prj.homography.T
+            p = (p[:, :2] / p[:, 2:3]).astype(np.float32).reshape(h, w, 2)
+            self._focal_map = (p[..., 0].copy(), p[..., 1].copy())
+        radiance = self._prj_encoder.emitted(image)
+        seen = cv2.remap(radiance, *self._focal_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+        return self._truth.camera.expose(diffuser * seen, noise=self._sensor_noise)
+
     # -- for verification only (never used by the pipeline) ------------------------------------------------
     @property
     def truth(self) -> RigModel:
