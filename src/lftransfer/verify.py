@@ -105,7 +105,7 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
              "point_light": light}
     images: dict[str, list[np.ndarray]] = {}
     for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
-        mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False)
+        mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False, optimize=False)
         images[name] = []
         for seed in seeds:
             if progress:

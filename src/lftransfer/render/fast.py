@@ -116,7 +116,7 @@ class CachedRenderer(HalfSpaceRenderer):
             albedo.append(np.asarray(obj.material.albedo, np.float32))
             bases.append(base)
             base += len(v)
-        self.scene = mi.load_dict({"type": "scene", **shapes}, parallel=False)
+        self.scene = mi.load_dict({"type": "scene", **shapes}, parallel=False, optimize=False)
         self.vertices = np.concatenate(verts)                     # (M, 3) cache points
         self.normals = np.concatenate(norms)                      # (M, 3)
         # Registry id of each loaded shape -> its first cache vertex and its albedo / pi.

@@ -73,7 +73,7 @@ class HalfSpaceRenderer:
         mi = mitsuba()
         self.objects = list(objects)
         self.max_depth = int(max_depth)
-        self.scene = mi.load_dict(scene_dict(self.objects, extra=extra_shapes), parallel=False)
+        self.scene = mi.load_dict(scene_dict(self.objects, extra=extra_shapes), parallel=False, optimize=False)
 
     def _rays(self, key: tuple, make):
         """Primary rays are the same from frame to frame: build them once per key (a small memo)."""
