@@ -155,6 +155,52 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", help="Scene
         write_json(json_out, result)
 
 
+calibrate_app = typer.Typer(no_args_is_help=True, help="Calibration steps that run on image files.")
+app.add_typer(calibrate_app, name="calibrate")
+
+
+@calibrate_app.command("lenslets")
+def calibrate_lenslets(image: Path = typer.Argument(..., help="Image of a collimated on-axis source through the array "
+                                                          "(8/16-bit PNG or TIFF, grey or colour)."),
+                       lattice: str = typer.Option("hex", help="hex | rect"),
+                       out: Path = typer.Option(Path("centres.csv"), help="CSV of lenslet centres (header x,y).")) -> None:
+    """Find every lenslet's centre (sub-pixel spot detection) and fit the lattice."""
+    from lftransfer.calibration.images import CalibrationImageError, read_image
+    from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres, write_centres_csv
+
+    if lattice not in ("hex", "rect"):
+        _fail(f"--lattice: expected hex or rect, got {lattice!r}")
+    try:
+        fit = find_lenslet_centres(read_image(image), lattice)
+    except (CalibrationImageError, NoSpotsError) as exc:
+        _fail(f"{image}: {exc}" if str(image) not in str(exc) else str(exc))
+    write_centres_csv(out, fit)
+    Console().print(fit.summary())
+    Console().print(f"wrote {len(fit.centres)} lenslet centres to {out}")
+
+
+@calibrate_app.command("intrinsics")
+def calibrate_intrinsics_cmd(images: list[Path] = typer.Argument(..., help="Chessboard photographs."),
+                             pattern: str = typer.Option("9x6", help="Inner corners, columns x rows."),
+                             square_mm: float = typer.Option(..., "--square-mm", help="Chessboard square size, mm."),
+                             out: Path = typer.Option(Path("intrinsics.json"), help="Output JSON.")) -> None:
+    """Camera matrix and distortion (k1 k2 p1 p2 k3) by Zhang's method from chessboard photographs."""
+    from lftransfer.calibration.intrinsics import (IntrinsicsError, calibrate_intrinsics, parse_pattern,
+                                                   write_intrinsics_json)
+
+    if not square_mm > 0:
+        _fail(f"--square-mm: expected a positive size in millimetres, got {square_mm}")
+    try:
+        intr = calibrate_intrinsics(images, parse_pattern(pattern), square_mm / 1000.0)
+    except (IntrinsicsError, ValueError) as exc:
+        _fail(str(exc))
+    write_intrinsics_json(out, intr)
+    Console().print(f"{len(intr.used)} views used, {len(intr.skipped)} skipped; reprojection RMS {intr.rms_px:.3f} px")
+    for name, why in intr.skipped.items():
+        Console().print(f"  skipped {name}: {why}")
+    Console().print(f"wrote {out}")
+
+
 def main() -> None:  # pragma: no cover
     logging.basicConfig(level=logging.WARNING)
     app()

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from lftransfer.lightfield import CameraModel, LightFieldDecoder, LightFieldEncoder, ProjectorModel, ResponseCurve
 from lftransfer.optics import LensArray, LensletDevice
 
@@ -20,11 +22,22 @@ class RigModel:
         array: the lens array (lattice, pitch, focal length, pose in the interface plane).
         camera: LF camera model (pixel geometry, bit depth, response, exposure).
         projector: projector model (pixel geometry, bit depth, response, radiance of a full-code pixel).
+        tilt: (about x, about y) radians: the array plane turned out of the world's z = 0 plane about the world
+            origin (x first, then y). Renderers work in the array's own frame (:meth:`world_to_array`).
     """
 
     array: LensArray
     camera: CameraModel
     projector: ProjectorModel
+    tilt: tuple[float, float] = (0.0, 0.0)
+
+    def world_to_array(self) -> np.ndarray:
+        """(4, 4) rigid transform: world point -> the array's frame (interface plane z = 0)."""
+        from lftransfer.scenes.frame import rotation_xy
+
+        m = np.eye(4)
+        m[:3, :3] = rotation_xy(self.tilt).T
+        return m
 
     def decoder(self, U: int, V: int) -> LightFieldDecoder:
         """Raw LF camera image -> light field on a (V, U) angular grid."""

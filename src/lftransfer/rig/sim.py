@@ -22,6 +22,7 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
 from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.scenes.frame import scene_in_frame
 
 
 class SimRig:
@@ -47,8 +48,10 @@ class SimRig:
         from lftransfer.backend import mitsuba
 
         mi = mitsuba()
-        self._scene = scene
         self._truth = truth or nominal_rig(scene.rig)
+        # The real world seen from the true lens array's own frame (interface plane z = 0).
+        scene = scene_in_frame(scene, self._truth.world_to_array())
+        self._scene = scene
         self._seed = int(scene.rig.seed if seed is None else seed)
         self._rng = np.random.default_rng(self._seed + 7)
         self.capture_spp = int(capture_spp)
@@ -56,13 +59,13 @@ class SimRig:
         self.aperture_samples = int(aperture_samples)
         array = self._truth.array
         xmin, xmax, ymin, ymax = array.extent()
-        absorber = {
+        self._absorber = {
             "type": "rectangle",
             "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
             .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
         }
-        self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": absorber},
+        self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
                                        max_depth=scene.render.max_depth)
         self._point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
         cam = self._truth.camera
@@ -135,22 +138,31 @@ class SimRig:
         return img.rgb
 
     # -- calibration actions (paper, section 4.2) -------------------------------------------------------------
-    def capture_collimated(self, spot_sigma_px: float = 1.2) -> np.ndarray:
-        """LF camera image of a collimated light source on the array's axis (real world lights off).
+    def capture_collimated(self, spot_sigma_px: float = 1.2, direction=(0.0, 0.0, 1.0)) -> np.ndarray:
+        """LF camera image of a collimated light source (real world lights off).
 
-        Every lenslet focuses the on-axis plane wave onto its focal point, so the camera sees one spot per
-        lenslet at the image of its optical centre; spots are as bright as the lenslet's aperture collects,
-        times vignetting, with sensor noise.
+        Every lenslet focuses the plane wave onto one point of its focal plane: on the array's axis its focal
+        point, so the camera sees one spot per lenslet at the image of its optical centre; tilted, the spot
+        moves by the (distorted) image of the beam's direction. Spots are as bright as the lenslet's
+        aperture collects, times vignetting, with sensor noise.
 
         Args:
             spot_sigma_px: standard deviation of each spot's blur, camera pixels.
+            direction: (3,) direction the beam comes from, in the array's frame (z > 0: the real side);
+                the collimator's tilt is set on its mount, so it is known in the array's frame.
 
         Returns:
             (H, W, 3) uint16 camera codes.
         """
         array, cam = self._truth.array, self._truth.camera
+        d = np.asarray(direction, np.float64)
+        if d.shape != (3,) or not d[2] > 0:
+            raise ValueError(f"direction must be a 3-vector with z > 0, got {direction!r}")
         k = np.arange(array.K)
-        spots = cam.device.ray_to_pixel(array, k, np.tile([0.0, 0.0, 1.0], (array.K, 1)))    # (K, 2)
+        spots = cam.device.ray_to_pixel(array, k, np.tile(d / np.linalg.norm(d), (array.K, 1)))    # (K, 2)
+        # a beam outside a lenslet's field lands outside its cell: that lenslet shows no spot
+        back = cam.device.pixel_to_ray(array, np.nan_to_num(spots, nan=-1e6))[0]
+        spots = spots[back == k]
         h, w = self._cam_shape
         r = int(np.ceil(4 * spot_sigma_px))
         off = np.arange(-r, r + 1)
@@ -197,6 +209,54 @@ class SimRig:
         seen = cv2.remap(radiance, *self._focal_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0)
         return self._truth.camera.expose(diffuser * seen, noise=self._sensor_noise)
+
+    def capture_board(self, image: np.ndarray, centre, normal, size=(0.3, 0.3), albedo: float = 0.8,
+                      spp: int | None = None) -> np.ndarray:
+        """View camera image of a diffuse board held in front of the array while the projector shows ``image``.
+
+        The real objects are taken away and the point light is off. The operator holds the board where the
+        projected image is sharp: the plane asked for, given in the frame the rig file's nominal array defines
+        (centre of the array, nominal pitch), lies in the real world where the true array's scale, rotation and
+        offset carry it.
+
+        Args:
+            image: (H, W, 3) projector codes.
+            centre: (3,) board centre, metres, nominal array frame (z > 0: the real side).
+            normal: (3,) board normal, pointing to the side the board is seen and lit from.
+            size: (width, height) of the board, metres.
+            albedo: the board's diffuse reflectance (a grey calibration target).
+            spp: view camera samples per pixel (default: the rig's ``view_spp``).
+
+        Returns:
+            (h, w, 3) float32 linear radiance of the view camera.
+        """
+        from lftransfer.backend import mitsuba
+
+        mi = mitsuba()
+        self.project(image)
+        array, nominal = self._truth.array, nominal_rig(self._scene.rig).array
+        scale = array.pitch / nominal.pitch
+        c, s_ = np.cos(array.rotation - nominal.rotation), np.sin(array.rotation - nominal.rotation)
+        rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        shift = np.array([*(np.asarray(array.offset) - np.asarray(nominal.offset)), 0.0])
+        p = scale * rot @ np.asarray(centre, np.float64) + shift
+        n = rot @ np.asarray(normal, np.float64)
+        n /= np.linalg.norm(n)
+        helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        ex = np.cross(helper, n)
+        ex /= np.linalg.norm(ex)
+        ey = np.cross(n, ex)
+        to_world = np.eye(4)
+        to_world[:3, :3] = np.stack([ex * size[0] / 2 * scale, ey * size[1] / 2 * scale, n], axis=1)
+        to_world[:3, 3] = p
+        board = {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}
+        renderer = HalfSpaceRenderer([], extra_shapes={"board": board, "lens_array_absorber": self._absorber},
+                                     max_depth=1)
+        w, h = self._view.resolution
+        lights = [self._projector_light] if self._projector_light is not None else []
+        img = renderer.render_view(self._view_sensor, w, h, lights, spp=spp or self.view_spp, seed=self._seed)
+        return img.rgb
 
     # -- for verification only (never used by the pipeline) ------------------------------------------------
     @property

@@ -31,6 +31,8 @@ class Perturbation:
         view_tilt_deg: how far the camera and projector look away from the focal plane's normal.
         gamma_rel: relative deviation of each channel's response exponent.
         vignetting: relative fall-off of the camera's sensitivity at the image corners.
+        tilt_deg: out-of-plane tilt of the lens array about the world x and y axes.
+        light_error_m: error of the point light's position as the scene file gives it, per axis.
     """
 
     rotation_deg: float = 2.0
@@ -42,6 +44,8 @@ class Perturbation:
     view_tilt_deg: float = 3.0
     gamma_rel: float = 0.1
     vignetting: float = 0.3
+    tilt_deg: float = 0.5
+    light_error_m: float = 0.003
 
 
 def _tilted(device: LensletDevice, tilt_deg: float, rng: np.random.Generator) -> LensletDevice:
@@ -97,4 +101,21 @@ def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigMod
                                                                        size.vignetting))
     projector = ProjectorModel(device=prj_device, bits=prj.bits, response=ResponseCurve(gamma(rig.projector_gamma)),
                                max_radiance=prj.max_radiance)
-    return RigModel(array=array, camera=camera, projector=projector)
+    tilt = tuple(float(a) for a in np.radians(rng.uniform(-size.tilt_deg, size.tilt_deg, 2)))
+    return RigModel(array=array, camera=camera, projector=projector, tilt=tilt)
+
+
+def true_light_scene(scene, seed: int, size: Perturbation = Perturbation()):
+    """The scene as it really is: the point light where it really stands, away from the file's position.
+
+    The scene file's position is a measurement by hand; the truth differs by up to ``size.light_error_m`` per
+    axis (drawn from ``seed``, independently of :func:`perturbed_rig`).
+
+    Returns:
+        A new SceneConfig (for the simulated rig and the ground truth only).
+    """
+    from lftransfer.scenes import with_overrides
+
+    rng = np.random.default_rng([seed, 17])
+    error = rng.uniform(-size.light_error_m, size.light_error_m, 3)
+    return with_overrides(scene, light={"position": (np.asarray(scene.light.position) + error).tolist()})

@@ -1,0 +1,62 @@
+"""A scene seen from another rigid frame (e.g. the lens array's own frame when the array is tilted).
+
+Renderers work in the lens array's frame, where the interface is the plane z = 0. When the array is tilted in
+the world, everything else (objects, the point light, the view camera) is moved into that frame first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from lftransfer.scenes.format import SceneConfig, with_overrides
+
+__all__ = ["rotation_xy", "scene_in_frame"]
+
+
+def rotation_xy(tilt: tuple[float, float]) -> np.ndarray:
+    """Rotation about the world x axis by ``tilt[0]``, then about the world y axis by ``tilt[1]`` (radians).
+
+    Returns:
+        (3, 3) float64 rotation matrix ``R_y @ R_x``.
+    """
+    return Rotation.from_euler("xy", [float(tilt[0]), float(tilt[1])]).as_matrix()
+
+
+def scene_in_frame(scene: SceneConfig, matrix: np.ndarray) -> SceneConfig:
+    """The same scene with every position expressed in another frame.
+
+    Args:
+        scene: the scene.
+        matrix: (4, 4) rigid transform, world point -> point in the new frame.
+
+    Returns:
+        A new SceneConfig: objects, point light and view camera moved by ``matrix``; the rig and the render
+        settings unchanged. The identity returns ``scene`` itself.
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
+        raise ValueError(f"matrix must be a (4, 4) rigid transform, got shape {m.shape}")
+    if np.allclose(m, np.eye(4), rtol=0, atol=1e-15):
+        return scene
+    rot, shift = m[:3, :3], m[:3, 3]
+
+    def point(p):
+        return (rot @ np.asarray(p, float) + shift).tolist()
+
+    def vector(v):
+        return (rot @ np.asarray(v, float)).tolist()
+
+    def move(obj):
+        r = Rotation.from_matrix(rot @ obj.rotation())
+        return obj.model_copy(update={"translate": point(obj.translate),
+                                      "rotate_deg": r.as_euler("xyz", degrees=True).tolist()})
+
+    view = scene.view
+    return with_overrides(
+        scene,
+        real=[move(o) for o in scene.real],
+        synthetic=[move(o) for o in scene.synthetic],
+        light={"position": point(scene.light.position)},
+        view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},
+    )
