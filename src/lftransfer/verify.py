@@ -182,3 +182,94 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
         "metric_resolution": [int(union.shape[1]), int(union.shape[0])],
         "metric_pixels": int(mask.sum()),
     }
+
+
+# ---- calibration against the hidden truth -----------------------------------------------------------------------
+
+def _rig_rotation(model) -> np.ndarray:
+    from lftransfer.scenes.frame import rotation_xy
+
+    c, s = np.cos(model.array.rotation), np.sin(model.array.rotation)
+    return rotation_xy(model.tilt) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict:
+    """Errors of a calibration against the simulated rig's hidden truth (verification only).
+
+    Args:
+        calibration: :class:`lftransfer.calibration.rig.Calibration`.
+        truth: the true ``RigModel`` (``SimRig.truth``).
+        max_pixels: camera pixels sampled for the ray and mapping errors.
+
+    Returns:
+        JSON-ready dict: lenslet centres (LF camera px), projector mapping (projector px), global pose (mm,
+        degrees), pitch, ray directions (degrees), responses (fraction of full scale), cross-talk, black level,
+        brightness, exposure, vignetting.
+    """
+    from lftransfer.calibration.radiometric import response_error
+
+    cal = calibration.model
+    out: dict = {}
+    ta, ca = truth.array, cal.array
+    tcam, ccam = truth.camera, cal.camera
+    if calibration.lattice is not None:
+        lat = calibration.lattice
+        k = lat.indices[:, 0] * ta.cols + lat.indices[:, 1]
+        true_px = tcam.device.ray_to_pixel(ta, k, np.tile([0.0, 0.0, 1.0], (len(k), 1)))
+        err = np.linalg.norm(lat.centres - true_px, axis=1)
+        out["lenslet_centre_rms_px"] = float(np.sqrt(np.mean(err ** 2)))
+        out["lenslet_centre_max_px"] = float(err.max())
+        out["lenslets_found"] = int(len(k))
+    # camera pixels behind lenslets, a sample
+    h, w = tcam.device.height, tcam.device.width
+    rng = np.random.default_rng(0)
+    px = np.stack([rng.uniform(0, w - 1, max_pixels), rng.uniform(0, h - 1, max_pixels)], 1)
+    kt, dt = tcam.device.pixel_to_ray(ta, px)
+    kc, dc = ccam.device.pixel_to_ray(ca, px)
+    both = (kt >= 0) & (kc >= 0)
+    same = both & (kt == kc)
+    out["lenslet_assignment_agreement"] = float(same.sum() / max(both.sum(), 1))
+    rt, rc = _rig_rotation(truth), _rig_rotation(cal)
+    dw_t, dw_c = dt[same] @ rt.T, dc[same] @ rc.T                       # world directions
+    ang = np.degrees(np.arccos(np.clip(np.sum(dw_t * dw_c, axis=1), -1, 1)))
+    out["ray_direction_rms_deg"] = float(np.sqrt(np.mean(ang ** 2)))
+
+    def to_prj(model, p):
+        q = np.concatenate([p, np.ones((len(p), 1))], 1) @ np.linalg.inv(model.camera.device.homography).T
+        r = q @ model.projector.device.homography.T
+        return r[:, :2] / r[:, 2:3]
+
+    inside = kt >= 0
+    e = np.linalg.norm(to_prj(cal, px[inside]) - to_prj(truth, px[inside]), axis=1)
+    out["projector_mapping_rms_px"] = float(np.sqrt(np.mean(e ** 2)))
+    # global pose: the lenslet centres in the world, and the array's orientation
+    ct, cc = ta.centres3d @ rt.T, ca.centres3d @ rc.T
+    d = np.linalg.norm(ct - cc, axis=1) * 1000
+    out["pose_position_rms_mm"] = float(np.sqrt(np.mean(d ** 2)))
+    out["pose_position_max_mm"] = float(d.max())
+    cosang = (np.trace(rc.T @ rt) - 1) / 2
+    out["pose_rotation_deg"] = float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))
+    out["pitch_rel_error"] = float(ca.pitch / ta.pitch - 1)
+    kd = np.asarray(ccam.device.distortion) - np.asarray(tcam.device.distortion)
+    out["distortion_k1_rms"] = float(np.sqrt(np.mean(kd[:, 0] ** 2)))
+    # radiometry
+    out["camera_response_error"] = response_error(ccam.response, tcam.response)
+    out["projector_response_error"] = response_error(cal.projector.response, truth.projector.response)
+    tp, cp = truth.projector, cal.projector
+
+    def mixing(p):
+        c = np.eye(3) if p.cross_talk is None else np.asarray(p.cross_talk)
+        return p.max_radiance * c
+
+    mt, mc = mixing(tp), mixing(cp)
+    out["projector_mixing_rel_error"] = float(np.abs(mc - mt).max() / np.abs(mt).max())
+    bt = tp.max_radiance * np.asarray(tp.black_level)
+    bc = cp.max_radiance * np.asarray(cp.black_level)
+    out["black_level_error"] = float(np.abs(bc - bt).max() / tp.max_radiance)
+    out["exposure_rel_error"] = float(ccam.exposure / tcam.exposure - 1)
+    if tcam.vignetting is not None and ccam.vignetting is not None:
+        ys, xs = px[inside, 1].astype(int), px[inside, 0].astype(int)
+        st = tcam.exposure * tcam.vignetting[ys, xs]
+        sc = ccam.exposure * ccam.vignetting[ys, xs]
+        out["camera_gain_rel_rms"] = float(np.sqrt(np.mean((sc / st - 1) ** 2)))
+    return out

@@ -9,15 +9,20 @@ results equal bit for bit to the plain float formulas in their docstrings (tests
 - decode: the response is inverted through a table over all codes (gain folded in when there is no
   vignetting), only for the 2 x 2 pixels each light field sample reads (:class:`~.codec._PatchSampler`);
 - encode: the renormalised remap result goes through :class:`_Quantiser`, an exact table of the quantiser
-  ``round(levels * encode(clip(L / max_radiance, 0, 1)))`` indexed by the float's bit pattern.
+  ``round(levels * encode(clip(L / max_radiance, 0, 1)))`` indexed by the float's bit pattern. A projector with
+  colour cross-talk or a black level first maps radiance to per-channel linear drive with one affine 3 x 4
+  ``cv2.transform`` (``x = C^-1 (L / max_radiance - black_level)``) and then quantises that with the table of
+  the same projector at ``max_radiance = 1``.
 """
 
 from __future__ import annotations
 
+import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from lftransfer.lightfield.codec import LensletCodec
@@ -252,25 +257,56 @@ class CameraModel:
 
 @dataclass(frozen=True, eq=False)
 class ProjectorModel:
-    """The projector behind the array: geometry, bit depth, response and brightness.
+    """The projector behind the array: geometry, bit depth, response, brightness, colour mixing and black level.
+
+    A pixel with codes ``n`` (RGB) makes its lenslet emit, per scene/camera RGB channel,
+    ``L = max_radiance * (black_level + cross_talk @ response.decode(n / levels))``.
 
     Attributes:
         device: Pixel <-> ray geometry.
         bits: Bits per code value (8 -> uint8 images, more -> uint16).
-        response: Linear drive <-> normalised code value.
-        max_radiance: Radiance a full-code pixel makes its lenslet emit, W m^-2 sr^-1.
+        response: Linear drive <-> normalised code value, per projector channel.
+        max_radiance: Radiance a full-code pixel makes its lenslet emit (without cross-talk and black level:
+            exactly; otherwise the scale of both), W m^-2 sr^-1.
+        cross_talk: ``(3, 3)`` matrix C: emitted RGB = C @ per-channel linear drive (column j: what projector
+            channel j emits in each RGB channel); None means the identity. Must be finite and invertible.
+        black_level: Light emitted at code 0, per RGB channel, as a fraction of ``max_radiance``, each in
+            [0, 0.2).
     """
 
     device: LensletDevice
     bits: int = 8
     response: ResponseCurve = field(default_factory=ResponseCurve)
     max_radiance: float = 1.0
+    cross_talk: np.ndarray | None = None
+    black_level: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "bits", _check_bits(self.bits, "ProjectorModel"))
         if not (np.isfinite(self.max_radiance) and self.max_radiance > 0):
             raise ValueError(f"max_radiance must be positive, got {self.max_radiance!r}")
         object.__setattr__(self, "max_radiance", float(self.max_radiance))
+        if self.cross_talk is not None:
+            try:
+                c = np.array(self.cross_talk, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"cross_talk must be a (3, 3) matrix of numbers, got {self.cross_talk!r}") from exc
+            if c.shape != (3, 3):
+                raise ValueError(f"cross_talk must have shape (3, 3), got {c.shape}")
+            if not np.all(np.isfinite(c)):
+                raise ValueError("cross_talk must be finite")
+            if np.linalg.cond(c) > 1e6:
+                raise ValueError(f"cross_talk must be invertible, got {c.tolist()} "
+                                 f"(condition number {np.linalg.cond(c):.3g})")
+            c.setflags(write=False)
+            object.__setattr__(self, "cross_talk", c)
+        try:
+            black = tuple(float(b) for b in self.black_level)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"black_level must be three numbers, got {self.black_level!r}") from exc
+        if len(black) != 3 or not all(math.isfinite(b) and 0.0 <= b < 0.2 for b in black):
+            raise ValueError(f"black_level must be three numbers in [0, 0.2), got {self.black_level!r}")
+        object.__setattr__(self, "black_level", black)
 
     @property
     def levels(self) -> int:
@@ -281,6 +317,32 @@ class ProjectorModel:
     def dtype(self) -> type:
         """Integer dtype of projector images: uint8 up to 8 bits, else uint16."""
         return np.uint8 if self.bits <= 8 else np.uint16
+
+    @property
+    def cross_talk_matrix(self) -> np.ndarray:
+        """The ``(3, 3)`` cross-talk matrix, the identity where :attr:`cross_talk` is None."""
+        return np.eye(3) if self.cross_talk is None else np.array(self.cross_talk)
+
+    @property
+    def mixes_colours(self) -> bool:
+        """Whether emission is more than ``max_radiance * response.decode(code)`` (cross-talk or black level)."""
+        identity = self.cross_talk is None or np.array_equal(self.cross_talk, np.eye(3))
+        return not identity or any(b != 0.0 for b in self.black_level)
+
+    def drive_affine(self) -> np.ndarray:
+        """``(3, 4)`` affine map radiance -> linear drive, ``x = C^-1 (L / max_radiance - black_level)``."""
+        inv = np.linalg.inv(self.cross_talk_matrix)
+        return np.concatenate([inv / self.max_radiance, -(inv @ np.asarray(self.black_level))[:, None]], axis=1)
+
+    def emit(self, linear: np.ndarray) -> np.ndarray:
+        """Linear drive per projector channel ``(..., 3)`` -> emitted radiance (float32), the forward model."""
+        linear = np.asarray(linear, dtype=np.float32)
+        if not self.mixes_colours:
+            return (linear * np.float32(self.max_radiance)).astype(np.float32, copy=False)
+        m = np.concatenate([self.cross_talk_matrix, np.asarray(self.black_level)[:, None]], axis=1)
+        m = (m * self.max_radiance).astype(np.float32)
+        flat = np.ascontiguousarray(linear.reshape(-1, 1, 3))
+        return cv2.transform(flat, m).reshape(linear.shape)
 
 
 class LightFieldDecoder:
@@ -370,12 +432,20 @@ class LightFieldEncoder:
         """
         self.array, self.projector = array, projector
         self.codec = LensletCodec(array, projector.device, U, V)
-        self._quantiser = _Quantiser.build(projector)      # None: no table fine enough (e.g. 16-bit codes)
+        # With cross-talk or a black level, radiance becomes linear drive through one affine transform; the
+        # drive is then quantised like radiance of a plain projector with max_radiance = 1.
+        self._affine: np.ndarray | None = None
+        self._quantised = projector
+        if projector.mixes_colours:
+            self._affine = projector.drive_affine().astype(np.float32)
+            self._quantised = replace(projector, max_radiance=1.0, cross_talk=None, black_level=(0.0, 0.0, 0.0))
+        self._quantiser = _Quantiser.build(self._quantised)   # None: no table fine enough (e.g. 16-bit codes)
 
     def __call__(self, lf: LightField) -> np.ndarray:
         """Encode a light field for the projector.
 
-        Radiance above ``max_radiance`` or below 0 is clipped.
+        The drive is ``x = C^-1 (L / max_radiance - black_level)`` (just ``L / max_radiance`` without cross-talk
+        and black level), clipped to [0, 1]: radiance outside what the projector can emit is clipped.
 
         Args:
             lf: LightField ``(K, V, U, 3)`` radiance to emit.
@@ -383,14 +453,38 @@ class LightFieldEncoder:
         Returns:
             ``(H, W, 3)`` uint8 (bits <= 8) or uint16 codes.
         """
-        if self._quantiser is None:
+        if self._quantiser is None and self._affine is None:
             return _encode_float(self.projector, self.codec.lightfield_to_image(lf)).astype(self.projector.dtype)
         img = self.codec.lightfield_to_unnormalised(lf)
-        img *= self.codec.inv_norm3                      # = lightfield_to_image(lf), bit for bit
+        img *= self.codec.inv_norm3                          # = lightfield_to_image(lf), bit for bit
+        if self._affine is not None:
+            img = cv2.transform(img, self._affine)           # radiance -> linear drive (max_radiance 1)
+        if self._quantiser is None:
+            return _encode_float(self._quantised, img).astype(self.projector.dtype)
+        return self._quantiser(img)
+
+    def quantise(self, radiance_image: np.ndarray) -> np.ndarray:
+        """Per-pixel radiance -> projector codes (the encoder without the light field resampling).
+
+        Args:
+            radiance_image: ``(H, W, 3)`` radiance each projector pixel should make its lenslet emit.
+
+        Returns:
+            ``(H, W, 3)`` uint8 (bits <= 8) or uint16 codes.
+        """
+        img = np.ascontiguousarray(radiance_image, dtype=np.float32)
+        if img.ndim != 3 or img.shape[-1] != 3:
+            raise ValueError(f"radiance image must have shape (H, W, 3), got {img.shape}")
+        if self._affine is not None:
+            img = cv2.transform(img, self._affine)
+        if self._quantiser is None:
+            return _encode_float(self._quantised, img).astype(self.projector.dtype)
         return self._quantiser(img)
 
     def emitted(self, image: np.ndarray) -> np.ndarray:
         """Radiance each projector pixel makes its lenslet emit (inverse of :meth:`__call__` up to quantisation).
+
+        ``L = max_radiance * (black_level + C @ response.decode(code / levels))`` per pixel.
 
         Args:
             image: ``(H, W, 3)`` integer projector codes.
@@ -401,4 +495,6 @@ class LightFieldEncoder:
         image = _check_codes(image, self.projector.device, "projector image")
         code = image.astype(np.float32) / np.float32(self.projector.levels)
         linear = self.projector.response.decode(code)
-        return (linear * np.float32(self.projector.max_radiance)).astype(np.float32, copy=False)
+        if not self.projector.mixes_colours:
+            return (linear * np.float32(self.projector.max_radiance)).astype(np.float32, copy=False)
+        return self.projector.emit(linear)

@@ -111,6 +111,10 @@ class SimRig:
 
     def capture_lf(self) -> np.ndarray:
         """LF camera image ((H, W, 3) uint16, ``bits``-bit codes) of the real world as it is lit now."""
+        return self._capture_lf_with(self._real)
+
+    def _capture_lf_with(self, renderer: HalfSpaceRenderer, lights=None) -> np.ndarray:
+        lights = self._lights() if lights is None else lights
         array = self._truth.array
         centres = array.centres[self._pix_lenslet]                 # (P, 2)
         offsets = aperture_offsets(array, len(self._pix), self.capture_spp, seed=self._seed + 101)  # (P, S, 2)
@@ -118,7 +122,7 @@ class SimRig:
         origins = np.zeros((len(self._pix), 3), np.float32)
         for s in range(self.capture_spp):
             origins[:, :2] = centres + offsets[:, s]
-            radiance, _, _ = self._real.render_rays(origins, self._pix_dir, self._lights(), seed=self._seed + s)
+            radiance, _, _ = renderer.render_rays(origins, self._pix_dir, lights, seed=self._seed + s)
             acc += radiance
         image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
         image[self._pix] = acc / self.capture_spp
@@ -180,11 +184,13 @@ class SimRig:
         radiance = np.repeat((image * peak)[..., None], 3, axis=2).astype(np.float32)
         return cam.expose(radiance, noise=self._sensor_noise)
 
-    def capture_focal_plane(self, image: np.ndarray, diffuser: float = 0.5) -> np.ndarray:
+    def capture_focal_plane(self, image: np.ndarray, diffuser: float = 0.5, exposure_scale: float = 1.0) -> np.ndarray:
         """LF camera image while the projector shows ``image`` onto a diffuser at the lenslets' focal plane.
 
         Both devices image that plane, so the camera sees the projector's pixels directly (through its own
         homography and the projector's); the diffuser passes the fraction ``diffuser`` of the light.
+        ``exposure_scale`` is the camera's exposure time relative to its normal one (exposure bracketing):
+        ``signal = exposure * exposure_scale * diffuser * L * vignetting``.
 
         Returns:
             (H, W, 3) uint16 camera codes.
@@ -208,10 +214,12 @@ class SimRig:
         radiance = self._prj_encoder.emitted(image)
         seen = cv2.remap(radiance, *self._focal_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0)
-        return self._truth.camera.expose(diffuser * seen, noise=self._sensor_noise)
+        if not (np.isfinite(exposure_scale) and exposure_scale > 0):
+            raise ValueError(f"exposure_scale must be positive, got {exposure_scale!r}")
+        return self._truth.camera.expose((exposure_scale * diffuser) * seen, noise=self._sensor_noise)
 
     def capture_board(self, image: np.ndarray, centre, normal, size=(0.3, 0.3), albedo: float = 0.8,
-                      spp: int | None = None) -> np.ndarray:
+                      printed: tuple[int, int, float] | None = None, spp: int | None = None) -> np.ndarray:
         """View camera image of a diffuse board held in front of the array while the projector shows ``image``.
 
         The real objects are taken away and the point light is off. The operator holds the board where the
@@ -225,15 +233,35 @@ class SimRig:
             normal: (3,) board normal, pointing to the side the board is seen and lit from.
             size: (width, height) of the board, metres.
             albedo: the board's diffuse reflectance (a grey calibration target).
+            printed: (columns, rows, square size in metres) of a chessboard printed on the board's centre (dark
+                squares of reflectance ``albedo / 4``), a metric target for the view camera; None: plain board.
             spp: view camera samples per pixel (default: the rig's ``view_spp``).
 
         Returns:
             (h, w, 3) float32 linear radiance of the view camera.
         """
+        self.project(image)
+        renderer = self._board_renderer(centre, normal, size, albedo, printed)
+        w, h = self._view.resolution
+        lights = [self._projector_light] if self._projector_light is not None else []
+        img = renderer.render_view(self._view_sensor, w, h, lights, spp=spp or self.view_spp, seed=self._seed)
+        return img.rgb
+
+    def capture_board_lf(self, image: np.ndarray, centre, normal, size=(0.3, 0.3), albedo: float = 0.8) -> np.ndarray:
+        """LF camera image of the board of :meth:`capture_board` (same placement) while the projector shows
+        ``image``: the LF camera and the view camera see the same diffuse surface.
+
+        Returns:
+            (H, W, 3) uint16 camera codes.
+        """
+        self.project(image)
+        lights = [self._projector_light] if self._projector_light is not None else []
+        return self._capture_lf_with(self._board_renderer(centre, normal, size, albedo, None), lights)
+
+    def _board_renderer(self, centre, normal, size, albedo, printed) -> HalfSpaceRenderer:
         from lftransfer.backend import mitsuba
 
         mi = mitsuba()
-        self.project(image)
         array, nominal = self._truth.array, nominal_rig(self._scene.rig).array
         scale = array.pitch / nominal.pitch
         c, s_ = np.cos(array.rotation - nominal.rotation), np.sin(array.rotation - nominal.rotation)
@@ -249,14 +277,21 @@ class SimRig:
         to_world = np.eye(4)
         to_world[:3, :3] = np.stack([ex * size[0] / 2 * scale, ey * size[1] / 2 * scale, n], axis=1)
         to_world[:3, 3] = p
-        board = {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
-                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}
-        renderer = HalfSpaceRenderer([], extra_shapes={"board": board, "lens_array_absorber": self._absorber},
-                                     max_depth=1)
-        w, h = self._view.resolution
-        lights = [self._projector_light] if self._projector_light is not None else []
-        img = renderer.render_view(self._view_sensor, w, h, lights, spp=spp or self.view_spp, seed=self._seed)
-        return img.rgb
+        shapes = {"lens_array_absorber": self._absorber,
+                  "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
+                            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}}
+        if printed is not None:
+            cols, rows, square = printed
+            chart = to_world.copy()
+            chart[:3, 0] = ex * cols * square / 2             # printed at its true size (not the array's scale)
+            chart[:3, 1] = ey * rows * square / 2
+            chart[:3, 3] = p + 1e-4 * n
+            texture = {"type": "checkerboard", "color0": {"type": "rgb", "value": [albedo / 4] * 3},
+                       "color1": {"type": "rgb", "value": [albedo] * 3},
+                       "to_uv": mi.ScalarTransform4f().scale([cols / 2, rows / 2, 1.0])}
+            shapes["chart"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f(chart.tolist()),
+                               "bsdf": {"type": "diffuse", "reflectance": texture}}
+        return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)
 
     # -- for verification only (never used by the pipeline) ------------------------------------------------
     @property

@@ -2,7 +2,8 @@
 
 A real rig never matches its drawing: the lens array sits rotated and shifted, its pitch is off by a fraction
 of a percent, each Fresnel lenslet distorts a little, the camera and the projector do not face the focal plane
-squarely, responses differ per channel, and the camera vignettes. :func:`perturbed_rig` draws all of that from a
+squarely, responses differ per channel, the camera vignettes and its exposure is off, the projector is brighter or
+dimmer than its data sheet, leaks light at code 0 and mixes its colour channels. :func:`perturbed_rig` draws all of that from a
 seed; the simulated rig renders with it, and the pipeline must recover it by calibration (only verification
 code may read it).
 """
@@ -33,6 +34,12 @@ class Perturbation:
         vignetting: relative fall-off of the camera's sensitivity at the image corners.
         tilt_deg: out-of-plane tilt of the lens array about the world x and y axes.
         light_error_m: error of the point light's position as the scene file gives it, per axis.
+        cross_talk: projector colour cross-talk: off-diagonal entries of the (3, 3) matrix drawn in
+            [0, cross_talk] (its diagonal is ``1 + uniform(-channel_gain_rel, channel_gain_rel)``).
+        black_level: projector light at code 0, per channel ``uniform(0.2, 1) * black_level`` of max_radiance.
+        exposure_rel: relative error of the camera's exposure.
+        brightness_rel: relative error of the projector's max_radiance.
+        channel_gain_rel: spread of the diagonal of the cross-talk matrix (per-channel brightness).
     """
 
     rotation_deg: float = 2.0
@@ -46,6 +53,11 @@ class Perturbation:
     vignetting: float = 0.3
     tilt_deg: float = 0.5
     light_error_m: float = 0.003
+    cross_talk: float = 0.06
+    black_level: float = 0.01
+    exposure_rel: float = 0.1
+    brightness_rel: float = 0.1
+    channel_gain_rel: float = 0.05
 
 
 def _tilted(device: LensletDevice, tilt_deg: float, rng: np.random.Generator) -> LensletDevice:
@@ -102,6 +114,15 @@ def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigMod
     projector = ProjectorModel(device=prj_device, bits=prj.bits, response=ResponseCurve(gamma(rig.projector_gamma)),
                                max_radiance=prj.max_radiance)
     tilt = tuple(float(a) for a in np.radians(rng.uniform(-size.tilt_deg, size.tilt_deg, 2)))
+    # Radiometry from its own generator, so that the draws above stay what they were before it existed.
+    rad = np.random.default_rng([seed, 23])
+    cross_talk = rad.uniform(0.0, size.cross_talk, (3, 3))
+    cross_talk[np.diag_indices(3)] = 1.0 + rad.uniform(-size.channel_gain_rel, size.channel_gain_rel, 3)
+    black_level = tuple(float(b) for b in rad.uniform(0.2, 1.0, 3) * size.black_level)
+    exposure = cam.exposure * (1.0 + rad.uniform(-size.exposure_rel, size.exposure_rel))
+    max_radiance = prj.max_radiance * (1.0 + rad.uniform(-size.brightness_rel, size.brightness_rel))
+    camera = replace(camera, exposure=exposure)
+    projector = replace(projector, max_radiance=max_radiance, cross_talk=cross_talk, black_level=black_level)
     return RigModel(array=array, camera=camera, projector=projector, tilt=tilt)
 
 

@@ -1,0 +1,285 @@
+"""All calibration steps through the rig, in order, and the calibration file (paper, section 4.2).
+
+1. lenslet centres: collimated on-axis source -> spots -> lattice (:mod:`.lenslets`); the LF camera's
+   homography maps the rig file's nominal lattice (the *model frame*) onto the spots;
+2. lenslet distortion: tilted collimator sweep (:mod:`.distortion`); the camera and the projector look through
+   the same lenslets (a beam splitter), so both get it;
+3. projector-to-camera mapping: Gray codes on a focal-plane diffuser (:mod:`.projector`); the projector's
+   homography is that mapping after the camera's;
+4. radiometry: responses, vignetting, cross-talk, black level, brightness and exposure (:mod:`.radiometric`);
+5. global pose: the projected checkerboard on a board the view camera sees (:mod:`.pose`), which carries the
+   model frame into the world (array rotation, offset, pitch and tilt).
+
+The result is a :class:`Calibration`, whose :attr:`Calibration.model` is the rig model the pipeline uses, and
+which is written as JSON in OpenCV's conventions (camera matrices, distortion ``k1 k2 p1 p2 k3``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
+from lftransfer.calibration.images import to_grey
+from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
+from lftransfer.calibration.pose import ArrayPose, apply_pose, calibrate_pose
+from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
+                                              gray_code_patterns)
+from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
+from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.rig.model import RigModel, nominal_rig
+
+__all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_rig", "load_calibration"]
+
+STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose")
+FORMAT = "lftransfer-calibration/1"
+
+
+class CalibrationFileError(ValueError):
+    """A calibration file that cannot be read or does not fit the scene's rig."""
+
+
+@dataclass
+class Calibration:
+    """A calibrated rig.
+
+    Attributes:
+        model: the rig model in the world (what the pipeline uses).
+        lattice: the lenslet-centre fit (LF camera pixels).
+        distortion: per-lenslet radial distortion.
+        projector_fit: LF camera -> projector pixel homography.
+        radiometry: responses, vignetting, cross-talk, black level, brightness, exposure.
+        pose: the model frame's pose in the world.
+        diagnostics: images and measurements for the report (not saved).
+    """
+
+    model: RigModel
+    lattice: LatticeFit | None
+    distortion: DistortionFit | None
+    projector_fit: ProjectorCameraFit | None
+    radiometry: Radiometry
+    pose: ArrayPose
+    diagnostics: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        """The calibration as plain JSON data (OpenCV conventions for the per-lenslet cameras)."""
+        m = self.model
+        a = m.array
+        data = {
+            "format": FORMAT,
+            "lens_array": {"lattice": a.lattice, "rows": a.rows, "cols": a.cols, "pitch_m": a.pitch,
+                           "focal_length_m": a.focal_length, "aperture": a.aperture,
+                           "offset_m": list(a.offset), "rotation_deg": float(np.degrees(a.rotation)),
+                           "tilt_deg": np.degrees(m.tilt).tolist()},
+            "pose": self.pose.to_json(),
+            "lf_camera": _device_json(m.camera.device, a, bits=m.camera.bits),
+            "projector": _device_json(m.projector.device, a, bits=m.projector.bits),
+            "radiometry": self.radiometry.to_json(),
+        }
+        if self.lattice is not None:
+            data["lenslet_centres"] = {"centres_px": self.lattice.centres.tolist(),
+                                       "indices": self.lattice.indices.tolist(), "rms_px": self.lattice.rms_px,
+                                       "pitch_px": self.lattice.pitch_px, "rotation_deg": self.lattice.rotation_deg}
+        if self.distortion is not None:
+            data["distortion"] = {"mount_angle_deg": float(np.degrees(self.distortion.mount_angle)),
+                                  "rms": self.distortion.rms}
+        if self.projector_fit is not None:
+            data["projector_mapping"] = {"camera_to_projector": self.projector_fit.homography.tolist(),
+                                         "rms_px": self.projector_fit.rms_px, "pixels": self.projector_fit.pixels}
+        return data
+
+    def write(self, path) -> Path:
+        """Write the JSON file atomically."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "w") as f:
+                json.dump(self.to_json(), f, indent=1)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+
+def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
+    """A device behind the array: its focal-plane homography and one OpenCV camera per lenslet.
+
+    Each lenslet's ``camera_matrix`` is the first-order map from its normalised coordinates x_d (DESIGN.md
+    section 2: ``x_n = -(d_x, d_y) / d_z``) to pixels, at its centre; ``dist_coeffs`` are k1 k2 p1 p2 k3.
+    """
+    c = array.centres
+    hom = np.concatenate([c, np.ones((len(c), 1))], 1) @ dev.homography.T
+    px = hom[:, :2] / hom[:, 2:3]
+    H = dev.homography
+    # Jacobian of the homography at each centre, times the focal length: pixels per normalised unit
+    w = hom[:, 2]
+    jac = (H[None, :2, :2] - px[:, :, None] * H[None, 2:3, :2]) / w[:, None, None] * array.focal_length
+    cams = np.zeros((len(c), 3, 3))
+    cams[:, :2, :2] = jac
+    cams[:, :2, 2] = px
+    cams[:, 2, 2] = 1.0
+    dist = np.zeros((len(c), 5))
+    dist[:, :2] = dev.distortion
+    return {"width": dev.width, "height": dev.height, "bits": bits, "homography": dev.homography.tolist(),
+            "lenslets": [{"camera_matrix": k.tolist(), "dist_coeffs": d.tolist()} for k, d in zip(cams, dist)]}
+
+
+def load_calibration(path, scene) -> Calibration:
+    """Read a calibration file written by :meth:`Calibration.write` for the scene's rig.
+
+    Raises:
+        CalibrationFileError: unreadable file, wrong format, or a rig that does not match the scene's.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise CalibrationFileError(f"{path}: cannot read a calibration file: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise CalibrationFileError(f"{path}: field 'format': expected {FORMAT!r}, "
+                                   f"found {data.get('format') if isinstance(data, dict) else type(data).__name__!r}")
+    try:
+        nominal = nominal_rig(scene.rig)
+        la = data["lens_array"]
+        if (la["lattice"], la["rows"], la["cols"]) != (nominal.array.lattice, nominal.array.rows, nominal.array.cols):
+            raise CalibrationFileError(
+                f"{path}: field 'lens_array': a {la['rows']} x {la['cols']} {la['lattice']} array, but the scene's "
+                f"rig has {nominal.array.rows} x {nominal.array.cols} {nominal.array.lattice}")
+        array = LensArray(lattice=la["lattice"], rows=la["rows"], cols=la["cols"], pitch=la["pitch_m"],
+                          focal_length=la["focal_length_m"], aperture=la["aperture"], offset=tuple(la["offset_m"]),
+                          rotation=float(np.radians(la["rotation_deg"])))
+
+        def device(d, name):
+            dev = d[name]
+            k = np.array([lens["dist_coeffs"][:2] for lens in dev["lenslets"]], float)
+            return LensletDevice(width=int(dev["width"]), height=int(dev["height"]),
+                                 homography=np.array(dev["homography"], float), distortion=k)
+
+        model = replace(nominal, array=array, tilt=tuple(np.radians(la["tilt_deg"]).tolist()),
+                        camera=replace(nominal.camera, device=device(data, "lf_camera")),
+                        projector=replace(nominal.projector, device=device(data, "projector")))
+        radiometry = Radiometry.from_json(data["radiometry"])
+        model = radiometry.apply(model)
+        pose = ArrayPose.from_json(data["pose"])
+    except CalibrationFileError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CalibrationFileError(f"{path}: malformed calibration ({type(exc).__name__}: {exc})") from None
+    return Calibration(model=model, lattice=None, distortion=None, projector_fit=None, radiometry=radiometry,
+                       pose=pose)
+
+
+def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.01,
+                       albedo: float = 0.8) -> tuple[float, dict]:
+    """The LF camera's absolute exposure, against the view camera (the radiometric reference).
+
+    A grey diffuse board in front of the array, lit by a uniform projector image, has one radiance in every
+    direction; the view camera measures it around the board's centre, and the LF camera, decoded with the
+    model's exposure, measures it along the rays that meet the board within ``radius`` of its centre. The
+    ratio corrects the exposure.
+
+    Returns:
+        (exposure, diagnostics with both measurements).
+    """
+    from lftransfer.calibration.pose import board_pattern, view_camera
+
+    board = board_pattern(scene.view, depth)
+    prj = model.projector
+    white = np.full((prj.device.height, prj.device.width, 3), prj.levels, prj.dtype)
+    view_img = rig.capture_board(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
+    raw = rig.capture_board_lf(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
+    K, R, t = view_camera(scene.view)
+    c = K @ (R @ board.centre + t)
+    x, y = int(round(c[0] / c[2])), int(round(c[1] / c[2]))
+    view_radiance = np.median(view_img[y - 3:y + 4, x - 3:x + 4].reshape(-1, 3), axis=0)
+    radiance = model.decoder(4, 4).radiance_image(raw)                   # per pixel, with the model's exposure
+    cam = model.camera.device
+    step = max(1, int(np.sqrt(cam.width * cam.height / 400_000)))
+    ys, xs = np.mgrid[0:cam.height:step, 0:cam.width:step]
+    px = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
+    k, d = cam.pixel_to_ray(model.array, px)
+    ok = k >= 0
+    origin = model.array.centres3d[k[ok]]
+    dn = d[ok] @ board.normal
+    lam = ((board.centre - origin) @ board.normal) / np.where(dn != 0, dn, np.nan)
+    hit = origin + lam[:, None] * d[ok]
+    near = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
+    if near.sum() < 20 or not np.all(view_radiance > 0):
+        raise ValueError("camera exposure: the board's centre is not seen by both cameras")
+    sel = px[ok][near].astype(int)
+    lf_radiance = np.median(radiance[sel[:, 1], sel[:, 0]], axis=0)
+    ratio = float(np.mean(lf_radiance / view_radiance))
+    return model.camera.exposure * ratio, {"view_radiance": view_radiance.tolist(),
+                                           "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum())}
+
+
+def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) -> Calibration:
+    """Run every calibration step through the rig (images only; the rig file's nominal values as the start).
+
+    Args:
+        rig: a rig with the calibration actions of :class:`lftransfer.rig.sim.SimRig`.
+        scene: the scene (rig file, view camera).
+        progress: called with a message per capture or step.
+
+    Returns:
+        Calibration.
+    """
+    say = progress or (lambda msg: None)
+    nominal = nominal_rig(scene.rig)
+    array = nominal.array
+    levels = nominal.camera.levels
+    diag: dict = {}
+
+    # 1. lenslet centres -> LF camera homography (model frame = the nominal lattice)
+    say("lenslet centres: collimated source")
+    spots_img = rig.capture_collimated()
+    lattice = find_lenslet_centres(to_grey(spots_img, levels), array.lattice, expected_shape=(array.rows, array.cols))
+    k = lattice.indices[:, 0] * array.cols + lattice.indices[:, 1]
+    H_cam, _ = cv2.findHomography(array.centres[k], lattice.centres, 0)
+    cam_w, cam_h = scene.rig.lf_camera
+    camera = LensletDevice(width=cam_w, height=cam_h, homography=H_cam / H_cam[2, 2], distortion=np.zeros((array.K, 2)))
+    diag["collimated"] = spots_img
+
+    # 2. distortion through the lenslets
+    distortion = calibrate_distortion(rig, array, camera, levels, progress=say)
+    camera = replace(camera, distortion=distortion.coefficients)
+
+    # 3. projector <-> camera
+    prj_w, prj_h = scene.rig.projector
+    captures = []
+    patterns = gray_code_patterns(prj_w, prj_h)
+    for i, p in enumerate(patterns):
+        if i % 8 == 0:
+            say(f"projector mapping: Gray code {i + 1}-{min(i + 8, len(patterns))} of {len(patterns)}")
+        img = np.repeat(p[..., None], 3, axis=2)
+        captures.append(rig.capture_focal_plane(img).astype(np.float32).mean(axis=2) / levels)
+    col, row, valid = decode_gray_code(captures, prj_w, prj_h)
+    prj_fit = fit_projector_camera(col, row, valid)
+    H_prj = prj_fit.homography @ camera.homography
+    projector = LensletDevice(width=prj_w, height=prj_h, homography=H_prj / H_prj[2, 2],
+                              distortion=distortion.coefficients)
+    model = replace(nominal, camera=replace(nominal.camera, device=camera),
+                    projector=replace(nominal.projector, device=projector))
+
+    # 4. radiometry
+    radiometry = calibrate_radiometry(rig, model, scene, progress=say)
+    model = radiometry.apply(model)
+    say("camera exposure: the LF camera and the view camera see the same board")
+    radiometry.camera_exposure, diag["exposure"] = calibrate_exposure(rig, model, scene)
+    model = radiometry.apply(model)
+
+    # 5. global pose
+    pose, pose_diag = calibrate_pose(rig, model, scene, progress=say)
+    diag["pose"] = pose_diag
+    model = apply_pose(model, pose)
+    return Calibration(model=model, lattice=lattice, distortion=distortion, projector_fit=prj_fit,
+                       radiometry=radiometry, pose=pose, diagnostics=diag)
