@@ -20,7 +20,9 @@ def small_fig4():
 
 @pytest.mark.slow
 def test_01_fig4_small_rig(variant, tmp_path):
-    report = run_scene(small_fig4(), tmp_path, RunOptions(bounces=2, compare_models=("point",), capture_spp=2))
+    """The rig file is exact here (no hidden deviations): transfer and verification alone."""
+    report = run_scene(small_fig4(), tmp_path, RunOptions(bounces=2, compare_models=("point",), capture_spp=2,
+                                                          truth_seed=None, rig_model="nominal"))
     for name in ("composite.png", "composite.exr", "ground_truth.png", "bounces.png", "captured_lf.png",
                  "projected_lf.png", "report.json"):
         assert (tmp_path / name).stat().st_size > 0, name
@@ -32,3 +34,26 @@ def test_01_fig4_small_rig(variant, tmp_path):
     energies = [(b["real_energy"], b["synthetic_energy"]) for b in report["bounces"]]
     assert all(np.all(np.diff(np.array(energies)[:, s]) < 0) for s in (0, 1)), energies
     assert report["bounces"][1]["projector_gain"] > 1
+
+
+@pytest.mark.slow
+def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
+    """The default run: the simulated rig hides its truth, the pipeline calibrates it from images, then transfers
+    with the calibrated values only; the calibration files are written and the transfer still works."""
+    from lftransfer.pipeline import quick_scene
+
+    scene = quick_scene(load_scene(builtin_scene("fig4")))
+    scene = with_overrides(scene, render={"gt_spp": 128})
+    report = run_scene(scene, tmp_path, RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=4))
+    assert report["rig_model"] == "calibrated"
+    for name in ("calibration.json", "calibration_errors.json", "calibration_report.html"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    errors = json.loads((tmp_path / "calibration_errors.json").read_text())
+    assert errors["lenslet_centre_rms_px"] < 0.1 and errors["projector_mapping_rms_px"] < 0.5
+    assert report["cross_transfer_rel_error"] < 0.45
+    assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
+    # the calibration file runs the pipeline again without calibrating
+    again = run_scene(scene, tmp_path / "again", RunOptions(bounces=1, compare_models=(), capture_spp=2,
+                                                           truth_seed=4, calibration=tmp_path / "calibration.json"))
+    assert again["rig_model"].startswith("calibration file")
+    assert again["cross_transfer_rel_error"] == pytest.approx(report["cross_transfer_rel_error"], abs=0.02)

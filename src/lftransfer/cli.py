@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Optional
 
 import typer
+from typer.core import TyperGroup
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -21,13 +22,30 @@ def _fail(message: str) -> None:
     raise typer.Exit(code=2)
 
 
+def _rig_options(truth_seed: int, exact_rig: bool, rig_model: str, calibration: Optional[Path]) -> dict:
+    from lftransfer.pipeline import RIG_MODELS
+
+    if rig_model not in RIG_MODELS:
+        _fail(f"--rig-model: expected one of {', '.join(RIG_MODELS)}, got {rig_model!r}")
+    if calibration is not None and not calibration.is_file():
+        _fail(f"--calibration: {calibration}: no such file")
+    return {"truth_seed": None if exact_rig else truth_seed, "rig_model": rig_model, "calibration": calibration}
+
+
+_TRUTH_SEED_HELP = "Seed of the simulated rig's hidden truth (how the rig as built differs from the rig file)."
+_EXACT_HELP = "Build the simulated rig exactly as the rig file says (no hidden deviations)."
+_MODEL_HELP = "What the pipeline knows of the rig: calibrated (calibrate first) | nominal (rig file) | oracle."
+_CAL_HELP = "Use this calibration file (from `lft calibrate`) instead of calibrating."
+
+
 def _run(scene, out: Path, bounces: int, lighting_model: Optional[str], compare: bool, gt_spp: Optional[int],
-         use_cache: bool, renderer: str = "auto") -> dict:
+         use_cache: bool, renderer: str = "auto", rig: dict | None = None) -> dict:
+    from lftransfer.calibration.rig import CalibrationFileError
     from lftransfer.pipeline import RunOptions, count_run_steps, run_scene
 
     options = RunOptions(bounces=bounces, lighting_model=lighting_model,
                          compare_models=("area", "point") if compare else (), gt_spp=gt_spp, use_cache=use_cache,
-                         renderer=renderer)
+                         renderer=renderer, **(rig or {}))
     total = count_run_steps(scene, options)
     with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console, transient=False) as bar:
@@ -36,7 +54,10 @@ def _run(scene, out: Path, bounces: int, lighting_model: Optional[str], compare:
         def progress(msg: str, done: int) -> None:
             bar.update(task, description=msg[:58], completed=min(done, total))
 
-        report = run_scene(scene, out, options, progress=progress)
+        try:
+            report = run_scene(scene, out, options, progress=progress)
+        except CalibrationFileError as exc:
+            _fail(str(exc))
         bar.update(task, description="done", completed=total)
     _summary(report, out)
     return report
@@ -53,6 +74,12 @@ def _summary(report: dict, out: Path) -> None:
         table.add_row(f"cross error, {name} model", f"{m['cross_transfer_rel_error']:.4g}")
     for b in report["bounces"]:
         table.add_row(f"bounce {b['index']} energy real / synthetic", f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
+    errors = report.get("calibration_errors")
+    if errors:
+        table.add_row("rig model", str(report["rig_model"]))
+        table.add_row("calibration: lenslet centres RMS", f"{errors['lenslet_centre_rms_px']:.3f} px")
+        table.add_row("calibration: pose error", f"{errors['pose_position_rms_mm']:.2f} mm, "
+                                                 f"{errors['pose_rotation_deg']:.3f} deg")
     table.add_row("total time", f"{report['timings_s']['total']:.1f} s")
     Console().print(table)
 
@@ -76,8 +103,12 @@ def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
          quick: bool = typer.Option(False, "--quick", help="Quarter resolution, fewer samples (seconds, not minutes)."),
          bounces: int = typer.Option(2, min=0, help="Number of bounces."),
          no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again."),
-         renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact.")) -> None:
-    """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets) on the simulated rig and check it."""
+         renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact."),
+         truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
+         exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
+         rig_model: str = typer.Option("calibrated", help=_MODEL_HELP),
+         calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP)) -> None:
+    """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets) on the simulated rig: calibrate, transfer, check."""
     from lftransfer.pipeline import quick_scene
     from lftransfer.scenes import builtin_scene
 
@@ -85,7 +116,8 @@ def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
     if quick:
         scene = quick_scene(scene)
     _check_renderer(renderer)
-    _run(scene, out, bounces, None, True, None, not no_cache, renderer)
+    _run(scene, out, bounces, None, True, None, not no_cache, renderer,
+         _rig_options(truth_seed, exact_rig, rig_model, calibration))
 
 
 @app.command()
@@ -97,8 +129,12 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
         gt_spp: Optional[int] = typer.Option(None, help="Ground-truth samples per pixel."),
         quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
         no_cache: bool = typer.Option(False, "--no-cache", help="Render the ground truth again."),
-        renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact.")) -> None:
-    """Run light field transfer on any scene file with the simulated rig."""
+        renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact."),
+        truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
+        exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
+        rig_model: str = typer.Option("calibrated", help=_MODEL_HELP),
+        calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP)) -> None:
+    """Run light field transfer on any scene file with the simulated rig (calibrating it first)."""
     from lftransfer.pipeline import quick_scene
     from lftransfer.render.lights import LIGHTING_MODELS
 
@@ -110,7 +146,8 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
     if quick:
         scene = quick_scene(scene)
     _check_renderer(renderer)
-    _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache, renderer)
+    _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache, renderer,
+         _rig_options(truth_seed, exact_rig, rig_model, calibration))
 
 
 @app.command()
@@ -155,8 +192,84 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", help="Scene
         write_json(json_out, result)
 
 
-calibrate_app = typer.Typer(no_args_is_help=True, help="Calibration steps that run on image files.")
+class _CalibrateGroup(TyperGroup):
+    """``lft calibrate SCENE.toml ...`` is ``lft calibrate rig SCENE.toml ...``; other first words name a step."""
+
+    def parse_args(self, ctx, args):
+        if args and not args[0].startswith("-") and args[0] not in self.commands:
+            args = ["rig", *args]
+        return super().parse_args(ctx, args)
+
+
+calibrate_app = typer.Typer(cls=_CalibrateGroup, no_args_is_help=True,
+                            help="Calibrate the rig (lft calibrate SCENE.toml), or run one step on image files.")
 app.add_typer(calibrate_app, name="calibrate")
+
+
+@calibrate_app.command("rig")
+def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML file (its rig)."),
+                      out: Path = typer.Option(Path("calibration.json"), help="Calibration file to write."),
+                      quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
+                      truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
+                      exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP)) -> None:
+    """Run every calibration step through the (simulated) rig; write the calibration file and its report.
+
+    Also reachable as ``lft calibrate SCENE.toml``. Beside ``--out`` it writes ``calibration_report.html`` and,
+    since the simulated rig knows its truth, ``calibration_errors.json``.
+    """
+    from lftransfer.calibration.report import write_calibration_report
+    from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps
+    from lftransfer.pipeline import quick_scene
+    from lftransfer.report import write_json
+    from lftransfer.rig.sim import SimRig
+    from lftransfer.rig.truth import perturbed_rig, true_light_scene
+    from lftransfer.verify import calibration_errors
+
+    if not scene_file.exists():
+        _fail(f"{scene_file}: no such file")
+    scene = _load(scene_file)
+    if quick:
+        scene = quick_scene(scene)
+    seed = None if exact_rig else truth_seed
+    rig = SimRig(scene if seed is None else true_light_scene(scene, seed),
+                 truth=None if seed is None else perturbed_rig(scene.rig, seed))
+    total = count_calibration_steps(scene)
+    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("starting", total=total)
+        done = [0]
+
+        def progress(msg: str) -> None:
+            done[0] += 1
+            bar.update(task, description=msg[:58], completed=min(done[0], total))
+
+        try:
+            cal = calibrate_rig(rig, scene, progress=progress)
+        except ValueError as exc:
+            _fail(f"calibration failed: {exc}")
+        bar.update(task, description="done", completed=total)
+    cal.write(out)
+    errors = calibration_errors(cal, rig.truth)
+    write_json(out.parent / "calibration_errors.json", errors)
+    report = write_calibration_report(out.parent / "calibration_report.html", cal, errors)
+    table = Table(title=f"calibration -> {out}")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    pose = cal.pose.to_json()
+    table.add_row("lenslets found", f"{len(cal.lattice.centres)} ({cal.lattice.rms_px:.3f} px lattice RMS)")
+    table.add_row("array rotation / offset", f"{pose['rotation_deg']:.3f} deg / "
+                                             f"({pose['offset_mm'][0]:.2f}, {pose['offset_mm'][1]:.2f}) mm")
+    table.add_row("array tilt / pitch scale", f"({pose['tilt_deg'][0]:.3f}, {pose['tilt_deg'][1]:.3f}) deg / "
+                                              f"{pose['scale']:.5f}")
+    table.add_row("projector mapping RMS", f"{cal.projector_fit.rms_px:.3f} px")
+    table.add_row("error vs hidden truth: lenslet centres", f"{errors['lenslet_centre_rms_px']:.3f} px")
+    table.add_row("error vs hidden truth: projector mapping", f"{errors['projector_mapping_rms_px']:.3f} px")
+    table.add_row("error vs hidden truth: pose", f"{errors['pose_position_rms_mm']:.2f} mm, "
+                                                 f"{errors['pose_rotation_deg']:.3f} deg")
+    table.add_row("error vs hidden truth: responses", f"camera {errors['camera_response_error']:.4f}, "
+                                                      f"projector {errors['projector_response_error']:.4f}")
+    Console().print(table)
+    Console().print(f"wrote {out}, {report}, {out.parent / 'calibration_errors.json'}")
 
 
 @calibrate_app.command("lenslets")

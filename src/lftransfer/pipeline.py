@@ -11,13 +11,14 @@ from pathlib import Path
 from typing import Callable
 
 
+from lftransfer.calibration.rig import calibrate_rig, load_calibration
 from lftransfer.composite import composite
-from lftransfer.report import write_outputs
+from lftransfer.report import write_json, write_outputs
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig
+from lftransfer.rig.truth import perturbed_rig, true_light_scene
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
-from lftransfer.verify import evaluate, render_ground_truth
+from lftransfer.verify import calibration_errors, evaluate, render_ground_truth
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
 
@@ -35,9 +36,13 @@ class RunOptions:
         use_cache: cache ground-truth renders.
         renderer: synthetic renderer, "auto" (fast path where the scene allows), "fast" or "exact".
         truth_seed: None: the simulated rig is built exactly as the rig file says; a seed: it is built with
-            deviations drawn from that seed (:func:`lftransfer.rig.truth.perturbed_rig`).
-        oracle: give the pipeline the simulated rig's true model instead of the rig file's (a verification
-            baseline: what perfect calibration would reach).
+            deviations drawn from that seed (:func:`lftransfer.rig.truth.perturbed_rig`), and its point light
+            stands away from the file's position (:func:`lftransfer.rig.truth.true_light_scene`).
+        rig_model: what the pipeline knows of the rig: ``"calibrated"`` (run every calibration step through the
+            rig first), ``"nominal"`` (the rig file's values, uncalibrated) or ``"oracle"`` (the simulated rig's
+            hidden truth and the true light position: a verification baseline, what perfect calibration would
+            reach).
+        calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
     """
 
     bounces: int = 2
@@ -47,8 +52,9 @@ class RunOptions:
     capture_spp: int = 4
     use_cache: bool = True
     renderer: str = "auto"
-    truth_seed: int | None = None
-    oracle: bool = False
+    truth_seed: int | None = 0
+    rig_model: str = "calibrated"
+    calibration: Path | None = None
 
 
 def quick_scene(scene):
@@ -66,12 +72,22 @@ def quick_scene(scene):
     )
 
 
+RIG_MODELS = ("calibrated", "nominal", "oracle")
+
+
+def _calibrates(options: RunOptions) -> bool:
+    return options.calibration is None and options.rig_model == "calibrated"
+
+
 def count_run_steps(scene, options: RunOptions) -> int:
-    """Progress steps of :func:`run_scene` (set-up, transfer, 6 ground-truth renders unless cached, reruns with
-    the other lighting models, writing), for a progress bar."""
+    """Progress steps of :func:`run_scene` (set-up, calibration, transfer, 6 ground-truth renders unless cached,
+    reruns with the other lighting models, writing), for a progress bar."""
+    from lftransfer.calibration.rig import count_calibration_steps
+
     primary = count_steps(TransferSettings(bounces=options.bounces))
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
-    return 1 + primary + 6 + len(_other_models(scene, options)) * other + 1
+    calibration = count_calibration_steps(scene) + 1 if _calibrates(options) else 0
+    return 1 + calibration + primary + 6 + len(_other_models(scene, options)) * other + 1
 
 
 def _other_models(scene, options: RunOptions) -> list[str]:
@@ -102,29 +118,57 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     step("set up the simulated rig")
-    truth = None if options.truth_seed is None else perturbed_rig(scene.rig, options.truth_seed)
-    rig = SimRig(scene, truth=truth, capture_spp=options.capture_spp)
-    # What the pipeline knows of the rig: the rig file's values (calibration replaces them), or, as a
-    # verification baseline only, the hidden truth.
-    model = rig.truth if options.oracle else nominal_rig(scene.rig)
+    if options.rig_model not in RIG_MODELS:
+        raise ValueError(f"rig_model must be one of {RIG_MODELS}, got {options.rig_model!r}")
+    seed = options.truth_seed
+    # The world as it is (hidden from the pipeline): the rig as built and the point light where it stands.
+    real_scene = scene if seed is None else true_light_scene(scene, seed)
+    truth = None if seed is None else perturbed_rig(scene.rig, seed)
+    rig = SimRig(real_scene, truth=truth, capture_spp=options.capture_spp)
     timings["setup"] = time.perf_counter() - t0
+    calibration, calibration_errors_ = None, None
+    if options.calibration is not None:
+        calibration = load_calibration(options.calibration, scene)
+        model, known, rig_model = calibration.model, scene, f"calibration file {options.calibration}"
+    elif options.rig_model == "calibrated":
+        t = time.perf_counter()
+        calibration = calibrate_rig(rig, scene, progress=step)
+        timings["calibration"] = time.perf_counter() - t
+        model, known, rig_model = calibration.model, scene, "calibrated"
+    elif options.rig_model == "oracle":
+        model, known, rig_model = rig.truth, real_scene, "true (oracle)"
+    else:
+        model, known, rig_model = nominal_rig(scene.rig), scene, "nominal (rig file)"
+    if calibration is not None:
+        step("calibration report")
+        out_dir = Path(out)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        calibration.write(out_dir / "calibration.json")
+        # verification only: the hidden truth against the calibration
+        calibration_errors_ = calibration_errors(calibration, rig.truth)
+        write_json(out_dir / "calibration_errors.json", calibration_errors_)
+        from lftransfer.calibration.report import write_calibration_report
+
+        write_calibration_report(out_dir / "calibration_report.html", calibration, calibration_errors_)
+    scene_known = known
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
                                 lighting_model=primary, aperture_samples=render.aperture_samples,
                                 lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
-    result = run_transfer(rig, model, scene, settings, progress=step)
+    result = run_transfer(rig, model, scene_known, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
 
     t = time.perf_counter()
-    gt = render_ground_truth(scene, spp=options.gt_spp or render.gt_spp, use_cache=options.use_cache, progress=step)
+    gt = render_ground_truth(real_scene, spp=options.gt_spp or render.gt_spp, use_cache=options.use_cache,
+                             progress=step)
     timings["ground_truth"] = time.perf_counter() - t
     metrics = evaluate(result, gt)
     by_model = {primary: {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}}
     for other in _other_models(scene, options):
         t = time.perf_counter()
-        alt = run_transfer(rig, model, scene, replace(settings, lighting_model=other, bounce_views=False),
+        alt = run_transfer(rig, model, scene_known, replace(settings, lighting_model=other, bounce_views=False),
                            progress=step)
         m = evaluate(alt, gt)
         by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
@@ -153,7 +197,8 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         "gt_spp": options.gt_spp or render.gt_spp,
         "renderer": resolve_renderer(scene, options.renderer),
         "truth_seed": options.truth_seed,
-        "rig_model": "true (oracle)" if options.oracle else "nominal (rig file)",
+        "rig_model": rig_model,
+        "calibration_errors": calibration_errors_,
         "variant": variant(),
         "scene": str(scene.source) if scene.source else None,
     }

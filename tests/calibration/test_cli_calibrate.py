@@ -105,3 +105,27 @@ def test_04_intrinsics_bad_input(tmp_path):
     assert result.exit_code == 2 and not (tmp_path / "i.json").exists()
     result = runner.invoke(app, ["calibrate", "intrinsics", str(tmp_path / "missing.png"), "--square-mm", "25"])
     assert result.exit_code == 2 and "missing.png" in _text(result)
+
+
+def test_05_calibrate_scene_writes_file_report_and_errors(variant, tmp_path):
+    """``lft calibrate SCENE.toml --out F`` calibrates the simulated rig and writes the file, report and errors."""
+    from lftransfer.scenes import builtin_scene
+
+    out = tmp_path / "cal" / "calibration.json"
+    result = runner.invoke(app, ["calibrate", str(builtin_scene("fig4")), "--quick", "--truth-seed", "2",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["format"] == "lftransfer-calibration/1" and len(data["lf_camera"]["lenslets"]) == 120
+    errors = json.loads((out.parent / "calibration_errors.json").read_text())
+    assert errors["lenslet_centre_rms_px"] < 0.1
+    assert (out.parent / "calibration_report.html").stat().st_size > 10_000
+
+
+def test_06_calibrate_scene_bad_input(tmp_path):
+    result = runner.invoke(app, ["calibrate", str(tmp_path / "nope.toml")])
+    assert result.exit_code == 2 and "nope.toml" in _text(result)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[rig]\nrows = -3\n")
+    result = runner.invoke(app, ["calibrate", str(bad)])
+    assert result.exit_code == 2 and "bad.toml" in _text(result) and "rows" in _text(result)

@@ -268,12 +268,15 @@ def test_09_to_grey_and_read_errors(tmp_path):
 
 def test_10_simulated_rig(variant):
     """The simulator's collimated-source image (quick fig4 rig, perturbed truth): every lenslet to < 0.1 px."""
-    from lftransfer.pipeline import quick_scene
     from lftransfer.rig.sim import SimRig
     from lftransfer.rig.truth import perturbed_rig
-    from lftransfer.scenes import builtin_scene, load_scene
+    from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
-    scene = quick_scene(load_scene(builtin_scene("fig4")))      # LF camera 512 x 384, 10 x 12 hex lenslets
+    full = load_scene(builtin_scene("fig4"))
+    # The devices at a quarter size, as ``lftransfer.pipeline.quick_scene`` makes them (LF camera 512 x 384,
+    # 10 x 12 hex lenslets about 39 px apart); built here to keep this test off the pipeline's imports.
+    scene = with_overrides(full, rig={"lf_camera": [v // 4 for v in full.rig.lf_camera],
+                                      "projector": [v // 4 for v in full.rig.projector], "angular_samples": 16})
     truth = perturbed_rig(scene.rig, seed=1)
     raw = SimRig(scene, truth=truth, capture_spp=1).capture_collimated()
     assert raw.shape == (384, 512, 3) and raw.dtype == np.uint16

@@ -40,7 +40,7 @@ def to_grey(image: np.ndarray, levels: float | None = None) -> np.ndarray:
         CalibrationImageError: unsupported dtype or shape, empty image, or a non-positive ``levels``.
     """
     arr = np.asarray(image)
-    if arr.dtype.kind not in "uif" or arr.dtype.kind == "b":
+    if arr.dtype.kind not in "uif":
         raise CalibrationImageError(f"unsupported pixel type {arr.dtype}: expected uint8, uint16 or float values")
     if levels is None:
         if arr.dtype.kind == "f":
@@ -88,7 +88,7 @@ def read_image(path) -> np.ndarray:
     if not path.is_file():
         raise CalibrationImageError(f"{path}: not a file (expected {_EXPECTED})")
     try:
-        data = np.fromfile(str(path), dtype=np.uint8)        # works for any path name, unlike cv2.imread
+        data = np.fromfile(str(path), dtype=np.uint8)        # = cv2.imread(IMREAD_UNCHANGED), for any path name
     except OSError as exc:
         raise CalibrationImageError(f"{path}: cannot be read ({exc.strerror or exc}); expected {_EXPECTED}") from exc
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None

@@ -6,12 +6,13 @@ fraction of a pixel and fits the lattice to them (``lft calibrate lenslets IMAGE
 centres.csv``):
 
 1. background: the median of 16 or 32 pixel blocks, interpolated, is subtracted (follows vignetting and an
-   uneven dark background); a second pass leaves the bright pixels of the first out, so that dense spots do
-   not raise it. Hot pixels (a single pixel far above its 3 x 3 median) are replaced by that median first.
+   uneven dark background); later passes leave the bright pixels of the previous one out, so that dense spots
+   do not raise it. Hot pixels (a single pixel far above its 3 x 3 median) are replaced by that median.
    The noise is measured on what is left, without the spots, on the lower half of the distribution (the
    upper half where the dark background was clipped at zero);
-2. spots: local maxima of the lightly smoothed image above 5 noise sigmas and above 10 % of the brightest spot
-   within two pitches (dim vignetted border spots are kept, noise maxima are not); spots whose centre lies
+2. spots: local maxima of the lightly smoothed image above 5 noise sigmas, above 10 % of the brightest spot
+   within two pitches and above 5 % of the bright spots (95th percentile) anywhere (dim vignetted border spots
+   are kept, noise maxima are not); spots whose centre lies
    within ``2.5 sigma`` (at least 2 px) of the image border are dropped (clipped spots);
 3. sub-pixel centres: Gaussian-windowed centroid (the window's sigma is the spots' own, estimated from the
    brightest spots), iterated to its fixed point on the background-subtracted image, after subtracting each
@@ -56,6 +57,7 @@ _SQRT3_2 = math.sqrt(3.0) / 2.0
 _ROW_STEP = {"hex": _SQRT3_2, "rect": 1.0}
 _SNR = 5.0                 # detection threshold, noise sigmas of the smoothed image
 _REL = 0.10                # ... and fraction of the brightest spot within two pitches
+_REL_GLOBAL = 0.05         # ... and fraction of the bright spots anywhere (noise maxima far from the array)
 _HOT = 0.8                 # (pixel - 3x3 median) / pixel above this: a hot pixel (a spot of sigma <~ 0.55 px)
 _MAX_RESIDUAL = 0.25       # a detection farther than this (lattice pitches) from its node is not a lenslet
 
@@ -97,8 +99,9 @@ class LatticeFit:
         rms_px: RMS length of ``residuals``, pixels.
         pitch_px: lenslet spacing along a row at the image centre (from ``homography``), pixels.
         rotation_deg: direction of the rows at the image centre, degrees counter-clockwise as seen on screen
-            (image y points down), in (-30, 30] for hex and (-45, 45] for rect; for a camera that faces the array
-            squarely it has the sign of ``LensArray.rotation``.
+            (image y points down); the rows are the lattice direction closest to the image x axis, so it lies
+            within about +-30 deg (hex) or +-45 deg (rect). For a camera that faces the array squarely it has
+            the sign of ``LensArray.rotation``.
         origin: ``(2,) float64`` pixel position of lattice index ``(0, 0)`` (from ``homography``).
         image_shape: ``(H, W)`` of the image.
         spot_sigma_px: estimated standard deviation of the spots' blur, pixels.
@@ -178,6 +181,8 @@ def find_lenslet_centres(image: np.ndarray, lattice: str, *,
         NoSpotsError: no spots, fewer than 4, or no lattice of that kind through them.
     """
     _check_lattice(lattice)
+    if expected_shape is not None:
+        _check_shape(expected_shape)
     img = _as_grey(image)
     points, sigma = _detect_spots(img)
     if len(points) < 4:
@@ -219,6 +224,16 @@ def _check_lattice(lattice: str) -> None:
         raise ValueError(f"lattice must be 'hex' or 'rect', got {lattice!r}")
 
 
+def _check_shape(expected_shape) -> tuple[int, int]:
+    try:
+        rows, cols = (int(v) for v in expected_shape)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"expected_shape must be (rows, cols), got {expected_shape!r}") from exc
+    if rows < 1 or cols < 1:
+        raise ValueError(f"expected_shape must be positive (rows, cols), got {expected_shape!r}")
+    return rows, cols
+
+
 def _as_grey(image: np.ndarray) -> np.ndarray:
     arr = np.asarray(image)
     if arr.ndim == 2 and arr.dtype.kind == "f":
@@ -251,8 +266,8 @@ def _noise_sigma(values: np.ndarray, clipped: bool) -> float:
     repeated, until none is left out.
     """
     v = values.ravel()
-    if v.size > 2_000_000:
-        v = v[:: v.size // 1_000_000]
+    if v.size > 400_000:
+        v = v[:: v.size // 200_000]                               # a sample is enough
     q = 84.134 if clipped else 15.866
 
     def estimate(x):
@@ -287,42 +302,51 @@ def _background(img: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         med = np.median(blocks, axis=2)
     else:
         counts = np.isfinite(blocks).sum(axis=2)
-        med = np.full((nh, nw), np.nan)
+        ordered = np.sort(np.where(np.isfinite(blocks), blocks, np.inf), axis=2)       # NaN (masked) last
+        lo = np.take_along_axis(ordered, np.maximum(counts - 1, 0)[..., None] // 2, axis=2)[..., 0]
+        hi = np.take_along_axis(ordered, np.minimum(counts // 2, b * b - 1)[..., None], axis=2)[..., 0]
         some = counts >= max(8, b * b // 16)
-        med[some] = np.nanmedian(blocks[some], axis=1)
+        med = np.where(some, 0.5 * (lo + hi), np.nan)
         med[~some] = np.median(med[some]) if some.any() else float(np.median(img))
     med = median_filter(med, size=3, mode="nearest")
     return cv2.resize(med.astype(np.float32), (nw * b, nh * b), interpolation=cv2.INTER_LINEAR)[:h, :w].astype(
         np.float64)
 
 
+def _blur(res: np.ndarray) -> np.ndarray:
+    return cv2.GaussianBlur(res.astype(np.float32), (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
+
+
 def _residual(img: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Background-subtracted image (hot pixels replaced), its smoothed version (sigma 1 px) and that one's noise.
 
+    The background and the noise are estimated up to three times, each time without the pixels that the
+    previous pass found bright (spots and their wings, grown by 3 px), so that dense spots do not raise them.
     Hot pixels (more than 5 noise sigmas and more than 80 % of their own background-subtracted value above the
-    median of their 3 x 3 neighbourhood; a Gaussian spot's peak is that sharp only for sigma < ~0.55 px) take
-    that median. The background is found twice: the second time without the
-    pixels that the first found bright (spots and their wings), so that dense spots do not raise it.
+    median of their 3 x 3 neighbourhood; a Gaussian spot's peak is that sharp only for sigma < ~0.55 px) then
+    take that median.
     """
-    lowest = img.min()
-    clipped = bool(np.count_nonzero(img <= lowest) >= 0.02 * img.size)
+    clipped = bool(np.count_nonzero(img <= img.min()) >= 0.02 * img.size)
     res = img - _background(img)
+    mask = np.zeros(img.shape, bool)
+    for _ in range(3):
+        smooth = _blur(res)
+        sample = smooth[~mask]
+        noise = _noise_sigma(sample, clipped)
+        bright = smooth > np.median(sample) + 3.0 * noise
+        if not bright.any() or bright.mean() > 0.9:
+            break
+        grown = cv2.dilate(bright.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+        mask = grown if grown.mean() <= 0.9 else bright
+        res = img - _background(img, mask)
     med3 = cv2.medianBlur(res.astype(np.float32), 3).astype(np.float64)
     spike = res - med3
-    hot = (spike > _SNR * _noise_sigma(res, clipped)) & (spike > _HOT * res)
+    hot = (spike > _SNR * _noise_sigma(res[~mask], clipped)) & (spike > _HOT * res)
     if hot.any():
         img = np.where(hot, img - res + med3, img)
-        res = img - _background(img)
-    for _ in range(2):
-        smooth = cv2.GaussianBlur(res.astype(np.float32), (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
-        noise = _noise_sigma(smooth, clipped)
-        bright = smooth > np.median(smooth) + 3.0 * noise
-        if not bright.any() or bright.mean() > 0.7:
-            break
-        bright = cv2.dilate(bright.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-        res = img - _background(img, bright)
-    smooth = cv2.GaussianBlur(res.astype(np.float32), (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
-    return res, smooth, _noise_sigma(smooth, clipped)
+        res = img - _background(img, mask | hot)
+    smooth = _blur(res)
+    return res, smooth, _noise_sigma(smooth[~mask], clipped)
 
 
 def _detect_spots(img: np.ndarray) -> tuple[np.ndarray, float]:
@@ -344,7 +368,7 @@ def _detect_spots(img: np.ndarray) -> tuple[np.ndarray, float]:
     amp = smooth[y, x].astype(np.float64)
     if len(xy) < 2:
         return xy.astype(np.float64), 1.0
-    # Relative threshold: 10 % of the brightest spot within about two pitches.
+    # Relative thresholds: 10 % of the brightest spot within about two pitches, 5 % of the bright ones anywhere.
     strong = amp >= 0.3 * np.percentile(amp, 90)
     if strong.sum() >= 2:
         d, _ = cKDTree(xy[strong]).query(xy[strong], k=2)
@@ -354,7 +378,7 @@ def _detect_spots(img: np.ndarray) -> tuple[np.ndarray, float]:
     k = min(19, len(xy))
     d, j = cKDTree(xy).query(xy, k=k, distance_upper_bound=2.2 * pitch0)
     neighbour_amp = np.where(np.isfinite(d), amp[np.minimum(j, len(xy) - 1)], 0.0)
-    keep = amp >= _REL * neighbour_amp.max(axis=1)
+    keep = (amp >= _REL * neighbour_amp.max(axis=1)) & (amp >= _REL_GLOBAL * np.percentile(amp, 95))
     xy, amp = xy[keep], amp[keep]
     sigma = _spot_sigma(res, xy, amp, pitch0)
     centres, ok = _windowed_centroids(res, xy, sigma, pitch0)
@@ -514,8 +538,12 @@ def _fit_lattice(points: np.ndarray, lattice: str, shape: tuple[int, int], sigma
     theta = np.angle(z) / fold
     b_angle = theta + (math.pi / 3 if lattice == "hex" else math.pi / 2)
     basis = pitch0 * np.array([[math.cos(theta), math.cos(b_angle)], [math.sin(theta), math.sin(b_angle)]])
+    # Reference: the spot nearest the middle of the detections among those with the most lattice neighbours
+    # (not a stray detection).
+    degree = near.sum(axis=1)
+    well = np.flatnonzero(degree >= min(3, degree.max()))
     centre = np.median(points, axis=0)
-    ref = points[np.argmin(np.linalg.norm(points - centre, axis=1))]
+    ref = points[well[np.argmin(np.linalg.norm(points[well] - centre, axis=1))]]
     # Refine the two lattice vectors near the reference spot.
     local = np.linalg.norm(points - ref, axis=1) < 4.0 * pitch0
     lvec = (points[j[:, 1:]] - points[:, None, :])[near & local[:, None]]
@@ -549,8 +577,7 @@ def _fit_lattice(points: np.ndarray, lattice: str, shape: tuple[int, int], sigma
     if ok.sum() < 4:
         raise NoSpotsError(f"only {int(ok.sum())} of {n} spots fit a {lattice} lattice; at least 4 are needed")
     # RANSAC (robust to stray detections), least squares on its inliers, one more assignment, final fit.
-    local_pitch = pitch0
-    _, inl = _homography(nodes[ok], points[ok], ransac_px=max(0.15 * local_pitch, 0.5))
+    _, inl = _homography(nodes[ok], points[ok], ransac_px=max(0.15 * pitch0, 0.5))
     h, _ = _homography(nodes[ok][inl], points[ok][inl])
     ok, idx_rel, nodes = _assign(h, points, lattice, _MAX_RESIDUAL)
     if ok.sum() < 4:
@@ -558,7 +585,7 @@ def _fit_lattice(points: np.ndarray, lattice: str, shape: tuple[int, int], sigma
     kept, idx_rel = points[ok], idx_rel[ok]
     indices = _final_indices(idx_rel, lattice, 0)
     if expected_shape is not None:
-        rows_e, cols_e = (int(v) for v in expected_shape)
+        rows_e, cols_e = _check_shape(expected_shape)
         span = indices.max(axis=0) + 1
         if lattice == "hex" and span[1] > cols_e and span[0] < rows_e:
             shifted = _final_indices(idx_rel, lattice, 1)             # the top detected row is an odd row

@@ -61,6 +61,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from lftransfer.lightfield import ResponseCurve
@@ -213,7 +214,7 @@ class Radiometry:
             raise ValueError(f"vignetting is for {self.vignetting_poly.shape} images, the model's camera is "
                              f"{(cam.device.height, cam.device.width)}")
         camera = replace(cam, response=self.camera_response, exposure=self.camera_exposure,
-                         vignetting=self.vignetting)
+                         vignetting=self.vignetting.copy())
         projector = replace(model.projector, response=self.projector_response, max_radiance=self.max_radiance,
                             cross_talk=self.cross_talk.copy(), black_level=tuple(self.black_level.tolist()))
         return replace(model, camera=camera, projector=projector)
@@ -246,7 +247,7 @@ def _stride(h: int, w: int, target: int) -> int:
 
 
 def _fit_camera_gamma(codes: np.ndarray, exposures: np.ndarray, rng: np.random.Generator,
-                      n_samples: int = 300) -> tuple[np.ndarray, np.ndarray, dict]:
+                      n_samples: int = 100) -> tuple[np.ndarray, np.ndarray, dict]:
     """Slope of log code against log exposure per channel.
 
     Args:
@@ -534,8 +535,6 @@ def calibrate_radiometry(rig, model, scene, *, progress: Progress | None = None,
     flat_lin = linear(flat, e_flat)
     level = np.median(flat_lin[lit], axis=0)
     mask = np.all((flat >= _DARK) & (flat <= _BRIGHT), axis=2) & np.all(flat_lin > 0.25 * level, axis=2)
-    import cv2
-
     mask = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     vig_poly, vig_diag = _fit_vignetting(flat_lin, mask, vignetting_degree, _stride(h, w, 200_000))
     vmap = vig_poly.map()

@@ -36,7 +36,8 @@ from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
 from lftransfer.optics import LensArray, LensletDevice
 from lftransfer.rig.model import RigModel, nominal_rig
 
-__all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_rig", "load_calibration"]
+__all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_exposure", "calibrate_rig",
+           "count_calibration_steps", "load_calibration"]
 
 STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose")
 FORMAT = "lftransfer-calibration/1"
@@ -182,7 +183,7 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
                        albedo: float = 0.8) -> tuple[float, dict]:
     """The LF camera's absolute exposure, against the view camera (the radiometric reference).
 
-    A grey diffuse board in front of the array, lit by a uniform projector image, has one radiance in every
+    A grey diffuse board in front of the array, lit by the projector, has one radiance in every
     direction; the view camera measures it around the board's centre, and the LF camera, decoded with the
     model's exposure, measures it along the rays that meet the board within ``radius`` of its centre. The
     ratio corrects the exposure.
@@ -192,9 +193,17 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
     """
     from lftransfer.calibration.pose import board_pattern, view_camera
 
+    from lftransfer.lightfield import LightField
+
     board = board_pattern(scene.view, depth)
-    prj = model.projector
-    white = np.full((prj.device.height, prj.device.width, 3), prj.levels, prj.dtype)
+    # light from the lenslets that reach the board's centre (within the lenslets' window), the others dark:
+    # the measurement needs one uniformly lit spot, and dark lenslets cost the simulated capture nothing
+    n = scene.rig.angular_samples
+    lf = LightField.zeros(model.array, n, n)
+    reach = depth * 1.2 * model.array.half_width + model.array.pitch
+    near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
+    lf.data[near_axis] = 0.9 * model.projector.max_radiance
+    white = model.encoder(n, n)(lf)
     view_img = rig.capture_board(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
     raw = rig.capture_board_lf(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
     K, R, t = view_camera(scene.view)
@@ -220,6 +229,21 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
     ratio = float(np.mean(lf_radiance / view_radiance))
     return model.camera.exposure * ratio, {"view_radiance": view_radiance.tolist(),
                                            "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum())}
+
+
+SWEEP_STEPS = 5                   # collimator tilts per axis
+_RADIOMETRY_MESSAGES = 5          # progress messages of calibrate_radiometry
+_POSE_MESSAGES = 3                # progress messages of calibrate_pose
+
+
+def _gray_groups(scene) -> int:
+    w, h = scene.rig.projector
+    return -(-len(gray_code_patterns(w, h)) // 8)
+
+
+def count_calibration_steps(scene) -> int:
+    """Progress messages of :func:`calibrate_rig` (for a progress bar)."""
+    return 1 + SWEEP_STEPS ** 2 + _gray_groups(scene) + _RADIOMETRY_MESSAGES + 1 + _POSE_MESSAGES
 
 
 def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) -> Calibration:
@@ -250,7 +274,7 @@ def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) 
     diag["collimated"] = spots_img
 
     # 2. distortion through the lenslets
-    distortion = calibrate_distortion(rig, array, camera, levels, progress=say)
+    distortion = calibrate_distortion(rig, array, camera, levels, steps=SWEEP_STEPS, progress=say)
     camera = replace(camera, distortion=distortion.coefficients)
 
     # 3. projector <-> camera

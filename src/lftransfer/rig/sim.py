@@ -130,10 +130,17 @@ class SimRig:
         return self._truth.camera.expose(image, noise=self._sensor_noise)
 
     def _sensor_noise(self, signal: np.ndarray) -> np.ndarray:
-        """Shot noise (Poisson in electrons, ``full_well`` at full scale) plus Gaussian read noise."""
+        """Shot noise (Poisson in electrons, ``full_well`` at full scale; its Gaussian limit above 64 electrons)
+        plus Gaussian read noise."""
         rig = self._scene.rig
         electrons = np.clip(signal, 0, None) * rig.full_well
-        return self._rng.poisson(electrons) / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
+        # Poisson where few electrons arrive; its Gaussian limit (mean = variance) where many do, much faster
+        many = electrons >= 64
+        shot = np.where(many, electrons + np.sqrt(electrons) * self._rng.standard_normal(signal.shape, np.float32),
+                        0.0)
+        few = ~many
+        shot[few] = self._rng.poisson(electrons[few])
+        return shot / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
 
     def capture_view(self) -> np.ndarray:
         """View camera image ((H, W, 3) float32 linear radiance) of the real world as it is lit now."""
@@ -184,7 +191,8 @@ class SimRig:
         radiance = np.repeat((image * peak)[..., None], 3, axis=2).astype(np.float32)
         return cam.expose(radiance, noise=self._sensor_noise)
 
-    def capture_focal_plane(self, image: np.ndarray, diffuser: float = 0.5, exposure_scale: float = 1.0) -> np.ndarray:
+    def capture_focal_plane(self, image: np.ndarray, diffuser: float = 0.5,
+                            exposure_scale: float = 1.0) -> np.ndarray:
         """LF camera image while the projector shows ``image`` onto a diffuser at the lenslets' focal plane.
 
         Both devices image that plane, so the camera sees the projector's pixels directly (through its own

@@ -2,10 +2,10 @@
 
 A real rig never matches its drawing: the lens array sits rotated and shifted, its pitch is off by a fraction
 of a percent, each Fresnel lenslet distorts a little, the camera and the projector do not face the focal plane
-squarely, responses differ per channel, the camera vignettes and its exposure is off, the projector is brighter or
-dimmer than its data sheet, leaks light at code 0 and mixes its colour channels. :func:`perturbed_rig` draws all of that from a
-seed; the simulated rig renders with it, and the pipeline must recover it by calibration (only verification
-code may read it).
+squarely, responses differ per channel, the camera vignettes and its exposure is off, the projector is brighter
+or dimmer than its data sheet, leaks light at code 0 and mixes its colour channels. :func:`perturbed_rig` draws
+all of that from a seed; the simulated rig renders with it, and the pipeline must recover it by calibration
+(only verification code may read it).
 """
 
 from __future__ import annotations
@@ -107,7 +107,9 @@ def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigMod
 
     cam, prj = nominal.camera, nominal.projector
     cam_device = _tilted(replace(cam.device, distortion=distortion()), size.view_tilt_deg, rng)
-    prj_device = _tilted(replace(prj.device, distortion=distortion()), size.view_tilt_deg, rng)
+    distortion()      # (a draw kept so that later draws stay the same)
+    # camera and projector look through the same lenslets (a beam splitter): one distortion for both
+    prj_device = _tilted(replace(prj.device, distortion=cam_device.distortion), size.view_tilt_deg, rng)
     camera = CameraModel(device=cam_device, bits=cam.bits, response=ResponseCurve(gamma(rig.camera_gamma)),
                          exposure=cam.exposure, vignetting=_vignetting(cam_device.width, cam_device.height,
                                                                        size.vignetting))

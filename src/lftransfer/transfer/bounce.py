@@ -26,6 +26,7 @@ from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
+from lftransfer.scenes.frame import scene_in_frame
 
 Progress = Callable[[str], None]
 
@@ -198,7 +199,8 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     Args:
         rig: the rig (only its :class:`~lftransfer.rig.base.Rig` methods are used).
         model: what the pipeline knows of the rig (nominal or calibrated), never the rig's hidden truth.
-        scene: ``lftransfer.scenes.SceneConfig``; its ``synthetic`` objects, ``light`` and ``view`` are used.
+        scene: ``lftransfer.scenes.SceneConfig``; its ``synthetic`` objects, ``light`` and ``view`` are used
+            (in world coordinates; moved into the array's frame by ``model.world_to_array()``).
         settings: see :class:`TransferSettings`.
         progress: called with a short description at the start of each step.
 
@@ -210,6 +212,8 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     mi = mitsuba()
     step = progress or (lambda _msg: None)
     timer = _Timer()
+    # The renderer works in the lens array's frame (interface plane z = 0): a tilted array moves the rest.
+    scene = scene_in_frame(scene, model.world_to_array())
     U = V = settings.angular_samples
     decoder = model.decoder(U, V)
     encoder = model.encoder(U, V)

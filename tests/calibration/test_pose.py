@@ -1,0 +1,98 @@
+"""Global pose: the view camera model, the checkerboard light field, the pose solve and its application."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lftransfer.calibration.pose import (ArrayPose, apply_pose, backproject, board_pattern, checkerboard_lightfield,
+                                         solve_array_pose, view_camera)
+from lftransfer.rig.model import nominal_rig
+from lftransfer.scenes import builtin_scene, load_scene
+from lftransfer.scenes.frame import rotation_xy
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(builtin_scene("fig4"))
+
+
+def test_01_view_camera_matches_mitsuba(variant, scene):
+    """A point on Mitsuba's ray through a pixel's centre projects to that pixel with our pinhole model."""
+    from lftransfer.backend import mitsuba
+    from lftransfer.render.camera import sensor_dict
+
+    mi = mitsuba()
+    v = scene.view
+    w, h = v.resolution
+    sensor = mi.load_dict(sensor_dict(v.origin, v.target, v.up, v.fov_deg, w, h))
+    px = np.array([[10, 20], [w // 2, h // 3], [w - 7, h - 5]], np.float64)
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                               mi.Point2f(((px[:, 0] + 0.5) / w).astype(np.float32),
+                                          ((px[:, 1] + 0.5) / h).astype(np.float32)), mi.Point2f(0.5, 0.5))
+    d = np.array(ray.d).T
+    X = np.asarray(v.origin) + 0.7 * d
+    K, R, t = view_camera(v)
+    p = (X @ R.T + t) @ K.T
+    np.testing.assert_allclose(p[:, :2] / p[:, 2:3], px, atol=1e-3)
+    # and back: pixels -> points on a plane -> the same pixels
+    normal = np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0])
+    Y = backproject(px, v, np.array([0.0, 0.0, 0.1]), normal)
+    q = (Y @ R.T + t) @ K.T
+    np.testing.assert_allclose(q[:, :2] / q[:, 2:3], px, atol=1e-6)
+    np.testing.assert_allclose((Y - [0.0, 0.0, 0.1]) @ normal, 0, atol=1e-12)
+
+
+def test_02_checkerboard_lightfield_draws_the_board(scene):
+    """Every lit sample's central ray meets the board plane on a square of the right colour; pattern and inverse
+    never overlap and together cover the pattern's area."""
+    array = nominal_rig(scene.rig).array
+    board = board_pattern(scene.view, 0.08)
+    pattern, inverse = checkerboard_lightfield(array, 24, 24, board, 2.0)
+    lit_p, lit_i = pattern.data[..., 0] > 0, inverse.data[..., 0] > 0
+    assert not np.any(lit_p & lit_i) and lit_p.sum() > 1000 and abs(lit_p.sum() - lit_i.sum()) < 0.2 * lit_p.sum()
+    k, j, i = np.nonzero(lit_p)
+    d = pattern.directions()[j, i]
+    c = array.centres3d[k]
+    t = ((board.centre - c) @ board.normal) / (d @ board.normal)
+    x = c + t[:, None] * d - board.centre
+    a, b = x @ board.ex / board.square_m, x @ board.ey / board.square_m
+    cols, rows = board.squares
+    assert np.all(np.abs(a) <= cols / 2) and np.all(np.abs(b) <= rows / 2)
+    assert np.all((np.floor(a + cols / 2) + np.floor(b + rows / 2)) % 2 == 0)
+
+
+def test_03_pose_recovered_from_exact_correspondences(scene):
+    """Model-frame corners carried by a known pose are mapped back to that pose (tilt, rotation, offset, scale)."""
+    board = board_pattern(scene.view, 0.08)
+    truth = ArrayPose(tilt=(np.radians(0.4), np.radians(-0.3)), rotation=np.radians(1.7), offset=(0.0021, -0.0013),
+                      scale=1.008)
+    corners = board.corners()
+    fit = solve_array_pose(corners, truth.model_to_world(corners))
+    assert fit.residual_mm < 1e-6
+    np.testing.assert_allclose(fit.tilt, truth.tilt, atol=1e-9)
+    np.testing.assert_allclose([fit.rotation, fit.scale, *fit.offset], [truth.rotation, truth.scale, *truth.offset],
+                               atol=1e-9)
+    assert ArrayPose.from_json(fit.to_json()).to_json() == fit.to_json()
+
+
+def test_04_apply_pose_keeps_every_pixels_ray(scene):
+    """A device pixel sees the same world ray whether its model-frame ray is carried by the pose, or the posed
+    model is asked directly."""
+    model = nominal_rig(scene.rig)
+    pose = ArrayPose(tilt=(0.004, -0.006), rotation=0.03, offset=(0.002, -0.001), scale=1.006)
+    posed = apply_pose(model, pose)
+    rng = np.random.default_rng(0)
+    dev = model.camera.device
+    px = np.stack([rng.uniform(0, dev.width - 1, 3000), rng.uniform(0, dev.height - 1, 3000)], 1)
+    k0, d0 = dev.pixel_to_ray(model.array, px)
+    k1, d1 = posed.camera.device.pixel_to_ray(posed.array, px)
+    ok = k0 >= 0
+    assert np.array_equal(k0, k1) and ok.sum() > 1000
+    origin0 = pose.model_to_world(model.array.centres3d[k0[ok]])
+    c, s = np.cos(pose.rotation), np.sin(pose.rotation)
+    world_dir0 = d0[ok] @ (rotation_xy(pose.tilt) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])).T
+    origin1 = posed.array.centres3d[k1[ok]] @ rotation_xy(posed.tilt).T
+    world_dir1 = d1[ok] @ rotation_xy(posed.tilt).T
+    np.testing.assert_allclose(origin1, origin0, atol=1e-12)
+    np.testing.assert_allclose(world_dir1, world_dir0, atol=1e-9)
