@@ -3,7 +3,7 @@ VENV  ?= .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test quick bench setup clean
+.PHONY: demo test quick bench calibration-table setup clean
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml scripts/bootstrap.sh
@@ -18,6 +18,9 @@ quick: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/lft bench --json out/bench.json
+
+calibration-table: $(STAMP)
+	$(VENV)/bin/lft calibrate seeds --seeds 1,2,3,4,5 --out out/calibration
 
 test: $(STAMP)
 	$(PY) -m pytest -q tests

@@ -1,0 +1,163 @@
+"""The calibration report: one self-contained HTML file with pictures, from a real calibration of a small rig."""
+
+from __future__ import annotations
+
+import base64
+import re
+from dataclasses import replace
+from html.parser import HTMLParser
+
+import cv2
+import numpy as np
+import pytest
+
+from lftransfer.calibration.report import (REPORT_NAME, SECTIONS, _heatmap_table, _nice_ticks, _svg_line_plot,
+                                           _Series, render_calibration_report, write_calibration_report)
+from lftransfer.calibration.rig import calibrate_rig, load_calibration
+from lftransfer.pipeline import quick_scene
+from lftransfer.rig.sim import SimRig
+from lftransfer.rig.truth import perturbed_rig
+from lftransfer.scenes import builtin_scene, load_scene
+from lftransfer.verify import calibration_errors
+
+# the project's targets (lenslet centres <= 0.1 px, projector mapping <= 0.5 px, pose <= 1 mm and 0.2 deg,
+# responses within 1 % of full scale)
+TARGETS = {"lenslet_centre_rms_px": 0.1, "projector_mapping_rms_px": 0.5, "pose_position_rms_mm": 1.0,
+           "pose_rotation_deg": 0.2, "camera_response_error": 0.01, "projector_response_error": 0.01}
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+
+
+class _NestingChecker(HTMLParser):
+    """Parses a document and records every end tag that does not close the innermost open element."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stack: list[str] = []
+        self.problems: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.problems.append(f"</{tag}> at line {self.getpos()[0]} closes {self.stack[-1:] or 'nothing'}")
+        else:
+            self.stack.pop()
+
+
+def _check_well_formed(text: str) -> None:
+    checker = _NestingChecker()
+    checker.feed(text)
+    checker.close()
+    assert checker.problems == [] and checker.stack == []
+    assert text.count("<svg") == text.count("</svg>")
+
+
+def _png_images(text: str) -> list[np.ndarray]:
+    return [cv2.imdecode(np.frombuffer(base64.b64decode(b64), np.uint8), cv2.IMREAD_UNCHANGED)
+            for b64 in re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)]
+
+
+@pytest.fixture(scope="module")
+def calibrated(variant, tmp_path_factory):
+    """A rig with hidden truth (seed 1) at quarter resolution, calibrated from its images, and its report."""
+    scene = quick_scene(load_scene(builtin_scene("fig4")))
+    rig = SimRig(scene, truth=perturbed_rig(scene.rig, 1))
+    cal = calibrate_rig(rig, scene)
+    errors = calibration_errors(cal, rig.truth)
+    path = write_calibration_report(tmp_path_factory.mktemp("report"), cal, errors)
+    return scene, cal, errors, path
+
+
+def test_01_sections_pictures_and_structure(calibrated):
+    """One HTML file with every section, its pictures (PNG data URIs, at most ~1000 px wide) and SVG plots."""
+    _, _, _, path = calibrated
+    assert path.name == REPORT_NAME and path.is_file()
+    assert not [p for p in path.parent.iterdir() if p != path]              # no temporary file left behind
+    text = path.read_text(encoding="utf-8")
+    for i, name in enumerate(SECTIONS, 1):
+        assert f"<h2>{i}. {name}</h2>" in text
+    assert "Against the simulator's hidden truth" in text
+    assert text.count("<img") >= 6 and text.count("<svg") >= 8
+    _check_well_formed(text)
+    images = _png_images(text)
+    assert len(images) == text.count("<img")
+    assert all(img is not None and img.shape[1] <= 1000 for img in images)
+    assert "http://" not in text.replace('xmlns="http://www.w3.org/2000/svg"', "")   # self-contained
+    assert path.stat().st_size < 2_000_000
+    assert "left out" not in text and "not available" not in text           # every picture was drawn
+
+
+def test_02_summary_numbers(calibrated):
+    """The calibration's key numbers appear as the summary writes them."""
+    _, cal, _, path = calibrated
+    text = path.read_text(encoding="utf-8")
+    rad = cal.radiometry
+    numbers = [f"{cal.model.array.pitch * 1e3:.4f}", f"{cal.lattice.pitch_px:.3f}", f"{cal.lattice.rms_px:.4f}",
+               f"{cal.projector_fit.rms_px:.3f}", f"{np.degrees(cal.distortion.mount_angle):.4f}",
+               f"{cal.pose.rms_px:.3f}", f"{cal.pose.scale:.6f}", f"{rad.max_radiance:.5g}",
+               f"{rad.camera_exposure:.5g}", *(f"{g:.4f}" for g in rad.camera_gamma),
+               *(f"{g:.4f}" for g in rad.projector_gamma), *(f"{b:.5f}" for b in rad.black_level),
+               f"{cal.projector_fit.homography[0, 0]:.6g}", f"{rad.cross_talk[0, 1]:.4f}"]
+    missing = [n for n in numbers if n not in text]
+    assert missing == []
+
+
+def test_03_truth_table_marks_each_target(calibrated):
+    """Each target is marked pass or fail as the error meets it; a failing error is marked fail."""
+    _, cal, errors, path = calibrated
+    text = path.read_text(encoding="utf-8")
+    passes = sum(abs(errors[k]) <= v for k, v in TARGETS.items())
+    assert text.count('class="pass"') == passes
+    assert text.count('class="fail"') == len(TARGETS) - passes
+    worse = render_calibration_report(cal, {**errors, "lenslet_centre_rms_px": 0.5})
+    assert worse.count('class="fail"') == len(TARGETS) - passes + 1
+    assert "hidden truth" not in render_calibration_report(cal)
+
+
+def test_04_loaded_from_file_still_renders(calibrated, tmp_path):
+    """A calibration read back from its file (no fits, no diagnostics) renders, saying what is missing."""
+    scene, cal, _, _ = calibrated
+    loaded = load_calibration(cal.write(tmp_path / "calibration.json"), scene)
+    assert loaded.lattice is None and loaded.distortion is None and loaded.projector_fit is None
+    path = write_calibration_report(tmp_path / "out" / "loaded.html", loaded)
+    assert path == tmp_path / "out" / "loaded.html"
+    text = path.read_text(encoding="utf-8")
+    assert text.count("not available (loaded from file)") >= 4
+    for i, name in enumerate(SECTIONS, 1):
+        assert f"<h2>{i}. {name}</h2>" in text
+    assert f"{loaded.model.array.pitch * 1e3:.4f}" in text
+    _check_well_formed(text)
+    # the same with every fit and diagnostic dropped from the calibration in memory
+    bare = replace(cal, lattice=None, distortion=None, projector_fit=None, diagnostics={})
+    _check_well_formed(render_calibration_report(bare))
+
+
+def test_05_missing_or_malformed_diagnostics_skip_pictures(calibrated):
+    """A missing or malformed diagnostic leaves its picture out; the report is still written."""
+    _, cal, _, _ = calibrated
+    odd = replace(cal, diagnostics={"collimated": "not an image", "exposure": 3,
+                                    "pose": {"images": {"pattern": None}, "normalised": np.zeros(3),
+                                             "found": None}},
+                  radiometry=replace(cal.radiometry, diagnostics={"camera_response_samples": [[1, 2, 3]],
+                                                                  "vignetting_fit": "?"}))
+    text = render_calibration_report(odd)
+    _check_well_formed(text)
+    assert "left out" in text
+    for i, name in enumerate(SECTIONS, 1):
+        assert f"<h2>{i}. {name}</h2>" in text
+
+
+def test_06_plot_helpers():
+    """Round ticks; a line plot and a heat-map table that are well formed."""
+    assert _nice_ticks(0.0, 1.0) == [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
+    assert _nice_ticks(-0.06, -0.02, 4) == [-0.06, -0.05, -0.04, -0.03, -0.02]
+    x = np.linspace(0, 1, 11)
+    svg = _svg_line_plot([_Series(x, x ** 2, "#d62728", "a & b", "line"), _Series(x, x, "#1f77b4", None, "dots")],
+                         xlabel="x", ylabel="y < 1", title="t")
+    _check_well_formed(svg)
+    assert "a &amp; b" in svg and "y &lt; 1" in svg and svg.count("<circle") == 11
+    table = _heatmap_table(np.eye(3), ["r0", "r1", "r2"], ["c0", "c1", "c2"])
+    _check_well_formed(table)
+    assert table.count("1.0000") == 3 and table.count("<td") == 9
