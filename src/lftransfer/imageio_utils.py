@@ -20,6 +20,29 @@ def _atomic_target(path: Path):
     return Path(tmp)
 
 
+def write_text(path: str | Path, text: str) -> Path:
+    """Write a text file atomically (temporary file in the same folder, then ``os.replace``), readable by all.
+
+    Args:
+        path: destination; its folder is created if missing.
+        text: the contents (UTF-8, ``\\n`` line ends).
+
+    Returns:
+        The path.
+    """
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+        os.chmod(tmp, 0o644)                  # mkstemp makes files private; outputs are for reading
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     """sRGB transfer function of linear values in [0, 1] (values outside are clipped)."""
     x = np.clip(x, 0.0, 1.0)

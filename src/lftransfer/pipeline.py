@@ -40,8 +40,8 @@ class RunOptions:
             stands away from the file's position (:func:`lftransfer.rig.truth.true_light_scene`).
         rig_model: what the pipeline knows of the rig: ``"calibrated"`` (run every calibration step through the
             rig first), ``"nominal"`` (the rig file's values, uncalibrated) or ``"oracle"`` (the simulated rig's
-            hidden truth and the true light position: a verification baseline, what perfect calibration would
-            reach).
+            hidden truth: a verification baseline, what perfect calibration would reach; the point light stays
+            where the scene file says, as no calibration step measures it).
         calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
     """
 
@@ -136,7 +136,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         timings["calibration"] = time.perf_counter() - t
         model, known, rig_model = calibration.model, scene, "calibrated"
     elif options.rig_model == "oracle":
-        model, known, rig_model = rig.truth, real_scene, "true (oracle)"
+        model, known, rig_model = rig.truth, scene, "true (oracle)"
     else:
         model, known, rig_model = nominal_rig(scene.rig), scene, "nominal (rig file)"
     if calibration is not None:

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import to_display, write_exr, write_png
+from lftransfer.imageio_utils import to_display, write_exr, write_png, write_text
 
 
 def display_scale(image: np.ndarray, percentile: float = 99.5, target: float = 0.9) -> float:
@@ -70,14 +68,7 @@ def bounce_panel(result, ground_truth: np.ndarray, composite_rgb: np.ndarray, *,
 
 def write_json(path: str | Path, data: dict) -> Path:
     """Write JSON atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".json", dir=path.parent)
-    with os.fdopen(fd, "w") as fh:
-        json.dump(data, fh, indent=2, sort_keys=False)
-        fh.write("\n")
-    os.replace(tmp, path)
-    return path
+    return write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray, composite_rgb: np.ndarray, report: dict,

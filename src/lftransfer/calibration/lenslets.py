@@ -40,8 +40,6 @@ Conventions:
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +48,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 from scipy.spatial import cKDTree
+
+from lftransfer.imageio_utils import write_text
 
 __all__ = ["LatticeFit", "NoSpotsError", "find_lenslet_centres", "lattice_coordinates", "write_centres_csv"]
 
@@ -200,22 +200,8 @@ def write_centres_csv(path, fit: LatticeFit) -> None:
         path: destination file; its folder is created if missing.
         fit: the result of :func:`find_lenslet_centres`.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     text = "x,y\n" + "".join(f"{x:.4f},{y:.4f}\n" for x, y in np.asarray(fit.centres, dtype=np.float64))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    write_text(path, text)
 
 
 # ----------------------------------------------------------------------------------------------- helpers

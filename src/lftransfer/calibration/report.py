@@ -25,15 +25,13 @@ import base64
 import html
 import itertools
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import to_display
+from lftransfer.imageio_utils import to_display, write_text
 
 __all__ = ["REPORT_NAME", "SECTIONS", "TARGETS", "render_calibration_report", "write_calibration_report"]
 
@@ -110,17 +108,7 @@ def write_calibration_report(path, calibration, errors: dict | None = None) -> P
     if path.suffix.lower() not in (".html", ".htm"):
         path = path / REPORT_NAME
     text = render_calibration_report(calibration, errors)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)                       # mkstemp makes it private; a report is for reading
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_text(path, text)
 
 
 def render_calibration_report(calibration, errors: dict | None = None) -> str:

@@ -17,8 +17,6 @@ which is written as JSON in OpenCV's conventions (camera matrices, distortion ``
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -33,6 +31,7 @@ from lftransfer.calibration.pose import ArrayPose, apply_pose, calibrate_pose
 from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
                                               gray_code_patterns)
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
+from lftransfer.imageio_utils import write_text
 from lftransfer.optics import LensArray, LensletDevice
 from lftransfer.rig.model import RigModel, nominal_rig
 
@@ -98,17 +97,7 @@ class Calibration:
 
     def write(self, path) -> Path:
         """Write the JSON file atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as f:
-                json.dump(self.to_json(), f, indent=1)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        return write_text(path, json.dumps(self.to_json(), indent=1) + "\n")
 
 
 def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
