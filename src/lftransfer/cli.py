@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
 
@@ -192,6 +193,22 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", help="Scene
         write_json(json_out, result)
 
 
+@contextmanager
+def _step_bar(total: int):
+    """A progress bar that advances by one on every message; yields the callback."""
+    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("starting", total=total)
+        done = [0]
+
+        def progress(msg: str) -> None:
+            done[0] += 1
+            bar.update(task, description=msg[:58], completed=min(done[0], total))
+
+        yield progress
+        bar.update(task, description="done", completed=total)
+
+
 class _CalibrateGroup(TyperGroup):
     """``lft calibrate SCENE.toml ...`` is ``lft calibrate rig SCENE.toml ...``; other first words name a step."""
 
@@ -233,21 +250,11 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML fi
     seed = None if exact_rig else truth_seed
     rig = SimRig(scene if seed is None else true_light_scene(scene, seed),
                  truth=None if seed is None else perturbed_rig(scene.rig, seed))
-    total = count_calibration_steps(scene)
-    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("starting", total=total)
-        done = [0]
-
-        def progress(msg: str) -> None:
-            done[0] += 1
-            bar.update(task, description=msg[:58], completed=min(done[0], total))
-
+    with _step_bar(count_calibration_steps(scene)) as progress:
         try:
             cal = calibrate_rig(rig, scene, progress=progress)
         except ValueError as exc:
             _fail(f"calibration failed: {exc}")
-        bar.update(task, description="done", completed=total)
     cal.write(out)
     errors = calibration_errors(cal, rig.truth)
     write_json(out.parent / "calibration_errors.json", errors)
@@ -295,16 +302,7 @@ def calibrate_seeds_cmd(seeds: str = typer.Option("1,2,3,4,5", help="Hidden-trut
     scene = _load(scene_file or builtin_scene("fig4"))
     if quick:
         scene = quick_scene(scene)
-    total = count_calibration_steps(scene) * len(seed_list)
-    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("starting", total=total)
-        done = [0]
-
-        def progress(msg: str) -> None:
-            done[0] += 1
-            bar.update(task, description=msg[:58], completed=min(done[0], total))
-
+    with _step_bar(count_calibration_steps(scene) * len(seed_list)) as progress:
         result = calibration_seeds(scene, seed_list, progress=progress)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "calibration_errors.json", result)

@@ -65,6 +65,7 @@ import cv2
 import numpy as np
 
 from lftransfer.lightfield import ResponseCurve
+from lftransfer.rig.sim import board_to_world
 
 __all__ = ["Radiometry", "RadiometryError", "VignettingPolynomial", "calibrate_radiometry", "response_error",
            "BOARD_DISTANCES", "BOARD_ALBEDO"]
@@ -340,36 +341,13 @@ def _fit_power(levels: np.ndarray, d: np.ndarray) -> tuple[float, np.ndarray, fl
     return g, amp, rms
 
 
-def _board_transform(array, nominal_array, centre, normal, size) -> np.ndarray:
-    """(4, 4) to_world of the board rectangle in ``array``'s frame (as the rig places it, see SimRig)."""
-    scale = array.pitch / nominal_array.pitch
-    c, s_ = np.cos(array.rotation - nominal_array.rotation), np.sin(array.rotation - nominal_array.rotation)
-    rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
-    shift = np.array([*(np.asarray(array.offset) - np.asarray(nominal_array.offset)), 0.0])
-    p = scale * rot @ np.asarray(centre, np.float64) + shift
-    n = rot @ np.asarray(normal, np.float64)
-    n /= np.linalg.norm(n)
-    helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    ex = np.cross(helper, n)
-    ex /= np.linalg.norm(ex)
-    ey = np.cross(n, ex)
-    m = np.eye(4)
-    m[:3, :3] = np.stack([ex * size[0] / 2 * scale, ey * size[1] / 2 * scale, n], axis=1)
-    m[:3, 3] = p
-    return m
-
-
 def _view_pixel(view, point: np.ndarray) -> np.ndarray:
-    """Pixel (x, y) of a point in the view camera (pinhole, horizontal fov, pixel centres at integers)."""
-    w, h = view.resolution
-    origin, target, up = (np.asarray(v, np.float64) for v in (view.origin, view.target, view.up))
-    fwd = (target - origin) / np.linalg.norm(target - origin)
-    left = np.cross(up, fwd)
-    left /= np.linalg.norm(left)
-    upv = np.cross(fwd, left)
-    q = np.stack([-left, -upv, fwd]) @ (np.asarray(point, np.float64) - origin)
-    f = 0.5 * w / np.tan(np.radians(view.fov_deg) / 2)
-    return np.array([f * q[0] / q[2] + 0.5 * w - 0.5, f * q[1] / q[2] + 0.5 * h - 0.5])
+    """Pixel (x, y) of a point in the view camera."""
+    from lftransfer.calibration.pose import view_camera
+
+    K, R, t = view_camera(view)
+    q = K @ (R @ np.asarray(point, np.float64) + t)
+    return q[:2] / q[2]
 
 
 def _board_pose(scene, model):
@@ -391,7 +369,7 @@ def _board_pose(scene, model):
         to_cam = np.asarray(scene.view.origin, np.float64) - np.asarray(centre)
         normal = np.array([0.0, 0.0, -1.0]) + to_cam / np.linalg.norm(to_cam)
         normal /= np.linalg.norm(normal)
-        where = _board_transform(model.array, nominal, centre, normal, BOARD_SIZE)[:3, 3]
+        where = board_to_world(model.array, nominal, centre, normal, BOARD_SIZE)[:3, 3]
         px = _view_pixel(view, where)
         if 0.15 * vw <= px[0] <= 0.85 * vw and 0.15 * vh <= px[1] <= 0.85 * vh:
             return centre, normal, view, tuple(int(round(v)) for v in px)
@@ -431,7 +409,7 @@ def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, p
     array = model.array
     view = scene_in_frame(scene, model.world_to_array()).view
     board = {"type": "rectangle",
-             "to_world": mi.ScalarTransform4f(_board_transform(array, nominal_rig(scene.rig).array, centre, normal,
+             "to_world": mi.ScalarTransform4f(board_to_world(array, nominal_rig(scene.rig).array, centre, normal,
                                                                BOARD_SIZE).tolist()),
              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [BOARD_ALBEDO] * 3}}}
     xmin, xmax, ymin, ymax = array.extent()

@@ -25,6 +25,37 @@ from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.scenes.frame import scene_in_frame
 
 
+def board_to_world(array, nominal_array, centre, normal, size) -> np.ndarray:
+    """Where a board asked for in the nominal array's frame stands, in the array's own frame.
+
+    The nominal frame's points are carried by the array's scale, rotation and offset relative to the nominal
+    array (the frame a light field projected through ``array`` but rendered for ``nominal_array`` lives in).
+
+    Args:
+        array, nominal_array: ``LensArray`` as built and as the rig file says.
+        centre: (3,) board centre, metres, nominal frame.
+        normal: (3,) board normal.
+        size: (width, height) of the board in nominal units.
+
+    Returns:
+        (4, 4) ``to_world`` of a Mitsuba ``rectangle`` ([-1, 1]^2, normal +z) for the board.
+    """
+    scale = array.pitch / nominal_array.pitch
+    c, s = np.cos(array.rotation - nominal_array.rotation), np.sin(array.rotation - nominal_array.rotation)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    shift = np.array([*(np.asarray(array.offset) - np.asarray(nominal_array.offset)), 0.0])
+    n = rot @ np.asarray(normal, np.float64)
+    n /= np.linalg.norm(n)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    ex = np.cross(helper, n)
+    ex /= np.linalg.norm(ex)
+    ey = np.cross(n, ex)
+    m = np.eye(4)
+    m[:3, :3] = np.stack([ex * size[0] / 2 * scale, ey * size[1] / 2 * scale, n], axis=1)
+    m[:3, 3] = scale * rot @ np.asarray(centre, np.float64) + shift
+    return m
+
+
 class SimRig:
     """Simulated rig for a scene (``lftransfer.scenes.SceneConfig``).
 
@@ -270,21 +301,9 @@ class SimRig:
         from lftransfer.backend import mitsuba
 
         mi = mitsuba()
-        array, nominal = self._truth.array, nominal_rig(self._scene.rig).array
-        scale = array.pitch / nominal.pitch
-        c, s_ = np.cos(array.rotation - nominal.rotation), np.sin(array.rotation - nominal.rotation)
-        rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
-        shift = np.array([*(np.asarray(array.offset) - np.asarray(nominal.offset)), 0.0])
-        p = scale * rot @ np.asarray(centre, np.float64) + shift
-        n = rot @ np.asarray(normal, np.float64)
-        n /= np.linalg.norm(n)
-        helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        ex = np.cross(helper, n)
-        ex /= np.linalg.norm(ex)
-        ey = np.cross(n, ex)
-        to_world = np.eye(4)
-        to_world[:3, :3] = np.stack([ex * size[0] / 2 * scale, ey * size[1] / 2 * scale, n], axis=1)
-        to_world[:3, 3] = p
+        to_world = board_to_world(self._truth.array, nominal_rig(self._scene.rig).array, centre, normal, size)
+        ex, ey, n = (to_world[:3, i] / np.linalg.norm(to_world[:3, i]) for i in range(3))
+        p = to_world[:3, 3]
         shapes = {"lens_array_absorber": self._absorber,
                   "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
                             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}}
