@@ -17,6 +17,7 @@ def _atomic_target(path: Path):
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)
+    os.chmod(tmp, 0o644)                  # mkstemp makes files private; outputs are for reading
     return Path(tmp)
 
 
@@ -35,7 +36,6 @@ def write_text(path: str | Path, text: str) -> Path:
     try:
         with open(tmp, "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
-        os.chmod(tmp, 0o644)                  # mkstemp makes files private; outputs are for reading
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
