@@ -86,7 +86,8 @@ def count_run_steps(scene, options: RunOptions) -> int:
 
     primary = count_steps(TransferSettings(bounces=options.bounces))
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
-    calibration = count_calibration_steps(scene) + 1 if _calibrates(options) else 0
+    calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
+        + (1 if _calibrates(options) or options.calibration is not None else 0)
     return 1 + calibration + primary + 6 + len(_other_models(scene, options)) * other + 1
 
 
@@ -129,16 +130,16 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     calibration, calibration_errors_ = None, None
     if options.calibration is not None:
         calibration = load_calibration(options.calibration, scene)
-        model, known, rig_model = calibration.model, scene, f"calibration file {options.calibration}"
+        model, rig_model = calibration.model, f"calibration file {options.calibration}"
     elif options.rig_model == "calibrated":
         t = time.perf_counter()
         calibration = calibrate_rig(rig, scene, progress=step)
         timings["calibration"] = time.perf_counter() - t
-        model, known, rig_model = calibration.model, scene, "calibrated"
+        model, rig_model = calibration.model, "calibrated"
     elif options.rig_model == "oracle":
-        model, known, rig_model = rig.truth, scene, "true (oracle)"
+        model, rig_model = rig.truth, "true (oracle)"
     else:
-        model, known, rig_model = nominal_rig(scene.rig), scene, "nominal (rig file)"
+        model, rig_model = nominal_rig(scene.rig), "nominal (rig file)"
     if calibration is not None:
         step("calibration report")
         out_dir = Path(out)
@@ -150,13 +151,12 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         from lftransfer.calibration.report import write_calibration_report
 
         write_calibration_report(out_dir / "calibration_report.html", calibration, calibration_errors_)
-    scene_known = known
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
                                 lighting_model=primary, aperture_samples=render.aperture_samples,
                                 lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
-    result = run_transfer(rig, model, scene_known, settings, progress=step)
+    result = run_transfer(rig, model, scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
 
@@ -168,7 +168,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     by_model = {primary: {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}}
     for other in _other_models(scene, options):
         t = time.perf_counter()
-        alt = run_transfer(rig, model, scene_known, replace(settings, lighting_model=other, bounce_views=False),
+        alt = run_transfer(rig, model, scene, replace(settings, lighting_model=other, bounce_views=False),
                            progress=step)
         m = evaluate(alt, gt)
         by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
