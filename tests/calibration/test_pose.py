@@ -96,3 +96,16 @@ def test_04_apply_pose_keeps_every_pixels_ray(scene):
     world_dir1 = d1[ok] @ rotation_xy(posed.tilt).T
     np.testing.assert_allclose(origin1, origin0, atol=1e-12)
     np.testing.assert_allclose(world_dir1, world_dir0, atol=1e-9)
+
+
+def test_05_no_board_in_view_is_a_clear_error(scene):
+    """A rig whose board photographs are black: the pose step says what it could not find."""
+    from lftransfer.calibration.pose import PoseError, calibrate_pose
+
+    class DarkRig:
+        def capture_board(self, image, centre, normal, size, printed=None, spp=None):
+            w, h = scene.view.resolution
+            return np.zeros((h, w, 3), np.float32)
+
+    with pytest.raises(PoseError, match="chessboard was not found"):
+        calibrate_pose(DarkRig(), nominal_rig(scene.rig), scene)

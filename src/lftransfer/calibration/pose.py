@@ -27,7 +27,6 @@ from typing import Callable
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray, LensletDevice
@@ -382,7 +381,7 @@ def calibrate_pose(rig, model: RigModel, scene, *, depth: float = 0.08, squares=
     corners_model = board.corners()
     px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view)
     if found.sum() < 4:
-        raise PoseError(f"found {int(found.sum())} of {len(predicted)} projected corners in the view camera image; "
+        raise PoseError(f"found {int(found.sum())} of {len(found)} projected corners in the view camera image; "
                         "is the board in view and lit?")
     world = backproject(px[found], scene.view, point, normal)
     pose = solve_array_pose(corners_model[found], world)
