@@ -257,11 +257,7 @@ def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict
     out["projector_response_error"] = response_error(cal.projector.response, truth.projector.response)
     tp, cp = truth.projector, cal.projector
 
-    def mixing(p):
-        c = np.eye(3) if p.cross_talk is None else np.asarray(p.cross_talk)
-        return p.max_radiance * c
-
-    mt, mc = mixing(tp), mixing(cp)
+    mt, mc = tp.max_radiance * tp.cross_talk_matrix, cp.max_radiance * cp.cross_talk_matrix
     out["projector_mixing_rel_error"] = float(np.abs(mc - mt).max() / np.abs(mt).max())
     bt = tp.max_radiance * np.asarray(tp.black_level)
     bc = cp.max_radiance * np.asarray(cp.black_level)

@@ -65,7 +65,7 @@ import cv2
 import numpy as np
 
 from lftransfer.lightfield import ResponseCurve
-from lftransfer.rig.sim import board_to_world
+from lftransfer.rig.sim import absorber_dict, board_to_world
 
 __all__ = ["Radiometry", "RadiometryError", "VignettingPolynomial", "calibrate_radiometry", "response_error",
            "BOARD_DISTANCES", "BOARD_ALBEDO"]
@@ -358,6 +358,7 @@ def _board_pose(scene, model):
     the view (15 % from every border); the normal is half-way between -z (towards the array, which lights it)
     and the direction to the view camera.
     """
+    from lftransfer.calibration.pose import board_pattern
     from lftransfer.rig.model import nominal_rig
     from lftransfer.scenes.frame import scene_in_frame
 
@@ -365,10 +366,8 @@ def _board_pose(scene, model):
     vw, vh = view.resolution
     nominal = nominal_rig(scene.rig).array
     for z in BOARD_DISTANCES:
-        centre = (0.0, 0.0, float(z))
-        to_cam = np.asarray(scene.view.origin, np.float64) - np.asarray(centre)
-        normal = np.array([0.0, 0.0, -1.0]) + to_cam / np.linalg.norm(to_cam)
-        normal /= np.linalg.norm(normal)
+        board = board_pattern(scene.view, z)
+        centre, normal = tuple(board.centre.tolist()), board.normal
         where = board_to_world(model.array, nominal, centre, normal, BOARD_SIZE)[:3, 3]
         px = _view_pixel(view, where)
         if 0.15 * vw <= px[0] <= 0.85 * vw and 0.15 * vh <= px[1] <= 0.85 * vh:
@@ -412,12 +411,8 @@ def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, p
              "to_world": mi.ScalarTransform4f(board_to_world(array, nominal_rig(scene.rig).array, centre, normal,
                                                                BOARD_SIZE).tolist()),
              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [BOARD_ALBEDO] * 3}}}
-    xmin, xmax, ymin, ymax = array.extent()
-    absorber = {"type": "rectangle",
-                "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
-                .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
-                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}
-    renderer = HalfSpaceRenderer([], extra_shapes={"board": board, "lens_array_absorber": absorber}, max_depth=1)
+    renderer = HalfSpaceRenderer([], extra_shapes={"board": board, "lens_array_absorber": absorber_dict(array)},
+                                 max_depth=1)
     encoder = LightFieldEncoder(array, projector, angular_samples, angular_samples)
     lf = encoder.codec.image_to_lightfield(encoder.emitted(image))
     light = LightFieldLight(lf, side="real", model="area", aperture_samples=aperture_samples, seed=seed + 3)

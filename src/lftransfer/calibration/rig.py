@@ -273,8 +273,7 @@ def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) 
     for i, p in enumerate(patterns):
         if i % 8 == 0:
             say(f"projector mapping: Gray code {i + 1}-{min(i + 8, len(patterns))} of {len(patterns)}")
-        img = np.repeat(p[..., None], 3, axis=2)
-        captures.append(rig.capture_focal_plane(img).astype(np.float32).mean(axis=2) / levels)
+        captures.append(rig.capture_focal_plane(p).astype(np.float32).mean(axis=2) / levels)
     col, row, valid = decode_gray_code(captures, prj_w, prj_h)
     prj_fit = fit_projector_camera(col, row, valid)
     H_prj = prj_fit.homography @ camera.homography

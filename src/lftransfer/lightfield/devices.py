@@ -494,7 +494,4 @@ class LightFieldEncoder:
         """
         image = _check_codes(image, self.projector.device, "projector image")
         code = image.astype(np.float32) / np.float32(self.projector.levels)
-        linear = self.projector.response.decode(code)
-        if not self.projector.mixes_colours:
-            return (linear * np.float32(self.projector.max_radiance)).astype(np.float32, copy=False)
-        return self.projector.emit(linear)
+        return self.projector.emit(self.projector.response.decode(code))

@@ -56,6 +56,18 @@ def board_to_world(array, nominal_array, centre, normal, size) -> np.ndarray:
     return m
 
 
+def absorber_dict(array) -> dict:
+    """Mitsuba shape dict of the lens array seen from the real side: a black rectangle just behind z = 0."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    xmin, xmax, ymin, ymax = array.extent()
+    return {"type": "rectangle",
+            "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
+            .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}
+
+
 class SimRig:
     """Simulated rig for a scene (``lftransfer.scenes.SceneConfig``).
 
@@ -89,13 +101,7 @@ class SimRig:
         self.view_spp = int(view_spp)
         self.aperture_samples = int(aperture_samples)
         array = self._truth.array
-        xmin, xmax, ymin, ymax = array.extent()
-        self._absorber = {
-            "type": "rectangle",
-            "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
-            .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
-        }
+        self._absorber = absorber_dict(array)
         self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
                                        max_depth=scene.render.max_depth)
         self._point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
@@ -137,8 +143,11 @@ class SimRig:
             self._projector_light = LightFieldLight(lf, side="real", model="area",
                                                     aperture_samples=self.aperture_samples, seed=self._seed + 3)
 
+    def _projector_lights(self) -> list:
+        return [self._projector_light] if self._projector_light is not None else []
+
     def _lights(self):
-        return [self._point_light] + ([self._projector_light] if self._projector_light is not None else [])
+        return [self._point_light] + self._projector_lights()
 
     def capture_lf(self) -> np.ndarray:
         """LF camera image ((H, W, 3) uint16, ``bits``-bit codes) of the real world as it is lit now."""
@@ -236,6 +245,8 @@ class SimRig:
         """
         import cv2
 
+        if not (np.isfinite(exposure_scale) and exposure_scale > 0):
+            raise ValueError(f"exposure_scale must be positive, got {exposure_scale!r}")
         image = np.asarray(image)
         expected = (*self._prj_shape, 3)
         if image.shape[:2] != self._prj_shape:
@@ -253,8 +264,6 @@ class SimRig:
         radiance = self._prj_encoder.emitted(image)
         seen = cv2.remap(radiance, *self._focal_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0)
-        if not (np.isfinite(exposure_scale) and exposure_scale > 0):
-            raise ValueError(f"exposure_scale must be positive, got {exposure_scale!r}")
         return self._truth.camera.expose((exposure_scale * diffuser) * seen, noise=self._sensor_noise)
 
     def capture_board(self, image: np.ndarray, centre, normal, size=(0.3, 0.3), albedo: float = 0.8,
@@ -282,8 +291,8 @@ class SimRig:
         self.project(image)
         renderer = self._board_renderer(centre, normal, size, albedo, printed)
         w, h = self._view.resolution
-        lights = [self._projector_light] if self._projector_light is not None else []
-        img = renderer.render_view(self._view_sensor, w, h, lights, spp=spp or self.view_spp, seed=self._seed)
+        img = renderer.render_view(self._view_sensor, w, h, self._projector_lights(), spp=spp or self.view_spp,
+                                   seed=self._seed)
         return img.rgb
 
     def capture_board_lf(self, image: np.ndarray, centre, normal, size=(0.3, 0.3), albedo: float = 0.8) -> np.ndarray:
@@ -294,8 +303,8 @@ class SimRig:
             (H, W, 3) uint16 camera codes.
         """
         self.project(image)
-        lights = [self._projector_light] if self._projector_light is not None else []
-        return self._capture_lf_with(self._board_renderer(centre, normal, size, albedo, None), lights)
+        return self._capture_lf_with(self._board_renderer(centre, normal, size, albedo, None),
+                                     self._projector_lights())
 
     def _board_renderer(self, centre, normal, size, albedo, printed) -> HalfSpaceRenderer:
         from lftransfer.backend import mitsuba
