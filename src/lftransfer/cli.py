@@ -234,31 +234,24 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML fi
     Also reachable as ``lft calibrate SCENE.toml``. Beside ``--out`` it writes ``calibration_report.html`` and,
     since the simulated rig knows its truth, ``calibration_errors.json``.
     """
-    from lftransfer.calibration.report import write_calibration_report
     from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps
-    from lftransfer.pipeline import quick_scene
-    from lftransfer.report import write_json
+    from lftransfer.pipeline import quick_scene, write_calibration
     from lftransfer.rig.sim import SimRig
-    from lftransfer.rig.truth import perturbed_rig, true_light_scene
-    from lftransfer.verify import calibration_errors
+    from lftransfer.rig.truth import hidden_world
 
     if not scene_file.exists():
         _fail(f"{scene_file}: no such file")
     scene = _load(scene_file)
     if quick:
         scene = quick_scene(scene)
-    seed = None if exact_rig else truth_seed
-    rig = SimRig(scene if seed is None else true_light_scene(scene, seed),
-                 truth=None if seed is None else perturbed_rig(scene.rig, seed))
+    world, truth = hidden_world(scene, None if exact_rig else truth_seed)
+    rig = SimRig(world, truth=truth)
     with _step_bar(count_calibration_steps(scene)) as progress:
         try:
             cal = calibrate_rig(rig, scene, progress=progress)
         except ValueError as exc:
             _fail(f"calibration failed: {exc}")
-    cal.write(out)
-    errors = calibration_errors(cal, rig.truth)
-    write_json(out.parent / "calibration_errors.json", errors)
-    report = write_calibration_report(out.parent / "calibration_report.html", cal, errors)
+    errors = write_calibration(out, cal, rig.truth)
     table = Table(title=f"calibration -> {out}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -276,7 +269,7 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML fi
     table.add_row("error vs hidden truth: responses", f"camera {errors['camera_response_error']:.4f}, "
                                                       f"projector {errors['projector_response_error']:.4f}")
     Console().print(table)
-    Console().print(f"wrote {out}, {report}, {out.parent / 'calibration_errors.json'}")
+    Console().print(f"wrote {out}, {out.parent / 'calibration_report.html'}, {out.parent / 'calibration_errors.json'}")
 
 
 @calibrate_app.command("seeds")

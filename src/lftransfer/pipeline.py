@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import Callable
 
 
-from lftransfer.calibration.rig import calibrate_rig, load_calibration
+from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.composite import composite
 from lftransfer.report import write_json, write_outputs
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig, true_light_scene
+from lftransfer.rig.truth import hidden_world
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
 from lftransfer.verify import calibration_errors, evaluate, render_ground_truth
 
@@ -82,8 +82,6 @@ def _calibrates(options: RunOptions) -> bool:
 def count_run_steps(scene, options: RunOptions) -> int:
     """Progress steps of :func:`run_scene` (set-up, calibration, transfer, 6 ground-truth renders unless cached,
     reruns with the other lighting models, writing), for a progress bar."""
-    from lftransfer.calibration.rig import count_calibration_steps
-
     primary = count_steps(TransferSettings(bounces=options.bounces))
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
@@ -94,6 +92,26 @@ def count_run_steps(scene, options: RunOptions) -> int:
 def _other_models(scene, options: RunOptions) -> list[str]:
     primary = options.lighting_model or scene.render.lighting_model
     return [m for m in options.compare_models if m != primary]
+
+
+def write_calibration(path: Path, calibration, truth) -> dict:
+    """Write a calibration file, its HTML report and (verification only) its errors against the hidden truth.
+
+    Args:
+        path: the calibration file; ``calibration_report.html`` and ``calibration_errors.json`` go beside it.
+        calibration: :class:`lftransfer.calibration.rig.Calibration`.
+        truth: the simulated rig's true ``RigModel``.
+
+    Returns:
+        The errors (:func:`lftransfer.verify.calibration_errors`).
+    """
+    from lftransfer.calibration.report import write_calibration_report
+
+    calibration.write(path)
+    errors = calibration_errors(calibration, truth)
+    write_json(path.parent / "calibration_errors.json", errors)
+    write_calibration_report(path.parent / "calibration_report.html", calibration, errors)
+    return errors
 
 
 def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
@@ -123,8 +141,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         raise ValueError(f"rig_model must be one of {RIG_MODELS}, got {options.rig_model!r}")
     seed = options.truth_seed
     # The world as it is (hidden from the pipeline): the rig as built and the point light where it stands.
-    real_scene = scene if seed is None else true_light_scene(scene, seed)
-    truth = None if seed is None else perturbed_rig(scene.rig, seed)
+    real_scene, truth = hidden_world(scene, seed)
     rig = SimRig(real_scene, truth=truth, capture_spp=options.capture_spp)
     timings["setup"] = time.perf_counter() - t0
     calibration, calibration_errors_ = None, None
@@ -142,15 +159,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         model, rig_model = nominal_rig(scene.rig), "nominal (rig file)"
     if calibration is not None:
         step("calibration report")
-        out_dir = Path(out)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        calibration.write(out_dir / "calibration.json")
-        # verification only: the hidden truth against the calibration
-        calibration_errors_ = calibration_errors(calibration, rig.truth)
-        write_json(out_dir / "calibration_errors.json", calibration_errors_)
-        from lftransfer.calibration.report import write_calibration_report
-
-        write_calibration_report(out_dir / "calibration_report.html", calibration, calibration_errors_)
+        calibration_errors_ = write_calibration(Path(out) / "calibration.json", calibration, rig.truth)
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,

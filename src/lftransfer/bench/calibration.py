@@ -16,7 +16,7 @@ import numpy as np
 
 from lftransfer.calibration.rig import calibrate_rig
 from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig, true_light_scene
+from lftransfer.rig.truth import hidden_world
 from lftransfer.verify import calibration_errors
 
 __all__ = ["TARGETS", "calibration_seeds", "markdown_table"]
@@ -58,7 +58,8 @@ def calibration_seeds(scene, seeds: Sequence[int], *, progress: Callable[[str], 
     say = progress or (lambda msg: None)
     per_seed = {}
     for seed in seeds:
-        rig = SimRig(true_light_scene(scene, seed), truth=perturbed_rig(scene.rig, seed))
+        world, truth = hidden_world(scene, seed)
+        rig = SimRig(world, truth=truth)
         t = time.perf_counter()
         cal = calibrate_rig(rig, scene, progress=lambda msg, s=seed: say(f"seed {s}: {msg}"))
         errors = calibration_errors(cal, rig.truth)

@@ -87,9 +87,8 @@ class BoardPattern:
 
     def corners(self) -> np.ndarray:
         """(N, 3) model-frame positions of the inner corners, row-major."""
-        cols, rows = self.squares
-        i, j = np.meshgrid(np.arange(1, cols) - cols / 2, np.arange(1, rows) - rows / 2)
-        return (self.centre + self.square_m * (i.reshape(-1, 1) * self.ex + j.reshape(-1, 1) * self.ey))
+        b = self.board_2d()
+        return self.centre + b[:, :1] * self.ex + b[:, 1:2] * self.ey
 
     def board_2d(self) -> np.ndarray:
         """(N, 3) the same corners in the board's own plane (z = 0), for ``cv2.solvePnP``."""

@@ -128,6 +128,21 @@ def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigMod
     return RigModel(array=array, camera=camera, projector=projector, tilt=tilt)
 
 
+def hidden_world(scene, seed: int | None):
+    """The world as it is for a hidden-truth seed, for the simulated rig and the ground truth only.
+
+    Args:
+        scene: the scene file's scene.
+        seed: hidden-truth seed; None: the rig file and the scene file are exact.
+
+    Returns:
+        (scene with the point light where it really stands, true ``RigModel`` or None for the rig file's).
+    """
+    if seed is None:
+        return scene, None
+    return true_light_scene(scene, seed), perturbed_rig(scene.rig, seed)
+
+
 def true_light_scene(scene, seed: int, size: Perturbation = Perturbation()):
     """The scene as it really is: the point light where it really stands, away from the file's position.
 
