@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# One-time, idempotent set-up: a libLLVM that Dr.Jit accepts (>= 16) and the project's virtual environment.
+# One-time, idempotent set-up: a libLLVM that Dr.Jit accepts (>= 16), a virtual display with software OpenGL
+# (for the hardware back-end's projector window and its tests) and the project's virtual environment.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
@@ -20,6 +21,23 @@ if ! have_llvm; then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libllvm19 >/dev/null
+fi
+
+# The hardware back-end's projector window (lftransfer.rig.hardware.projector) and its tests: the glfw wheel
+# brings libglfw, which dlopens libX11 & co. and libGL.so.1 at run time; Mesa's software OpenGL (llvmpipe)
+# draws under Xvfb, the virtual X server the tests start. Installed only where a package is missing.
+HW_DEBS="xvfb xauth libgl1 libglx-mesa0 libgl1-mesa-dri libegl1 libx11-6 libx11-xcb1 libxext6 libxrandr2
+  libxinerama1 libxcursor1 libxi6 libxxf86vm1"
+missing=""
+for p in $HW_DEBS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  echo "bootstrap: installing Debian's$missing (virtual display and software OpenGL for the projector window)" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  # shellcheck disable=SC2086
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then

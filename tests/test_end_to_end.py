@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from lftransfer.pipeline import RunOptions, run_scene
+from lftransfer.app.pipeline import RunOptions, run_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 
@@ -40,7 +40,7 @@ def test_01_fig4_small_rig(variant, tmp_path):
 def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     """The default run: the simulated rig hides its truth, the pipeline calibrates it from images, then transfers
     with the calibrated values only; the calibration files are written and the transfer still works."""
-    from lftransfer.pipeline import quick_scene
+    from lftransfer.app.pipeline import quick_scene
 
     scene = quick_scene(load_scene(builtin_scene("fig4")))
     scene = with_overrides(scene, render={"gt_spp": 128})

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from typer.testing import CliRunner
 
-from lftransfer.cli import app
+from lftransfer.app.cli import app
 
 runner = CliRunner()
 

@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 
 from lftransfer.calibration.distortion import calibrate_distortion, collimator_directions, fit_distortion
-from lftransfer.pipeline import quick_scene
+from lftransfer.app.pipeline import quick_scene
 from lftransfer.rig.model import nominal_rig
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from lftransfer.calibration.projector import decode_gray_code, fit_projector_camera, gray_code_patterns
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 

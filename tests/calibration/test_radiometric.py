@@ -11,10 +11,10 @@ import pytest
 from lftransfer.calibration.radiometric import (Radiometry, RadiometryError, VignettingPolynomial,
                                                 calibrate_radiometry, response_error)
 from lftransfer.lightfield import LightField, ResponseCurve
-from lftransfer.pipeline import quick_scene
+from lftransfer.app.pipeline import quick_scene
 from lftransfer.rig.model import nominal_rig
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import Perturbation, perturbed_rig
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import Perturbation, perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene
 
 _CACHE: dict = {}

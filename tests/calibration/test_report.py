@@ -11,14 +11,14 @@ import cv2
 import numpy as np
 import pytest
 
-from lftransfer.calibration.report import (REPORT_NAME, SECTIONS, _heatmap_table, _nice_ticks, _svg_line_plot,
+from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, _heatmap_table, _nice_ticks, _svg_line_plot,
                                            _Series, render_calibration_report, write_calibration_report)
 from lftransfer.calibration.rig import calibrate_rig, load_calibration
-from lftransfer.pipeline import quick_scene
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig
+from lftransfer.app.pipeline import quick_scene
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene
-from lftransfer.verify import calibration_errors
+from lftransfer.sim.verify import calibration_errors
 
 # the project's targets (lenslet centres <= 0.1 px, projector mapping <= 0.5 px, pose <= 1 mm and 0.2 deg,
 # responses within 1 % of full scale)

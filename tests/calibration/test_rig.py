@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
-from lftransfer.pipeline import quick_scene
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import perturbed_rig, true_light_scene
+from lftransfer.app.pipeline import quick_scene
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import perturbed_rig, true_light_scene
 from lftransfer.scenes import builtin_scene, load_scene
-from lftransfer.verify import calibration_errors
+from lftransfer.sim.verify import calibration_errors
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from lftransfer.render.fast import CachedRenderer, supports, tessellate
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.scenes.format import ObjectConfig
-from lftransfer.verify import psnr
+from lftransfer.sim.verify import psnr
 
 ARRAY = LensArray(lattice="hex", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
 

@@ -21,6 +21,9 @@ from scipy.spatial import cKDTree
 from lftransfer.calibration.images import to_grey
 from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.optics.geometry import apply_homography, rotation_2d
+from lftransfer.rig.base import Rig
+from lftransfer.rig.requests import Collimator
 
 __all__ = ["DistortionFit", "collimator_directions", "fit_distortion", "calibrate_distortion"]
 
@@ -67,9 +70,7 @@ def fit_distortion(k: np.ndarray, xn: np.ndarray, xd: np.ndarray, K: int, iterat
     coef = np.zeros((K, 2))
     counts = np.bincount(k, minlength=K)
     for _ in range(iterations):
-        c, s = np.cos(phi), np.sin(phi)
-        rot = np.array([[c, -s], [s, c]])
-        xr = xn @ rot.T                                        # beam in the lattice's frame
+        xr = xn @ rotation_2d(phi).T                                        # beam in the lattice's frame
         r2 = np.sum(xr * xr, axis=1)
         # per lenslet normal equations of xd - xr = xr (k1 r^2 + k2 r^4), both components stacked
         a1, a2 = xr * r2[:, None], xr * (r2 * r2)[:, None]
@@ -88,20 +89,19 @@ def fit_distortion(k: np.ndarray, xn: np.ndarray, xd: np.ndarray, K: int, iterat
         scale = 1.0 + coef[k, 0] * r2 + coef[k, 1] * r2 * r2
         z = xn * scale[:, None]
         phi = float(np.arctan2(np.sum(z[:, 0] * xd[:, 1] - z[:, 1] * xd[:, 0]), np.sum(z * xd)))
-    c, s = np.cos(phi), np.sin(phi)
-    xr = xn @ np.array([[c, -s], [s, c]]).T
+    xr = xn @ rotation_2d(phi).T
     r2 = np.sum(xr * xr, axis=1)
     pred = xr * (1.0 + coef[k, 0] * r2 + coef[k, 1] * r2 * r2)[:, None]
     rms = float(np.sqrt(np.mean(np.sum((pred - xd) ** 2, axis=1))))
     return DistortionFit(coefficients=coef, mount_angle=phi, rms=rms, spots=counts)
 
 
-def calibrate_distortion(rig, array: LensArray, device: LensletDevice, levels: int, *, max_tan: float = 0.3,
+def calibrate_distortion(rig: Rig, array: LensArray, device: LensletDevice, levels: int, *, max_tan: float = 0.3,
                          steps: int = 5, progress=None) -> DistortionFit:
     """Sweep the collimator, find the spots, fit the distortion.
 
     Args:
-        rig: a rig with ``capture_collimated(direction=...)``.
+        rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Collimator` at each tilt.
         array: the lens array in the model frame (from the lenslet centres).
         device: the LF camera's model (its homography from the lenslet centres; distortion unused).
         levels: the camera's full-scale code.
@@ -117,19 +117,18 @@ def calibrate_distortion(rig, array: LensArray, device: LensletDevice, levels: i
         if progress:
             progress(f"distortion: collimator tilt {i + 1}/{steps * steps}")
         try:
-            spots = find_lenslet_centres(to_grey(rig.capture_collimated(direction=d), levels), array.lattice).centres
+            rig.setup(Collimator(direction=tuple(d)))
+            spots = find_lenslet_centres(to_grey(rig.capture_lf().codes, levels), array.lattice).centres
         except NoSpotsError:
             continue
         xn = -d[:2] / d[2]
         # where the undistorted model puts each lenslet's spot, and the detected spot nearest to it
         guess = array.centres + array.focal_length * xn
-        hom = np.concatenate([guess, np.ones((array.K, 1))], 1) @ device.homography.T
-        guess_px = hom[:, :2] / hom[:, 2:3]
+        guess_px = apply_homography(device.homography, guess)
         dist, j = cKDTree(spots).query(guess_px)
         pitch_px = np.median(np.linalg.norm(np.diff(guess_px[: array.cols], axis=0), axis=1))
         keep = dist < 0.25 * pitch_px
-        q = np.concatenate([spots[j[keep]], np.ones((keep.sum(), 1))], 1) @ inv.T
-        q = q[:, :2] / q[:, 2:3]
+        q = apply_homography(inv, spots[j[keep]])
         kk = np.flatnonzero(keep)
         ks.append(kk)
         xns.append(np.broadcast_to(xn, (len(kk), 2)))

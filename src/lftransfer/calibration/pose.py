@@ -30,40 +30,17 @@ from scipy.optimize import least_squares
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.optics.geometry import backproject, plane_axes, project, rotation_xy, rotation_z, view_camera
+from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
-from lftransfer.scenes.frame import rotation_xy
+from lftransfer.rig.requests import Board, ViewCapture
 
 __all__ = ["ArrayPose", "BoardPattern", "PoseError", "apply_pose", "board_pattern", "calibrate_pose",
-           "checkerboard_lightfield", "find_board_corners", "solve_array_pose", "view_camera"]
+           "checkerboard_lightfield", "corner_landing", "find_board_corners", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
     """The board's corners could not be found or the pose could not be solved."""
-
-
-def view_camera(view) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """OpenCV pinhole model of the view camera (``lftransfer.scenes.ViewConfig``).
-
-    Returns:
-        K (3, 3) pixels, R (3, 3) world -> camera rotation, t (3,) such that ``x_cam = R X + t`` (x right,
-        y down, z forward); pixel (0, 0) is the centre of the top-left pixel.
-    """
-    w, h = view.resolution
-    origin, target, up = (np.asarray(v, np.float64) for v in (view.origin, view.target, view.up))
-    fwd = (target - origin) / np.linalg.norm(target - origin)
-    left = np.cross(up, fwd)
-    left /= np.linalg.norm(left)
-    upv = np.cross(fwd, left)
-    R = np.stack([-left, -upv, fwd])
-    fx = 0.5 * w / np.tan(np.radians(view.fov_deg) / 2)
-    K = np.array([[fx, 0.0, 0.5 * w - 0.5], [0.0, fx, 0.5 * h - 0.5], [0.0, 0.0, 1.0]])
-    return K, R, -R @ origin
-
-
-def _project(K, R, t, X: np.ndarray) -> np.ndarray:
-    x = X @ R.T + t
-    p = x @ K.T
-    return p[:, :2] / p[:, 2:3]
 
 
 @dataclass(frozen=True)
@@ -106,10 +83,7 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
     centre = np.array([0.0, 0.0, float(depth)])
     to_cam = np.asarray(view.origin, np.float64) - centre
     normal = to_cam / np.linalg.norm(to_cam) + np.array([0.0, 0.0, -1.0])
-    normal /= np.linalg.norm(normal)
-    ex = np.cross([0.0, 1.0, 0.0], normal)
-    ex /= np.linalg.norm(ex)
-    ey = np.cross(normal, ex)
+    ex, ey, normal = plane_axes(normal)
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
 
 
@@ -170,7 +144,6 @@ def find_board_corners(pattern_img: np.ndarray, inverse_img: np.ndarray, board: 
     lit = total > 0.05 * np.percentile(total, 99.5)
     norm = np.where(lit, (a_img - b_img) / np.where(lit, total, 1.0), 0.0).astype(np.float32)
     h, w = norm.shape
-    K, R, t = view_camera(view)
     to_world = plane_to_world or (lambda X: X)
     # predicted board plane in the world, and each pixel's square coordinates on it
     origin = to_world(board.centre[None])[0]
@@ -179,13 +152,13 @@ def find_board_corners(pattern_img: np.ndarray, inverse_img: np.ndarray, board: 
     normal = np.cross(ex, ey)
     ys, xs = np.mgrid[0:h, 0:w]
     px = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
-    X = backproject(px, view, origin, normal / np.linalg.norm(normal))
+    X = backproject(view, px, origin, normal / np.linalg.norm(normal))
     cols, rows = board.squares
     a = ((X - origin) @ ex) / (ex @ ex) / board.square_m + cols / 2
     b = ((X - origin) @ ey) / (ey @ ey) / board.square_m + rows / 2
     template = (np.sin(np.pi * a) * np.sin(np.pi * b)).reshape(h, w).astype(np.float32)
     inner = ((a > 0.5) & (a < cols - 0.5) & (b > 0.5) & (b < rows - 0.5)).reshape(h, w) & lit
-    corners_pred = _project(K, R, t, to_world(board.corners()))
+    corners_pred = project(view, to_world(board.corners()))
     if inner.sum() < 100:
         return corners_pred, np.zeros(len(corners_pred), bool), norm
     if np.mean(template[inner] * norm[inner]) < 0:      # the pattern's phase: white squares where a + b is even
@@ -233,10 +206,18 @@ class ArrayPose:
 
     def model_to_world(self, X: np.ndarray) -> np.ndarray:
         """(N, 3) model-frame points -> world points."""
-        c, s = np.cos(self.rotation), np.sin(self.rotation)
-        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        local = self.scale * np.asarray(X, np.float64) @ rz.T + np.array([*self.offset, 0.0])
+        local = self.scale * np.asarray(X, np.float64) @ rotation_z(self.rotation).T + np.array([*self.offset, 0.0])
         return local @ rotation_xy(self.tilt).T
+
+    def world_to_model(self, X: np.ndarray) -> np.ndarray:
+        """(N, 3) world points -> model-frame points (the inverse of :meth:`model_to_world`)."""
+        local = np.asarray(X, np.float64) @ rotation_xy(self.tilt) - np.array([*self.offset, 0.0])
+        return local @ rotation_z(self.rotation) / self.scale
+
+    def direction_to_model(self, v: np.ndarray) -> np.ndarray:
+        """(N, 3) world directions -> unit model-frame directions."""
+        d = np.asarray(v, np.float64) @ rotation_xy(self.tilt) @ rotation_z(self.rotation)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def to_json(self) -> dict:
         return {"tilt_deg": np.degrees(self.tilt).tolist(), "rotation_deg": float(np.degrees(self.rotation)),
@@ -286,15 +267,6 @@ def board_plane(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple
     return R.T @ (point_cam - t), R.T @ normal_cam, rms
 
 
-def backproject(px: np.ndarray, view, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """(N, 2) view camera pixels -> (N, 3) world points where their rays meet the plane (point, normal)."""
-    K, R, t = view_camera(view)
-    rays = np.concatenate([px, np.ones((len(px), 1))], 1) @ np.linalg.inv(K).T @ R     # world directions
-    centre = -R.T @ t
-    lam = ((point - centre) @ normal) / (rays @ normal)
-    return centre + lam[:, None] * rays
-
-
 def solve_array_pose(corners_model: np.ndarray, corners_world: np.ndarray) -> ArrayPose:
     """The array pose (similarity with the tilt, rotation, offset and scale of :class:`ArrayPose`).
 
@@ -342,24 +314,61 @@ def apply_pose(model: RigModel, pose: ArrayPose) -> RigModel:
                    tilt=(float(pose.tilt[0]), float(pose.tilt[1])))
 
 
-def calibrate_pose(rig, model: RigModel, scene, *, depth: float = 0.08, squares=(5, 4), square_m: float = 0.028,
-                   chart=(7, 5, 0.022), spp: int = 16,
-                   progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
-    """Find the board's plane, project the checkerboard light field and its inverse, solve the pose.
+def corner_landing(array: LensArray, corners: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Where the projected corners land on a board that is not where they were drawn (model frame).
+
+    A corner drawn at X is the meeting point of the rays from every lenslet whose window holds the direction
+    towards X. On a board plane through ``point`` with ``normal`` (off the drawing plane by the operator's hand
+    error and the model frame's scale), those rays spread into a small blur; the corner seen on the board is the
+    blur's centroid: the mean of the rays' intersections with the plane.
 
     Args:
-        rig: a rig with ``capture_board`` (the operator holds a diffuse board, with a chessboard printed on it,
-            where the projected image is sharp).
+        array: the lens array in the model frame.
+        corners: (N, 3) drawn corner positions, model frame.
+        point, normal: (3,) the board plane, model frame.
+
+    Returns:
+        (N, 3) landing points, model frame (``corners`` itself for a lenslet-free corner).
+    """
+    c = array.centres3d[None]                                            # (1, K, 3)
+    d = corners[:, None, :] - c                                          # (N, K, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offsets = -array.focal_length * d[..., :2] / d[..., 2:3]         # focal-plane offsets of those directions
+        lit = (d[..., 2] > 0) & array.in_cell(np.nan_to_num(offsets, nan=1e9))
+        lam = ((point - c) @ normal) / (d @ normal)                      # (N, K)
+    hits = c + lam[..., None] * d
+    lit &= np.isfinite(lam) & (lam > 0)
+    n = lit.sum(axis=1)
+    mean = np.where(lit[..., None], hits, 0.0).sum(axis=1) / np.maximum(n, 1)[:, None]
+    return np.where((n > 0)[:, None], mean, corners)
+
+
+def calibrate_pose(rig: Rig, model: RigModel, scene, *, depth: float = 0.08, squares=(5, 4), square_m: float = 0.028,
+                   chart=(7, 5, 0.022), spp: int = 16, refinements: int = 3,
+                   progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
+    """Ask for the board, find its plane, project the checkerboard light field and its inverse, solve the pose.
+
+    The board is asked for where the checkerboard is drawn (``depth`` in front of the array, turned towards the
+    view camera); the operator puts it there only roughly. Its plane is measured in the world from the printed
+    chessboard; the pose is first solved as if the corners lay where they were drawn, then refined
+    ``refinements`` times with the corners where their rays land on the measured plane (:func:`corner_landing`),
+    which carries the board's depth and tilt errors into the fit instead of into the pose.
+
+    Args:
+        rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Board` with a printed chessboard and
+            shows the light fields on it.
         model: the calibrated rig in the model frame (lenslets, projector mapping, distortion).
         scene: the scene (view camera, angular samples).
         depth: distance of the board's centre from the array, metres (model frame).
         squares, square_m: layout of the projected checkerboard.
         chart: (columns, rows, square size in metres) of the printed chessboard.
-        spp: view camera samples per pixel of the calibration photographs.
+        spp: view camera quality (samples per pixel of a simulated camera) of the calibration photographs.
+        refinements: fits with the corners moved onto the measured board plane.
         progress: called with a message per capture.
 
     Returns:
-        (ArrayPose, diagnostics: the view images and the corners, for the report).
+        (ArrayPose, diagnostics: the view images, the corners and the board's placement error as measured, for
+        the report).
     """
     board = board_pattern(scene.view, depth, squares, square_m)
     n = scene.rig.angular_samples
@@ -369,24 +378,35 @@ def calibrate_pose(rig, model: RigModel, scene, *, depth: float = 0.08, squares=
     flood.data[...] = 0.5 * level
     encoder = model.encoder(n, n)
     size = ((chart[0] + 2) * chart[2], (chart[1] + 2) * chart[2])
+    rig.setup(Board(centre=tuple(board.centre), normal=tuple(board.normal), size=size, chart=tuple(chart)))
     images = {}
     for name, lf in (("flood", flood), ("pattern", pattern), ("inverse", inverse)):
         if progress:
             progress(f"pose: board photographed with the {name} light field")
-        images[name] = rig.capture_board(encoder(lf), board.centre, board.normal, size=size, printed=tuple(chart),
-                                         spp=spp)
+        rig.project(encoder(lf))
+        images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
+    rig.project(rig.info.black())
     point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
-    K, R, t = view_camera(scene.view)
     corners_model = board.corners()
     px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view)
     if found.sum() < 4:
         raise PoseError(f"found {int(found.sum())} of {len(found)} projected corners in the view camera image; "
                         "is the board in view and lit?")
-    world = backproject(px[found], scene.view, point, normal)
-    pose = solve_array_pose(corners_model[found], world)
+    world = backproject(scene.view, px[found], point, normal)
+    drawn = corners_model[found]
+    pose = solve_array_pose(drawn, world)
+    for _ in range(refinements):
+        p_m = pose.world_to_model(point[None])[0]
+        n_m = pose.direction_to_model(normal[None])[0]
+        pose = solve_array_pose(corner_landing(model.array, drawn, p_m, n_m), world)
+    landed = corner_landing(model.array, drawn, pose.world_to_model(point[None])[0],
+                            pose.direction_to_model(normal[None])[0])
     pose.corners_px = px[found]
-    pose.reprojected = _project(K, R, t, pose.model_to_world(corners_model[found]))
+    pose.reprojected = project(scene.view, pose.model_to_world(landed))
     pose.rms_px = float(np.sqrt(np.mean(np.sum((pose.reprojected - pose.corners_px) ** 2, axis=1))))
     pose.pnp_rms_px = chart_rms
+    n_m = pose.direction_to_model(normal[None])[0]
+    placement = {"depth_mm": float(1000 * (pose.world_to_model(point[None])[0] - board.centre) @ n_m),
+                 "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ board.normal, -1.0, 1.0))))}
     return pose, {"images": images, "normalised": norm, "found": found,
-                  "predicted": _project(K, R, t, corners_model)}
+                  "predicted": project(scene.view, corners_model), "board_placement": placement}

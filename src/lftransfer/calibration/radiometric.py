@@ -10,10 +10,10 @@ into the model's :class:`~lftransfer.lightfield.CameraModel` and :class:`~lftran
 
 It uses only what the pipeline may know: the rig file's nominal values, the (geometrically calibrated) model
 passed in, the scene's view camera, and images from two calibration actions of the rig:
-``capture_focal_plane(image, exposure_scale=...)`` (a diffuser at the lenslets' focal plane: the LF camera sees
-the projector's pixels directly, with exposure bracketing) and ``capture_board(image, centre, normal, size,
-albedo)`` (the view camera's absolute radiance image of a grey diffuse board of known albedo lit through the
-array by the projector; the view camera is the radiometric reference).
+a :class:`~lftransfer.rig.requests.FocalPlaneDiffuser` set-up (a diffuser at the lenslets' focal plane: the LF
+camera sees the projector's pixels directly; LF captures with exposure bracketing) and a
+:class:`~lftransfer.rig.requests.Board` set-up (the view camera's absolute radiance image of a grey diffuse board of
+known albedo lit through the array by the projector; the view camera is the radiometric reference).
 
 Procedure (:func:`calibrate_radiometry`):
 
@@ -38,7 +38,7 @@ c. **Projector response, black level, cross-talk.** Uniform projector images at 
    projector channel gives ``gamma_j`` (``r_j(n) = (n / levels)^gamma_j``) and the column ``G C[:, j]``. C is
    known up to scale only: it is normalised so that the mean of its diagonal is 1, and the black level is
    expressed on that same scale (``b = S(black) / s`` with s the mean diagonal of ``G C``).
-d. **Absolute scale.** (i) Projector: ``capture_board`` with a uniform full-code projector image, the board
+d. **Absolute scale.** (i) Projector: a board asked for with a uniform full-code projector image, the board
    (0.2 m square, albedo 0.8) on the array's axis 0.1-0.2 m in front of it (the farthest of a few distances
    whose centre the view camera sees well), turned half-way between the array and the view camera. The same
    view camera pixels around the board centre are rendered with our own renderer
@@ -65,7 +65,10 @@ import cv2
 import numpy as np
 
 from lftransfer.lightfield import ResponseCurve
-from lftransfer.rig.sim import absorber_dict, board_to_world
+from lftransfer.optics.geometry import project, rectangle_to_world
+from lftransfer.render.shapes import board_shapes, lens_array_absorber
+from lftransfer.rig.base import Rig
+from lftransfer.rig.requests import Board, FocalPlaneDiffuser, LFCapture, ViewCapture
 
 __all__ = ["Radiometry", "RadiometryError", "VignettingPolynomial", "calibrate_radiometry", "response_error",
            "BOARD_DISTANCES", "BOARD_ALBEDO"]
@@ -341,35 +344,23 @@ def _fit_power(levels: np.ndarray, d: np.ndarray) -> tuple[float, np.ndarray, fl
     return g, amp, rms
 
 
-def _view_pixel(view, point: np.ndarray) -> np.ndarray:
-    """Pixel (x, y) of a point in the view camera."""
-    from lftransfer.calibration.pose import view_camera
-
-    K, R, t = view_camera(view)
-    q = K @ (R @ np.asarray(point, np.float64) + t)
-    return q[:2] / q[2]
-
-
 def _board_pose(scene, model):
-    """Where the board is held: centre, normal (nominal array frame), the view camera in the model's array frame
-    and the board centre's view pixel.
+    """Where the board is asked for: centre, normal (rig frame, the best guess of the model's frame before the
+    pose step), the view camera in the model's array frame and the board centre's view pixel.
 
     The centre lies on the array's axis at the first of :data:`BOARD_DISTANCES` whose image falls well inside
     the view (15 % from every border); the normal is half-way between -z (towards the array, which lights it)
     and the direction to the view camera.
     """
     from lftransfer.calibration.pose import board_pattern
-    from lftransfer.rig.model import nominal_rig
     from lftransfer.scenes.frame import scene_in_frame
 
     view = scene_in_frame(scene, model.world_to_array()).view
     vw, vh = view.resolution
-    nominal = nominal_rig(scene.rig).array
     for z in BOARD_DISTANCES:
         board = board_pattern(scene.view, z)
         centre, normal = tuple(board.centre.tolist()), board.normal
-        where = board_to_world(model.array, nominal, centre, normal, BOARD_SIZE)[:3, 3]
-        px = _view_pixel(view, where)
+        px = project(view, board.centre[None])[0]
         if 0.15 * vw <= px[0] <= 0.85 * vw and 0.15 * vh <= px[1] <= 0.85 * vh:
             return centre, normal, view, tuple(int(round(v)) for v in px)
     raise RadiometryError(f"brightness: no board position {BOARD_DISTANCES} m in front of the array centre "
@@ -401,17 +392,13 @@ def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, p
     from lftransfer.render.camera import sensor_dict
     from lftransfer.render.lights import LightFieldLight
     from lftransfer.render.renderer import HalfSpaceRenderer
-    from lftransfer.rig.model import nominal_rig
     from lftransfer.scenes.frame import scene_in_frame
 
     mi = mitsuba()
     array = model.array
     view = scene_in_frame(scene, model.world_to_array()).view
-    board = {"type": "rectangle",
-             "to_world": mi.ScalarTransform4f(board_to_world(array, nominal_rig(scene.rig).array, centre, normal,
-                                                               BOARD_SIZE).tolist()),
-             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [BOARD_ALBEDO] * 3}}}
-    renderer = HalfSpaceRenderer([], extra_shapes={"board": board, "lens_array_absorber": absorber_dict(array)},
+    shapes = board_shapes(rectangle_to_world(centre, normal, BOARD_SIZE), BOARD_ALBEDO)
+    renderer = HalfSpaceRenderer([], extra_shapes={**shapes, "lens_array_absorber": lens_array_absorber(array)},
                                  max_depth=1)
     encoder = LightFieldEncoder(array, projector, angular_samples, angular_samples)
     lf = encoder.codec.image_to_lightfield(encoder.emitted(image))
@@ -424,15 +411,14 @@ def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, p
     return radiance.reshape(len(xs), spp, 3).mean(1), hit.reshape(len(xs), spp).all(1), view
 
 
-def calibrate_radiometry(rig, model, scene, *, progress: Progress | None = None,
+def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = None,
                          exposures: int = 5, projector_levels: int = 4, vignetting_degree: int = 4,
                          board_spp: int | None = None, predict_spp: int = 16, angular_samples: int = 64,
                          seed: int = 0) -> Radiometry:
     """Calibrate the camera's and the projector's radiometry from rig captures (module docstring: the steps).
 
     Args:
-        rig: a rig with ``projector_shape``, ``capture_focal_plane(image, exposure_scale=...)`` and
-            ``capture_board(image, centre, normal, size, albedo, spp)`` (e.g. ``SimRig``).
+        rig: the rig; it is asked for the focal-plane diffuser (with exposure bracketing) and a grey board.
         model: the current ``RigModel`` (calibrated geometry; its bit depths and exposure are used).
         scene: the scene (``SceneConfig``): nominal rig file values and the view camera.
         progress: called with a message once per capture group.
@@ -454,14 +440,15 @@ def calibrate_radiometry(rig, model, scene, *, progress: Progress | None = None,
     rng = np.random.default_rng(seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    prj_h, prj_w = rig.projector_shape
+    prj_h, prj_w = rig.info.projector_shape
     p_levels, p_dtype = model.projector.levels, model.projector.dtype
     c_levels = float(model.camera.levels)
     n_captures = [0]
 
     def capture(image: np.ndarray, e: float) -> np.ndarray:
         n_captures[0] += 1
-        return rig.capture_focal_plane(image, exposure_scale=float(e)).astype(np.float32) / np.float32(c_levels)
+        rig.project(image)
+        return rig.capture_lf(LFCapture(exposure_scale=float(e))).codes.astype(np.float32) / np.float32(c_levels)
 
     def uniform(codes) -> np.ndarray:
         return np.broadcast_to(np.asarray(codes, p_dtype), (prj_h, prj_w, 3)).copy()
@@ -469,6 +456,7 @@ def calibrate_radiometry(rig, model, scene, *, progress: Progress | None = None,
     # a. camera response ------------------------------------------------------------------------------------
     t = time.perf_counter()
     say(f"camera response: exposure bracket of a projector ramp ({exposures} captures)")
+    rig.setup(FocalPlaneDiffuser())
     ramp = np.round(np.linspace(0, p_levels, prj_w)).astype(p_dtype)
     ramp_img = np.repeat(np.broadcast_to(ramp[None, :], (prj_h, prj_w))[..., None], 3, axis=2).copy()
     first = capture(ramp_img, 1.0)
@@ -560,7 +548,9 @@ def calibrate_radiometry(rig, model, scene, *, progress: Progress | None = None,
     t = time.perf_counter()
     say("projector brightness: board in front of the array (view camera)")
     centre, normal, view, (cx, cy) = _board_pose(scene, model)
-    measured = rig.capture_board(white, centre, normal, BOARD_SIZE, BOARD_ALBEDO, board_spp)
+    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO))
+    rig.project(white)
+    measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
     projector = replace(model.projector, response=ResponseCurve(tuple(projector_gamma)), max_radiance=1.0,
                         cross_talk=cross_talk, black_level=tuple(black_level.tolist()))
     vw, vh = view.resolution

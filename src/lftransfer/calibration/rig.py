@@ -33,7 +33,11 @@ from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_co
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
 from lftransfer.imageio_utils import write_text
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.optics.geometry import apply_homography, project
+from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.rig.requests import Board, Collimator, FocalPlaneDiffuser, RealScene
+from lftransfer.scenes import check_synthetic
 
 __all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_exposure", "calibrate_rig",
            "count_calibration_steps", "load_calibration"]
@@ -107,11 +111,10 @@ def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
     section 2: ``x_n = -(d_x, d_y) / d_z``) to pixels, at its centre; ``dist_coeffs`` are k1 k2 p1 p2 k3.
     """
     c = array.centres
-    hom = np.concatenate([c, np.ones((len(c), 1))], 1) @ dev.homography.T
-    px = hom[:, :2] / hom[:, 2:3]
+    px = apply_homography(dev.homography, c)
     H = dev.homography
     # Jacobian of the homography at each centre, times the focal length: pixels per normalised unit
-    w = hom[:, 2]
+    w = np.concatenate([c, np.ones((len(c), 1))], 1) @ H[2]
     jac = (H[None, :2, :2] - px[:, :, None] * H[None, 2:3, :2]) / w[:, None, None] * array.focal_length
     cams = np.zeros((len(c), 3, 3))
     cams[:, :2, :2] = jac
@@ -168,7 +171,7 @@ def load_calibration(path, scene) -> Calibration:
                        pose=pose)
 
 
-def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.01,
+def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.01,
                        albedo: float = 0.8) -> tuple[float, dict]:
     """The LF camera's absolute exposure, against the view camera (the radiometric reference).
 
@@ -180,8 +183,7 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
     Returns:
         (exposure, diagnostics with both measurements).
     """
-    from lftransfer.calibration.pose import board_pattern, view_camera
-
+    from lftransfer.calibration.pose import board_pattern
     from lftransfer.lightfield import LightField
 
     board = board_pattern(scene.view, depth)
@@ -193,11 +195,12 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
     near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
     lf.data[near_axis] = 0.9 * model.projector.max_radiance
     white = model.encoder(n, n)(lf)
-    view_img = rig.capture_board(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
-    raw = rig.capture_board_lf(white, board.centre, board.normal, size=(0.2, 0.2), albedo=albedo)
-    K, R, t = view_camera(scene.view)
-    c = K @ (R @ board.centre + t)
-    x, y = int(round(c[0] / c[2])), int(round(c[1] / c[2]))
+    rig.setup(Board(centre=board.centre, normal=board.normal, size=(0.2, 0.2), albedo=albedo))
+    rig.project(white)
+    view_img = rig.capture_view().radiance
+    raw = rig.capture_lf().codes
+    rig.project(rig.info.black())
+    x, y = (int(round(v)) for v in project(scene.view, board.centre[None])[0])
     view_radiance = np.median(view_img[y - 3:y + 4, x - 3:x + 4].reshape(-1, 3), axis=0)
     radiance = model.decoder(4, 4).radiance_image(raw)                   # per pixel, with the model's exposure
     cam = model.camera.device
@@ -220,6 +223,17 @@ def calibrate_exposure(rig, model: RigModel, scene, *, depth: float = 0.1, radiu
                                            "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum())}
 
 
+def _as_projector_image(pattern: np.ndarray, rig: Rig) -> np.ndarray:
+    """A grey (H, W) or (H, W, 3) uint8 pattern (0 and 255) as the projector's (H, W, 3) image of its bit depth."""
+    pattern = np.asarray(pattern)
+    if pattern.ndim == 2:
+        pattern = np.repeat(pattern[..., None], 3, axis=2)
+    levels = 2 ** rig.info.projector_bits - 1
+    if levels != 255:
+        pattern = np.round(pattern.astype(np.float64) * (levels / 255))
+    return pattern.astype(rig.info.projector_dtype)
+
+
 SWEEP_STEPS = 5                   # collimator tilts per axis
 _RADIOMETRY_MESSAGES = 5          # progress messages of calibrate_radiometry
 _POSE_MESSAGES = 3                # progress messages of calibrate_pose
@@ -235,18 +249,34 @@ def count_calibration_steps(scene) -> int:
     return 1 + SWEEP_STEPS ** 2 + _gray_groups(scene) + _RADIOMETRY_MESSAGES + 1 + _POSE_MESSAGES
 
 
-def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) -> Calibration:
+def check_rig_matches(rig: Rig, scene) -> None:
+    """A ValueError unless the rig's devices are those the scene's rig file describes."""
+    info, r = rig.info, scene.rig
+    want = {"LF camera size": (tuple(r.lf_camera), info.lf_camera), "projector size": (tuple(r.projector), info.projector),
+            "LF camera bits": (r.lf_camera_bits, info.lf_camera_bits),
+            "projector bits": (r.projector_bits, info.projector_bits),
+            "view camera size": (tuple(scene.view.resolution), info.view)}
+    wrong = [f"{name}: the scene file says {a}, the {info.kind} rig has {b}" for name, (a, b) in want.items()
+             if tuple(np.atleast_1d(a)) != tuple(np.atleast_1d(b))]
+    if wrong:
+        raise ValueError("the rig does not match the scene's [rig] and [view]: " + "; ".join(wrong))
+
+
+def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = None) -> Calibration:
     """Run every calibration step through the rig (images only; the rig file's nominal values as the start).
 
     Args:
-        rig: a rig with the calibration actions of :class:`lftransfer.rig.sim.SimRig`.
-        scene: the scene (rig file, view camera).
+        rig: any :class:`~lftransfer.rig.base.Rig`; the steps ask it for set-ups (collimator, focal-plane
+            diffuser, boards), projections and captures, and leave it in the real scene with the projector black.
+        scene: the synthetic part of the scene (``SceneConfig.synthetic_part()``): the rig file's nominal
+            values and the view camera.
         progress: called with a message per capture or step.
 
     Returns:
         Calibration.
     """
     say = progress or (lambda msg: None)
+    check_rig_matches(rig, check_synthetic(scene))
     nominal = nominal_rig(scene.rig)
     array = nominal.array
     levels = nominal.camera.levels
@@ -254,7 +284,9 @@ def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) 
 
     # 1. lenslet centres -> LF camera homography (model frame = the nominal lattice)
     say("lenslet centres: collimated source")
-    spots_img = rig.capture_collimated()
+    rig.project(rig.info.black())
+    rig.setup(Collimator())
+    spots_img = rig.capture_lf().codes
     lattice = find_lenslet_centres(to_grey(spots_img, levels), array.lattice, expected_shape=(array.rows, array.cols))
     k = lattice.indices[:, 0] * array.cols + lattice.indices[:, 1]
     H_cam, _ = cv2.findHomography(array.centres[k], lattice.centres, 0)
@@ -270,10 +302,12 @@ def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) 
     prj_w, prj_h = scene.rig.projector
     captures = []
     patterns = gray_code_patterns(prj_w, prj_h)
+    rig.setup(FocalPlaneDiffuser())
     for i, p in enumerate(patterns):
         if i % 8 == 0:
             say(f"projector mapping: Gray code {i + 1}-{min(i + 8, len(patterns))} of {len(patterns)}")
-        captures.append(rig.capture_focal_plane(p).astype(np.float32).mean(axis=2) / levels)
+        rig.project(_as_projector_image(p, rig))
+        captures.append(rig.capture_lf().codes.astype(np.float32).mean(axis=2) / levels)
     col, row, valid = decode_gray_code(captures, prj_w, prj_h)
     prj_fit = fit_projector_camera(col, row, valid)
     H_prj = prj_fit.homography @ camera.homography
@@ -293,5 +327,7 @@ def calibrate_rig(rig, scene, *, progress: Callable[[str], None] | None = None) 
     pose, pose_diag = calibrate_pose(rig, model, scene, progress=say)
     diag["pose"] = pose_diag
     model = apply_pose(model, pose)
+    rig.project(rig.info.black())
+    rig.setup(RealScene())
     return Calibration(model=model, lattice=lattice, distortion=distortion, projector_fit=prj_fit,
                        radiometry=radiometry, pose=pose, diagnostics=diag)

@@ -26,7 +26,8 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 
-__all__ = ["bsdf_dict", "shape_dict", "scene_dict", "object_keys", "mesh_cache_dir", "write_ply",
+__all__ = ["board_shapes", "bsdf_dict", "lens_array_absorber", "shape_dict", "scene_dict", "object_keys",
+           "mesh_cache_dir", "write_ply",
            "SPHERE_SUBDIVISIONS"]
 
 SPHERE_SUBDIVISIONS = 4        # icosphere subdivisions of a non-uniformly scaled sphere (5120 triangles)
@@ -242,3 +243,48 @@ def scene_dict(objects: Sequence, *, extra: dict | None = None) -> dict:
             raise ValueError(f"scene_dict: extra entry {key!r} clashes with an object's key or 'type'")
         d[key] = value
     return d
+
+
+def lens_array_absorber(array) -> dict:
+    """Mitsuba shape dict of the lens array seen from the real side: a black rectangle just behind z = 0.
+
+    Args:
+        array: ``LensArray`` (its extent, in the array's own frame).
+    """
+    mi = mitsuba()
+    xmin, xmax, ymin, ymax = array.extent()
+    return {"type": "rectangle",
+            "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
+            .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}
+
+
+def board_shapes(to_world: np.ndarray, albedo: float, chart: tuple[int, int, float] | None = None) -> dict:
+    """Mitsuba shape dicts of a flat diffuse calibration board, with an optional printed chessboard.
+
+    Args:
+        to_world: (4, 4) the board rectangle's ``to_world`` (:func:`lftransfer.optics.geometry.rectangle_to_world`).
+        albedo: the board's diffuse reflectance.
+        chart: (columns, rows, square metres) of a chessboard printed at its true size on the board's centre
+            (dark squares of reflectance ``albedo / 4``), or None.
+
+    Returns:
+        ``{"board": ..., "chart": ...}`` shape dicts.
+    """
+    mi = mitsuba()
+    to_world = np.asarray(to_world, np.float64)
+    shapes = {"board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
+                        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}}
+    if chart is not None:
+        cols, rows, square = chart
+        ex, ey, n = (to_world[:3, i] / np.linalg.norm(to_world[:3, i]) for i in range(3))
+        m = to_world.copy()
+        m[:3, 0] = ex * cols * square / 2
+        m[:3, 1] = ey * rows * square / 2
+        m[:3, 3] = to_world[:3, 3] + 1e-4 * n
+        texture = {"type": "checkerboard", "color0": {"type": "rgb", "value": [albedo / 4] * 3},
+                   "color1": {"type": "rgb", "value": [albedo] * 3},
+                   "to_uv": mi.ScalarTransform4f().scale([cols / 2, rows / 2, 1.0])}
+        shapes["chart"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f(m.tolist()),
+                           "bsdf": {"type": "diffuse", "reflectance": texture}}
+    return shapes

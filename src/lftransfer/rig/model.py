@@ -12,6 +12,7 @@ import numpy as np
 
 from lftransfer.lightfield import CameraModel, LightFieldDecoder, LightFieldEncoder, ProjectorModel, ResponseCurve
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.optics.geometry import rotation_xy
 
 
 @dataclass(frozen=True)
@@ -33,8 +34,6 @@ class RigModel:
 
     def world_to_array(self) -> np.ndarray:
         """(4, 4) rigid transform: world point -> the array's frame (interface plane z = 0)."""
-        from lftransfer.scenes.frame import rotation_xy
-
         m = np.eye(4)
         m[:3, :3] = rotation_xy(self.tilt).T
         return m

@@ -499,8 +499,29 @@ RealObject = Annotated[ObjectConfig, _in_half_space("real")]
 SyntheticObject = Annotated[ObjectConfig, _in_half_space("synthetic")]
 
 
+class SyntheticScene(_Model):
+    """What the pipeline may know of a scene: the rig file's nominal values, the view camera, the point light as
+    measured by hand, the render settings and the synthetic objects; never the real objects.
+
+    Attributes:
+        rig: light field interface hardware (nominal values).
+        view: the view camera.
+        light: the point light.
+        render: render settings.
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        source: the TOML file it was loaded from, or None.
+    """
+
+    rig: RigConfig = Field(default_factory=RigConfig)
+    view: ViewConfig = Field(default_factory=ViewConfig)
+    light: LightConfig
+    render: RenderConfig = Field(default_factory=RenderConfig)
+    synthetic: list[SyntheticObject] = Field(default_factory=list)
+    source: Path | None = None
+
+
 class SceneConfig(_Model):
-    """A whole scene.
+    """A whole scene file, real objects included (for the simulated rig and its ground truth).
 
     Attributes:
         rig: light field interface hardware (defaults: the paper's rig).
@@ -527,6 +548,18 @@ class SceneConfig(_Model):
         if real is not None and not real and not value:
             raise ValueError("a scene needs at least one [[real]] or [[synthetic]] object, found none")
         return value
+
+    def synthetic_part(self) -> SyntheticScene:
+        """The part of the scene the pipeline is given (everything but the real objects)."""
+        return SyntheticScene.model_construct(**{k: getattr(self, k) for k in SyntheticScene.model_fields})
+
+
+def check_synthetic(scene) -> SyntheticScene:
+    """``scene`` if it is the synthetic part of a scene, else a TypeError: the pipeline never gets real objects."""
+    if not isinstance(scene, SyntheticScene):
+        raise TypeError(f"the pipeline takes the synthetic part of a scene (SceneConfig.synthetic_part()), "
+                        f"never the real objects; got {type(scene).__name__}")
+    return scene
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -606,7 +639,7 @@ def load_scene(path: str | Path) -> SceneConfig:
         raise _scene_error(str(path), exc) from None
 
 
-def with_overrides(scene: SceneConfig, **changes: Any) -> SceneConfig:
+def with_overrides(scene: SceneConfig | SyntheticScene, **changes: Any) -> SceneConfig | SyntheticScene:
     """A copy of a scene with some fields changed, validated again.
 
     Table-valued fields (``rig``, ``view``, ``light``, ``render``) given as dicts are merged into the current
@@ -618,7 +651,7 @@ def with_overrides(scene: SceneConfig, **changes: Any) -> SceneConfig:
             ``rig=scene.rig.model_copy(update=...)``, ``synthetic=[]``.
 
     Returns:
-        A new validated SceneConfig.
+        A new validated scene of the same type.
 
     Raises:
         SceneError: unknown field or invalid value (message names the scene's file, or ``<scene>``).
@@ -635,7 +668,7 @@ def with_overrides(scene: SceneConfig, **changes: Any) -> SceneConfig:
             data[key] = value
     base = scene.source.parent if scene.source else None
     try:
-        return SceneConfig.model_validate(data, context={"base_dir": base})
+        return type(scene).model_validate(data, context={"base_dir": base})
     except ValidationError as exc:
         raise _scene_error(str(scene.source) if scene.source else "<scene>", exc) from None
 

@@ -9,21 +9,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lftransfer.scenes.format import SceneConfig, with_overrides
+from lftransfer.optics.geometry import rotation_xy
+from lftransfer.scenes.format import SceneConfig, SyntheticScene, with_overrides
 
 __all__ = ["rotation_xy", "scene_in_frame"]
 
 
-def rotation_xy(tilt: tuple[float, float]) -> np.ndarray:
-    """Rotation about the world x axis by ``tilt[0]``, then about the world y axis by ``tilt[1]`` (radians).
-
-    Returns:
-        (3, 3) float64 rotation matrix ``R_y @ R_x``.
-    """
-    return Rotation.from_euler("xy", [float(tilt[0]), float(tilt[1])]).as_matrix()
-
-
-def scene_in_frame(scene: SceneConfig, matrix: np.ndarray) -> SceneConfig:
+def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> SceneConfig | SyntheticScene:
     """The same scene with every position expressed in another frame.
 
     Args:
@@ -31,7 +23,7 @@ def scene_in_frame(scene: SceneConfig, matrix: np.ndarray) -> SceneConfig:
         matrix: (4, 4) rigid transform, world point -> point in the new frame.
 
     Returns:
-        A new SceneConfig: objects, point light and view camera moved by ``matrix``; the rig and the render
+        A new scene of the same type: objects, point light and view camera moved by ``matrix``; the rig and the render
         settings unchanged. The identity returns ``scene`` itself.
     """
     m = np.asarray(matrix, dtype=np.float64)
@@ -53,9 +45,10 @@ def scene_in_frame(scene: SceneConfig, matrix: np.ndarray) -> SceneConfig:
                                       "rotate_deg": r.as_euler("xyz", degrees=True).tolist()})
 
     view = scene.view
+    objects = {"real": [move(o) for o in scene.real]} if isinstance(scene, SceneConfig) else {}
     return with_overrides(
         scene,
-        real=[move(o) for o in scene.real],
+        **objects,
         synthetic=[move(o) for o in scene.synthetic],
         light={"position": point(scene.light.position)},
         view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},

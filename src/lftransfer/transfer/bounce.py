@@ -26,6 +26,8 @@ from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
+from lftransfer.rig.requests import RealScene
+from lftransfer.scenes import SyntheticScene, check_synthetic
 from lftransfer.scenes.frame import scene_in_frame
 
 Progress = Callable[[str], None]
@@ -163,7 +165,7 @@ def real_response(rig: Rig, decoder, encoder, incident: LightField, direct: Ligh
     projector black. The gain g puts a weak light field into the projector's range and is divided out again.
 
     Args:
-        rig: the rig (project, capture_lf).
+        rig: the rig (project, capture_lf), in the real scene.
         decoder: raw LF camera image -> LightField.
         encoder: LightField -> projector image.
         incident: light field to project (K, V, U, 3).
@@ -181,7 +183,7 @@ def real_response(rig: Rig, decoder, encoder, incident: LightField, direct: Ligh
         pattern = encoder(incident * gain)
     rig.project(pattern)
     with time_it("capture"):
-        raw = rig.capture_lf()
+        raw = rig.capture_lf().codes
     with time_it("decode"):
         return (decoder(raw) - direct) / gain
 
@@ -192,15 +194,16 @@ def count_steps(settings: TransferSettings) -> int:
     return 4 + settings.bounces * per_bounce + 2
 
 
-def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = TransferSettings(), *,
+def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
                  progress: Progress | None = None) -> TransferResult:
     """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
 
     Args:
         rig: the rig (only its :class:`~lftransfer.rig.base.Rig` methods are used).
         model: what the pipeline knows of the rig (nominal or calibrated), never the rig's hidden truth.
-        scene: ``lftransfer.scenes.SceneConfig``; its ``synthetic`` objects, ``light`` and ``view`` are used
-            (in world coordinates; moved into the array's frame by ``model.world_to_array()``).
+        scene: the synthetic part of the scene (:class:`~lftransfer.scenes.SyntheticScene`): its ``synthetic``
+            objects, ``light`` and ``view`` (in world coordinates; moved into the array's frame by
+            ``model.world_to_array()``).
         settings: see :class:`TransferSettings`.
         progress: called with a short description at the start of each step.
 
@@ -213,7 +216,7 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     step = progress or (lambda _msg: None)
     timer = _Timer()
     # The renderer works in the lens array's frame (interface plane z = 0): a tilted array moves the rest.
-    scene = scene_in_frame(scene, model.world_to_array())
+    scene = scene_in_frame(check_synthetic(scene), model.world_to_array())
     U = V = settings.angular_samples
     decoder = model.decoder(U, V)
     encoder = model.encoder(U, V)
@@ -222,7 +225,7 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     view = scene.view
     width, height = view.resolution
     sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, width, height))
-    black = np.zeros((*rig.projector_shape, 3), np.uint8 if model.projector.bits <= 8 else np.uint16)
+    black = rig.info.black()
 
     def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
         with timer("render_lightfield"):
@@ -234,12 +237,13 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
 
     # Direct light.
     step("capture direct (projector black)")
+    rig.setup(RealScene())
     rig.project(black)
     with timer("capture"):
-        raw0 = rig.capture_lf()
+        raw0 = rig.capture_lf().codes
     step("capture view, projector black")
     with timer("capture_view"):
-        real_view_direct = rig.capture_view()
+        real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
     step("render synthetic direct")
@@ -257,7 +261,7 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
         if settings.bounce_views:
             step(f"bounce {n}: capture real view")
             with timer("capture_view"):
-                real_view_n = (rig.capture_view() - real_view_direct) / gain
+                real_view_n = (rig.capture_view().radiance - real_view_direct) / gain
         # Synthetic side: lit by R_{n-1} only.
         step(f"bounce {n}: render synthetic lit by R_{n - 1}")
         incident = LightFieldLight(prev.real_lf, side="synthetic", model=settings.lighting_model,
@@ -277,7 +281,7 @@ def run_transfer(rig: Rig, model: RigModel, scene, settings: TransferSettings = 
     clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
     rig.project(pattern)
     with timer("capture_view"):
-        real_view = rig.capture_view()
+        real_view = rig.capture_view().radiance
     rig.project(black)
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)

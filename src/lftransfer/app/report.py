@@ -32,11 +32,12 @@ def _resize(image: np.ndarray, width: int) -> np.ndarray:
     return cv2.resize(image, (width, h), interpolation=cv2.INTER_AREA)
 
 
-def bounce_panel(result, ground_truth: np.ndarray, composite_rgb: np.ndarray, *, tile_width: int = 512) -> np.ndarray:
+def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, *,
+                 tile_width: int = 512) -> np.ndarray:
     """The paper's Fig. 4 as one picture.
 
     Rows: real side (direct, bounce 1, ...), synthetic side (direct, bounce 1, ...), then the composite and the
-    ground truth. Each tile is shown at its own display scale, written on it relative to the direct image.
+    ground truth (where there is one: the simulated rig). Each tile is shown at its own display scale, written on it relative to the direct image.
 
     Returns:
         (H, W, 3) uint8 sRGB.
@@ -56,8 +57,9 @@ def bounce_panel(result, ground_truth: np.ndarray, composite_rgb: np.ndarray, *,
             title = f"{side} {'direct' if b.index == 0 else f'bounce {b.index}'}  x{s / base:.3g}"
             tiles.append(_label(_resize(to_display(img, s), tile_width), title))
         rows.append(np.concatenate(tiles, axis=1))
-    last = [_label(_resize(to_display(composite_rgb, base), tile_width), "composite  x1"),
-            _label(_resize(to_display(ground_truth, base), tile_width), "ground truth (path traced)  x1")]
+    last = [_label(_resize(to_display(composite_rgb, base), tile_width), "composite  x1")]
+    if ground_truth is not None:
+        last.append(_label(_resize(to_display(ground_truth, base), tile_width), "ground truth (path traced)  x1"))
     width = rows[0].shape[1]
     last_row = np.concatenate(last, axis=1)
     if last_row.shape[1] < width:
@@ -71,16 +73,20 @@ def write_json(path: str | Path, data: dict) -> Path:
     return write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
-def write_outputs(out: str | Path, result, ground_truth: np.ndarray, composite_rgb: np.ndarray, report: dict,
+def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,
                   captured_raw: np.ndarray | None = None, camera_bits: int = 12) -> list[Path]:
-    """Write every output file of a run into ``out``; returns their paths."""
+    """Write every output file of a run into ``out`` (the ground truth's only where there is one); returns their
+    paths."""
     out = Path(out)
     scale = min(display_scale(result.bounces[0].real_view), display_scale(result.bounces[0].synthetic_view.rgb))
     files = [
         write_png(out / "composite.png", to_display(composite_rgb, scale)),
         write_exr(out / "composite.exr", composite_rgb),
-        write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
-        write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32)),
+    ]
+    if ground_truth is not None:
+        files += [write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
+                  write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32))]
+    files += [
         write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb)),
         write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)
                   if result.projected_image.dtype == np.uint8 else

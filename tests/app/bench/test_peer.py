@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.bench.peer import PeerRenderer, projector_texture, rmse, spp_for_rmse
+from lftransfer.app.bench.peer import PeerRenderer, projector_texture, rmse, spp_for_rmse
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
 from lftransfer.render.lights import LightFieldLight

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from lftransfer.rig.model import nominal_rig
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import Perturbation, perturbed_rig
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import Perturbation, perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 

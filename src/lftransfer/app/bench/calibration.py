@@ -1,10 +1,10 @@
 """Calibration accuracy over several hidden truths: every step through the simulated rig, errors per seed.
 
 For each seed the simulated rig is built as the rig file says plus deviations drawn from that seed
-(:func:`lftransfer.rig.truth.perturbed_rig`, with the point light moved as in
-:func:`lftransfer.rig.truth.true_light_scene`); the pipeline calibrates it from images alone
+(:func:`lftransfer.sim.truth.perturbed_rig`, with the point light moved as in
+:func:`lftransfer.sim.truth.true_light_scene`); the pipeline calibrates it from images alone
 (:func:`lftransfer.calibration.rig.calibrate_rig`) and the verification code compares the result with the
-hidden truth (:func:`lftransfer.verify.calibration_errors`).
+hidden truth (:func:`lftransfer.sim.verify.calibration_errors`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from lftransfer.calibration.rig import calibrate_rig
-from lftransfer.rig.sim import SimRig
-from lftransfer.rig.truth import hidden_world
-from lftransfer.verify import calibration_errors
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.truth import hidden_world
+from lftransfer.sim.verify import calibration_errors
 
 __all__ = ["TARGETS", "calibration_seeds", "markdown_table"]
 
@@ -40,6 +40,8 @@ OTHERS = {
     "black_level_error": ("of max", "projector black level"),
     "exposure_rel_error": ("", "LF camera exposure (relative)"),
     "camera_gain_rel_rms": ("", "LF camera exposure x vignetting per pixel (relative RMS)"),
+    "board_depth_mm": ("mm", "pose board: measured off the asked-for plane (operator's hand error)"),
+    "board_tilt_deg": ("deg", "pose board: measured tilt from the asked-for plane"),
 }
 
 
@@ -59,10 +61,13 @@ def calibration_seeds(scene, seeds: Sequence[int], *, progress: Callable[[str], 
     per_seed = {}
     for seed in seeds:
         world, truth = hidden_world(scene, seed)
-        rig = SimRig(world, truth=truth)
+        rig = SimRig(world, truth=truth, operator_seed=seed)
         t = time.perf_counter()
-        cal = calibrate_rig(rig, scene, progress=lambda msg, s=seed: say(f"seed {s}: {msg}"))
+        cal = calibrate_rig(rig, scene.synthetic_part(), progress=lambda msg, s=seed: say(f"seed {s}: {msg}"))
         errors = calibration_errors(cal, rig.truth)
+        placement = cal.diagnostics["pose"]["board_placement"]
+        errors["board_depth_mm"] = placement["depth_mm"]
+        errors["board_tilt_deg"] = placement["tilt_deg"]
         errors["calibration_s"] = round(time.perf_counter() - t, 1)
         per_seed[str(seed)] = errors
     summary = {}

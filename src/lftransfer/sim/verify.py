@@ -20,6 +20,7 @@ import numpy as np
 
 from lftransfer.composite import composite
 from lftransfer.imageio_utils import read_exr, write_exr
+from lftransfer.optics.geometry import apply_homography, rotation_xy, rotation_z
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 
@@ -187,10 +188,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
 # ---- calibration against the hidden truth -----------------------------------------------------------------------
 
 def _rig_rotation(model) -> np.ndarray:
-    from lftransfer.scenes.frame import rotation_xy
-
-    c, s = np.cos(model.array.rotation), np.sin(model.array.rotation)
-    return rotation_xy(model.tilt) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rotation_xy(model.tilt) @ rotation_z(model.array.rotation)
 
 
 def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict:
@@ -235,9 +233,7 @@ def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict
     out["ray_direction_rms_deg"] = float(np.sqrt(np.mean(ang ** 2)))
 
     def to_prj(model, p):
-        q = np.concatenate([p, np.ones((len(p), 1))], 1) @ np.linalg.inv(model.camera.device.homography).T
-        r = q @ model.projector.device.homography.T
-        return r[:, :2] / r[:, 2:3]
+        return apply_homography(model.projector.device.homography @ np.linalg.inv(model.camera.device.homography), p)
 
     inside = kt >= 0
     e = np.linalg.norm(to_prj(cal, px[inside]) - to_prj(truth, px[inside]), axis=1)

@@ -27,8 +27,8 @@ from lftransfer.render.fast import CachedRenderer
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.rig.model import nominal_rig
-from lftransfer.rig.sim import SimRig
-from lftransfer.verify import psnr
+from lftransfer.sim.rig import SimRig
+from lftransfer.sim.verify import psnr
 
 Progress = Callable[[str], None]
 STAGES = ("decode", "relight", "render_lightfield", "encode", "render_view", "composite")
@@ -94,16 +94,15 @@ def run_bench(scene, settings: BenchSettings = BenchSettings(), *, progress: Pro
 
     # Inputs of a live frame: the rig captures while showing the synthetic light field of the last frame.
     step("capture (the rig's physics, timed on its own)")
-    black = np.zeros((*rig.projector_shape, 3), model.projector.dtype)
-    rig.project(black)
+    rig.project(rig.info.black())
     t = time.perf_counter()
     rig.capture_lf()
     capture_s = [time.perf_counter() - t]
-    real_view = rig.capture_view()
+    real_view = rig.capture_view().radiance
     ls0 = fast.render_lightfield(model.array, [point_light], U, V, model="point", spp=1)
     rig.project(encoder(ls0))
     t = time.perf_counter()
-    raw = rig.capture_lf()
+    raw = rig.capture_lf().codes
     capture_s.append(time.perf_counter() - t)
 
     def iteration(timings: dict[str, list[float]] | None):
@@ -183,7 +182,7 @@ def _peer(scene, model, fast: CachedRenderer, captured, U: int, V: int, settings
     """Time Mitsuba's path integrator on the light field part of the job, at equal RMSE (point model)."""
     import drjit as dr
 
-    from lftransfer.bench.peer import PeerRenderer, rmse, spp_for_rmse
+    from lftransfer.app.bench.peer import PeerRenderer, rmse, spp_for_rmse
 
     step("peer: converged point-model light field (exact path, averaged over each sample's footprint)")
     light = LightFieldLight(captured, side="synthetic", model="point")

@@ -23,30 +23,69 @@ def _fail(message: str) -> None:
     raise typer.Exit(code=2)
 
 
-def _rig_options(truth_seed: int, exact_rig: bool, rig_model: str, calibration: Optional[Path]) -> dict:
-    from lftransfer.pipeline import RIG_MODELS
+def _rig_spec(rig: str):
+    from lftransfer.app.pipeline import RigSpec
+
+    try:
+        return RigSpec.parse(rig)
+    except ValueError as exc:
+        _fail(str(exc))
+
+
+def _rig_options(truth_seed: int, exact_rig: bool, rig_model: str, calibration: Optional[Path],
+                 rig: str = "sim") -> dict:
+    from lftransfer.app.pipeline import RIG_MODELS
 
     if rig_model not in RIG_MODELS:
         _fail(f"--rig-model: expected one of {', '.join(RIG_MODELS)}, got {rig_model!r}")
     if calibration is not None and not calibration.is_file():
         _fail(f"--calibration: {calibration}: no such file")
-    return {"truth_seed": None if exact_rig else truth_seed, "rig_model": rig_model, "calibration": calibration}
+    spec = _rig_spec(rig)
+    if rig_model == "oracle" and spec.kind != "sim":
+        _fail("--rig-model oracle: only the simulated rig (--rig sim) knows its truth")
+    return {"truth_seed": None if exact_rig else truth_seed, "rig_model": rig_model, "calibration": calibration,
+            "rig": spec}
+
+
+def _operator(bar: Progress | None = None):
+    """The operator callback of a physical rig: show the instruction, wait for Enter (progress bar paused)."""
+    import sys
+
+    from rich.markup import escape
+
+    from lftransfer.rig.base import RigError
+
+    def ask(message: str) -> None:
+        if not sys.stdin.isatty():
+            raise RigError(f"operator needed but the terminal is not interactive: {message}")
+        if bar is not None:
+            bar.stop()
+        try:
+            console.print(f"[bold yellow]operator:[/] {escape(message)}", soft_wrap=True)
+            input("  press Enter when done (Ctrl-C to stop) ")
+        finally:
+            if bar is not None:
+                bar.start()
+
+    return ask
 
 
 _TRUTH_SEED_HELP = "Seed of the simulated rig's hidden truth (how the rig as built differs from the rig file)."
 _EXACT_HELP = "Build the simulated rig exactly as the rig file says (no hidden deviations)."
 _MODEL_HELP = "What the pipeline knows of the rig: calibrated (calibrate first) | nominal (rig file) | oracle."
 _CAL_HELP = "Use this calibration file (from `lft calibrate`) instead of calibrating."
+_RIG_HELP = "Which rig: sim (simulated, default) | hardware:RIG.toml (a physical rig) | replay:DIR (a recording)."
 
 
 def _run(scene, out: Path, bounces: int, lighting_model: Optional[str], compare: bool, gt_spp: Optional[int],
-         use_cache: bool, renderer: str = "auto", rig: dict | None = None) -> dict:
+         use_cache: bool, renderer: str = "auto", rig: dict | None = None, record: Optional[Path] = None) -> dict:
     from lftransfer.calibration.rig import CalibrationFileError
-    from lftransfer.pipeline import RunOptions, count_run_steps, run_scene
+    from lftransfer.app.pipeline import RunOptions, count_run_steps, run_scene
+    from lftransfer.rig.base import RigError
 
     options = RunOptions(bounces=bounces, lighting_model=lighting_model,
                          compare_models=("area", "point") if compare else (), gt_spp=gt_spp, use_cache=use_cache,
-                         renderer=renderer, **(rig or {}))
+                         renderer=renderer, record=record, **(rig or {}))
     total = count_run_steps(scene, options)
     with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console, transient=False) as bar:
@@ -56,9 +95,10 @@ def _run(scene, out: Path, bounces: int, lighting_model: Optional[str], compare:
             bar.update(task, description=msg[:58], completed=min(done, total))
 
         try:
-            report = run_scene(scene, out, options, progress=progress)
-        except CalibrationFileError as exc:
-            _fail(str(exc))
+            report = run_scene(scene, out, options, progress=progress, operator=_operator(bar))
+        except (CalibrationFileError, RigError) as exc:
+            bar.stop()
+            _fail(f"{exc} (what was written so far is in {out}; {out / 'status.json'} says where it stopped)")
         bar.update(task, description="done", completed=total)
     _summary(report, out)
     return report
@@ -68,17 +108,22 @@ def _summary(report: dict, out: Path) -> None:
     table = Table(title=f"light field transfer -> {out}")
     table.add_column("metric")
     table.add_column("value", justify="right")
+    table.add_row("rig", str(report["rig"]))
+    table.add_row("verification", str(report["verification"]))
     for key in ("psnr_db", "psnr_db_direct_only", "cross_transfer_rel_error", "gt_noise_psnr_db",
                 "cross_gt_noise_rel"):
-        table.add_row(key, f"{report[key]:.4g}")
+        if report.get(key) is not None:
+            table.add_row(key, f"{report[key]:.4g}")
     for name, m in report["by_lighting_model"].items():
-        table.add_row(f"cross error, {name} model", f"{m['cross_transfer_rel_error']:.4g}")
+        if m.get("cross_transfer_rel_error") is not None:
+            table.add_row(f"cross error, {name} model", f"{m['cross_transfer_rel_error']:.4g}")
     for b in report["bounces"]:
         table.add_row(f"bounce {b['index']} energy real / synthetic", f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
-    errors = report.get("calibration_errors")
-    if errors:
-        table.add_row("rig model", str(report["rig_model"]))
+    table.add_row("rig model", str(report["rig_model"]))
+    errors = report.get("calibration_errors") or {}
+    if "lenslet_centre_rms_px" in errors:
         table.add_row("calibration: lenslet centres RMS", f"{errors['lenslet_centre_rms_px']:.3f} px")
+    if "pose_position_rms_mm" in errors:
         table.add_row("calibration: pose error", f"{errors['pose_position_rms_mm']:.2f} mm, "
                                                  f"{errors['pose_rotation_deg']:.3f} deg")
     table.add_row("total time", f"{report['timings_s']['total']:.1f} s")
@@ -108,9 +153,11 @@ def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
          truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
          exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
          rig_model: str = typer.Option("calibrated", help=_MODEL_HELP),
-         calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP)) -> None:
-    """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets) on the simulated rig: calibrate, transfer, check."""
-    from lftransfer.pipeline import quick_scene
+         calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP),
+         rig: str = typer.Option("sim", help=_RIG_HELP)) -> None:
+    """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
+    transfer, check against ground truth."""
+    from lftransfer.app.pipeline import quick_scene
     from lftransfer.scenes import builtin_scene
 
     scene = _load(builtin_scene("fig4"))
@@ -118,7 +165,7 @@ def demo(out: Path = typer.Option(Path("out/demo"), help="Output folder."),
         scene = quick_scene(scene)
     _check_renderer(renderer)
     _run(scene, out, bounces, None, True, None, not no_cache, renderer,
-         _rig_options(truth_seed, exact_rig, rig_model, calibration))
+         _rig_options(truth_seed, exact_rig, rig_model, calibration, rig))
 
 
 @app.command()
@@ -134,9 +181,10 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
         truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
         exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
         rig_model: str = typer.Option("calibrated", help=_MODEL_HELP),
-        calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP)) -> None:
-    """Run light field transfer on any scene file with the simulated rig (calibrating it first)."""
-    from lftransfer.pipeline import quick_scene
+        calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP),
+        rig: str = typer.Option("sim", help=_RIG_HELP)) -> None:
+    """Run light field transfer on any scene file with a rig (calibrating it first)."""
+    from lftransfer.app.pipeline import quick_scene
     from lftransfer.render.lights import LIGHTING_MODELS
 
     if lighting_model is not None and lighting_model not in LIGHTING_MODELS:
@@ -148,7 +196,37 @@ def run(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
         scene = quick_scene(scene)
     _check_renderer(renderer)
     _run(scene, out, bounces, lighting_model, compare, gt_spp, not no_cache, renderer,
-         _rig_options(truth_seed, exact_rig, rig_model, calibration))
+         _rig_options(truth_seed, exact_rig, rig_model, calibration, rig))
+
+
+@app.command()
+def record(scene_file: Path = typer.Argument(..., help="Scene TOML file."),
+           out: Path = typer.Option(..., "--out", help="Session folder: the recording, and the run's outputs in run/."),
+           rig: str = typer.Option("sim", help="Which rig to record: sim | hardware:RIG.toml."),
+           bounces: int = typer.Option(2, min=0, help="Number of bounces."),
+           quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
+           renderer: str = typer.Option("auto", help="Synthetic renderer: auto | fast | exact."),
+           truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
+           exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
+           calibration: Optional[Path] = typer.Option(None, help=_CAL_HELP)) -> None:
+    """Calibrate and run transfer on a rig while storing every request and image it answers (replay it with
+    ``lft run SCENE.toml --rig replay:SESSION``)."""
+    from lftransfer.app.pipeline import quick_scene
+
+    if rig.startswith("replay"):
+        _fail("--rig: a recording is recorded already; record from sim or hardware:RIG.toml")
+    if not scene_file.exists():
+        _fail(f"{scene_file}: no such file")
+    if (out / "manifest.json").exists():
+        _fail(f"--out {out}: holds a recording already; choose an empty folder")
+    scene = _load(scene_file)
+    if quick:
+        scene = quick_scene(scene)
+    _check_renderer(renderer)
+    _run(scene, out / "run", bounces, None, False, None, True, renderer,
+         _rig_options(truth_seed, exact_rig, "calibrated", calibration, rig), record=out)
+    Console().print(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
+                    f"{' --quick' if quick else ''} --bounces {bounces})")
 
 
 @app.command()
@@ -159,10 +237,10 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", help="Scene
           peer: bool = typer.Option(True, help="Also time Mitsuba's path integrator on the same job."),
           quick: bool = typer.Option(False, "--quick", help="Quarter resolution.")) -> None:
     """Time one light field transfer iteration (decode, relight, render, encode, view, composite)."""
-    from lftransfer.bench.iteration import BenchSettings, run_bench
-    from lftransfer.pipeline import quick_scene
+    from lftransfer.app.bench.iteration import BenchSettings, run_bench
+    from lftransfer.app.pipeline import quick_scene
     from lftransfer.render.lights import LIGHTING_MODELS
-    from lftransfer.report import write_json
+    from lftransfer.app.report import write_json
     from lftransfer.scenes import builtin_scene
 
     if lighting_model not in LIGHTING_MODELS:
@@ -228,30 +306,32 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML fi
                       out: Path = typer.Option(Path("calibration.json"), help="Calibration file to write."),
                       quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
                       truth_seed: int = typer.Option(0, help=_TRUTH_SEED_HELP),
-                      exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP)) -> None:
-    """Run every calibration step through the (simulated) rig; write the calibration file and its report.
+                      exact_rig: bool = typer.Option(False, "--exact-rig", help=_EXACT_HELP),
+                      rig: str = typer.Option("sim", help=_RIG_HELP)) -> None:
+    """Run every calibration step through the rig; write the calibration file and its report.
 
     Also reachable as ``lft calibrate SCENE.toml``. Beside ``--out`` it writes ``calibration_report.html`` and,
-    since the simulated rig knows its truth, ``calibration_errors.json``.
+    where the rig is simulated and knows its truth, ``calibration_errors.json``.
     """
     from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps
-    from lftransfer.pipeline import quick_scene, write_calibration
-    from lftransfer.rig.sim import SimRig
-    from lftransfer.rig.truth import hidden_world
+    from lftransfer.app.pipeline import RunOptions, open_rig, quick_scene, write_calibration
+    from lftransfer.rig.base import RigError
 
     if not scene_file.exists():
         _fail(f"{scene_file}: no such file")
     scene = _load(scene_file)
     if quick:
         scene = quick_scene(scene)
-    world, truth = hidden_world(scene, None if exact_rig else truth_seed)
-    rig = SimRig(world, truth=truth)
+    options = RunOptions(truth_seed=None if exact_rig else truth_seed, rig=_rig_spec(rig))
     with _step_bar(count_calibration_steps(scene)) as progress:
+        opened = open_rig(scene, options, operator=_operator())
         try:
-            cal = calibrate_rig(rig, scene, progress=progress)
-        except ValueError as exc:
+            cal = calibrate_rig(opened.rig, scene.synthetic_part(), progress=progress)
+        except (ValueError, RigError) as exc:
             _fail(f"calibration failed: {exc}")
-    errors = write_calibration(out, cal, rig.truth)
+        finally:
+            opened.rig.close()
+    errors = write_calibration(out, cal, opened.truth) or {}
     table = Table(title=f"calibration -> {out}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -262,14 +342,20 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., help="Scene TOML fi
     table.add_row("array tilt / pitch scale", f"({pose['tilt_deg'][0]:.3f}, {pose['tilt_deg'][1]:.3f}) deg / "
                                               f"{pose['scale']:.5f}")
     table.add_row("projector mapping RMS", f"{cal.projector_fit.rms_px:.3f} px")
-    table.add_row("error vs hidden truth: lenslet centres", f"{errors['lenslet_centre_rms_px']:.3f} px")
-    table.add_row("error vs hidden truth: projector mapping", f"{errors['projector_mapping_rms_px']:.3f} px")
-    table.add_row("error vs hidden truth: pose", f"{errors['pose_position_rms_mm']:.2f} mm, "
-                                                 f"{errors['pose_rotation_deg']:.3f} deg")
-    table.add_row("error vs hidden truth: responses", f"camera {errors['camera_response_error']:.4f}, "
-                                                      f"projector {errors['projector_response_error']:.4f}")
+    placement = cal.diagnostics.get("pose", {}).get("board_placement")
+    if placement:
+        table.add_row("board as measured vs as asked for", f"{placement['depth_mm']:+.2f} mm along its normal, "
+                                                         f"{placement['tilt_deg']:.2f} deg")
+    if errors:
+        table.add_row("error vs hidden truth: lenslet centres", f"{errors['lenslet_centre_rms_px']:.3f} px")
+        table.add_row("error vs hidden truth: projector mapping", f"{errors['projector_mapping_rms_px']:.3f} px")
+        table.add_row("error vs hidden truth: pose", f"{errors['pose_position_rms_mm']:.2f} mm, "
+                                                     f"{errors['pose_rotation_deg']:.3f} deg")
+        table.add_row("error vs hidden truth: responses", f"camera {errors['camera_response_error']:.4f}, "
+                                                          f"projector {errors['projector_response_error']:.4f}")
     Console().print(table)
-    Console().print(f"wrote {out}, {out.parent / 'calibration_report.html'}, {out.parent / 'calibration_errors.json'}")
+    Console().print(f"wrote {out}, {out.parent / 'calibration_report.html'}"
+                    + (f", {out.parent / 'calibration_errors.json'}" if errors else ""))
 
 
 @calibrate_app.command("seeds")
@@ -278,10 +364,10 @@ def calibrate_seeds_cmd(seeds: str = typer.Option("1,2,3,4,5", help="Hidden-trut
                         quick: bool = typer.Option(False, "--quick", help="Quarter resolution."),
                         out: Path = typer.Option(Path("out/calibration"), help="Output folder.")) -> None:
     """Calibration accuracy over several hidden truths (writes calibration_errors.json and a Markdown table)."""
-    from lftransfer.bench.calibration import calibration_seeds, markdown_table
+    from lftransfer.app.bench.calibration import calibration_seeds, markdown_table
     from lftransfer.calibration.rig import count_calibration_steps
-    from lftransfer.pipeline import quick_scene
-    from lftransfer.report import write_json
+    from lftransfer.app.pipeline import quick_scene
+    from lftransfer.app.report import write_json
     from lftransfer.scenes import builtin_scene
 
     try:

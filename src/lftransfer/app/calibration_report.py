@@ -5,7 +5,7 @@ are PNG (OpenCV) embedded as ``data:`` URIs, plots are inline SVG written here a
 the file is opened. Its sections follow the calibration's steps (:mod:`lftransfer.calibration.rig`):
 
 1. summary: the calibration file's key numbers and, if given, the errors against a simulated rig's hidden truth
-   (:func:`lftransfer.verify.calibration_errors`) with the project's targets, each marked pass or fail;
+   (:func:`lftransfer.sim.verify.calibration_errors`) with the project's targets, each marked pass or fail;
 2. lenslet centres: the collimated image with the detected centres and the fitted lattice, a full-resolution
    crop, and the lattice fit's residuals as arrows;
 3. lenslet distortion: histograms of the per-lenslet k1 and k2 and a map of k1 over the lenslets;
@@ -98,7 +98,7 @@ def write_calibration_report(path, calibration, errors: dict | None = None) -> P
         path: a folder (the file is ``calibration_report.html`` in it) or a file name ending in ``.html``;
             missing folders are created.
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
-        errors: errors against a simulated rig's hidden truth (:func:`lftransfer.verify.calibration_errors`),
+        errors: errors against a simulated rig's hidden truth (:func:`lftransfer.sim.verify.calibration_errors`),
             shown with the project's targets; None to leave that table out.
 
     Returns:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typer.testing import CliRunner
 
-from lftransfer.cli import app
+from lftransfer.app.cli import app
 
 runner = CliRunner()
 

@@ -7,7 +7,7 @@ import pytest
 
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
-from lftransfer.rig.sim import SimRig
+from lftransfer.sim.rig import SimRig
 from lftransfer.scenes.format import SceneConfig
 
 

@@ -1,0 +1,370 @@
+"""One complete run on a chosen rig: calibration, transfer, (on the simulated rig) ground truth and metrics, and
+every output file.
+
+This is what ``lft run``, ``lft demo`` and ``lft record`` call. The rig is picked by a *rig spec*: ``sim`` (the
+digital twin, with its hidden truth), ``hardware:RIG.toml`` (a physical rig) or ``replay:DIR`` (a recording).
+The pipeline itself (:func:`lftransfer.calibration.rig.calibrate_rig`, :func:`lftransfer.transfer.run_transfer`)
+gets the rig and the synthetic part of the scene only; verification against ground truth happens here, on the
+simulated rig's truth. It reports progress through a callback and never prints.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
+from lftransfer.composite import composite
+from lftransfer.app.report import write_json, write_outputs
+from lftransfer.rig.base import Rig
+from lftransfer.rig.model import nominal_rig
+from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
+
+Progress = Callable[[str, int], None]   # (description, steps done so far)
+Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """Which rig a run uses: ``sim``, ``hardware:RIG.toml`` or ``replay:DIR``.
+
+    Attributes:
+        kind: "sim", "hardware" or "replay".
+        path: the rig file (hardware) or the recording's folder (replay).
+    """
+
+    kind: str = "sim"
+    path: Path | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> "RigSpec":
+        """``"sim"``, ``"hardware:RIG.toml"`` or ``"replay:DIR"`` -> RigSpec (ValueError naming what is wrong)."""
+        kind, _, rest = str(text).partition(":")
+        if kind == "sim" and not rest:
+            return cls("sim")
+        if kind in ("hardware", "replay") and rest:
+            path = Path(rest).expanduser()
+            if kind == "hardware" and not path.is_file():
+                raise ValueError(f"--rig {text}: the rig file {path} does not exist")
+            if kind == "replay" and not (path / "manifest.json").is_file():
+                raise ValueError(f"--rig {text}: {path} is not a recording (no manifest.json; make one with lft record)")
+            return cls(kind, path)
+        raise ValueError(f"--rig {text!r}: expected 'sim', 'hardware:RIG.toml' or 'replay:DIR'")
+
+    def __str__(self) -> str:
+        return self.kind if self.path is None else f"{self.kind}:{self.path}"
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Options of a run.
+
+    Attributes:
+        bounces: number of bounces N.
+        lighting_model: the model used for the outputs ("area", "point" or "prefiltered").
+        compare_models: further lighting models whose cross-transfer error is also measured (full reruns).
+        gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
+        capture_spp: rays per LF camera pixel in the simulated rig.
+        use_cache: cache ground-truth renders.
+        renderer: synthetic renderer, "auto" (fast path where the scene allows), "fast" or "exact".
+        truth_seed: None: the simulated rig is built exactly as the rig file says; a seed: it is built with
+            deviations drawn from that seed (:func:`lftransfer.sim.truth.perturbed_rig`), and its point light
+            stands away from the file's position (:func:`lftransfer.sim.truth.true_light_scene`).
+        rig_model: what the pipeline knows of the rig: ``"calibrated"`` (run every calibration step through the
+            rig first), ``"nominal"`` (the rig file's values, uncalibrated) or ``"oracle"`` (the simulated rig's
+            hidden truth: a verification baseline, what perfect calibration would reach; the point light stays
+            where the scene file says, as no calibration step measures it).
+        calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
+        rig: which rig (:class:`RigSpec`); ``truth_seed``, ``capture_spp`` and the ``oracle`` model are for the
+            simulated rig only. A replay of a recording made on the simulated rig is verified against the same
+            hidden truth (the recording's manifest names its truth seed).
+        record: a folder to record every rig request and answer into (:class:`lftransfer.rig.replay.RecordingRig`).
+        verify: compare with the path-traced ground truth where the truth is known (simulated rig, or a replay
+            of one).
+    """
+
+    bounces: int = 2
+    lighting_model: str | None = None
+    compare_models: tuple[str, ...] = ("point",)
+    gt_spp: int | None = None
+    capture_spp: int = 4
+    use_cache: bool = True
+    renderer: str = "auto"
+    truth_seed: int | None = 0
+    rig_model: str = "calibrated"
+    calibration: Path | None = None
+    rig: RigSpec = RigSpec()
+    record: Path | None = None
+    verify: bool = True
+
+
+def quick_scene(scene):
+    """The same scene at a small resolution (for ``--quick``): every device at a quarter size."""
+    from lftransfer.scenes import with_overrides
+
+    rig, view, render = scene.rig, scene.view, scene.render
+    return with_overrides(
+        scene,
+        rig={"lf_camera": [rig.lf_camera[0] // 4, rig.lf_camera[1] // 4],
+             "projector": [rig.projector[0] // 4, rig.projector[1] // 4],
+             "angular_samples": max(8, rig.angular_samples // 3)},
+        view={"resolution": [view.resolution[0] // 4, view.resolution[1] // 4]},
+        render={"gt_spp": max(16, render.gt_spp // 4)},
+    )
+
+
+RIG_MODELS = ("calibrated", "nominal", "oracle")
+
+
+def _calibrates(options: RunOptions) -> bool:
+    return options.calibration is None and options.rig_model == "calibrated"
+
+
+def _verifies(options: RunOptions, truth_seed_known: bool = True) -> bool:
+    return options.verify and (options.rig.kind == "sim" or (options.rig.kind == "replay" and truth_seed_known))
+
+
+def count_run_steps(scene, options: RunOptions) -> int:
+    """Progress steps of :func:`run_scene` (set-up, calibration, transfer, 6 ground-truth renders unless cached,
+    reruns with the other lighting models, writing), for a progress bar."""
+    primary = count_steps(TransferSettings(bounces=options.bounces))
+    other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
+    calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
+        + (1 if _calibrates(options) or options.calibration is not None else 0)
+    return 1 + calibration + primary + (6 if _verifies(options) else 0) \
+        + len(_other_models(scene, options)) * other + 1
+
+
+def _other_models(scene, options: RunOptions) -> list[str]:
+    primary = options.lighting_model or scene.render.lighting_model
+    return [m for m in options.compare_models if m != primary]
+
+
+def write_calibration(path: Path, calibration, truth=None) -> dict | None:
+    """Write a calibration file, its HTML report and (simulated rig only) its errors against the hidden truth.
+
+    Args:
+        path: the calibration file; ``calibration_report.html`` and ``calibration_errors.json`` go beside it.
+        calibration: :class:`lftransfer.calibration.rig.Calibration`.
+        truth: the simulated rig's true ``RigModel``, or None (a physical rig or a recording: no errors).
+
+    Returns:
+        The errors (:func:`lftransfer.sim.verify.calibration_errors`), or None without a truth.
+    """
+    from lftransfer.app.calibration_report import write_calibration_report
+    from lftransfer.sim.verify import calibration_errors
+
+    calibration.write(path)
+    errors = None
+    if truth is not None:
+        errors = calibration_errors(calibration, truth)
+        write_json(path.parent / "calibration_errors.json", errors)
+    write_calibration_report(path.parent / "calibration_report.html", calibration, errors)
+    return errors
+
+
+@dataclass
+class OpenedRig:
+    """A rig opened for a run.
+
+    Attributes:
+        rig: the rig the pipeline talks to (wrapped in a recorder when recording).
+        truth: the simulated rig's true model (verification only), or None.
+        world: the scene as it really is (the simulated rig's hidden world, for the ground truth), or None.
+        truth_seed: the hidden truth's seed the world was drawn from (simulated rig or a replay of one).
+    """
+
+    rig: Rig
+    truth: object | None = None
+    world: object | None = None
+    truth_seed: int | None = None
+
+
+def open_rig(scene, options: RunOptions, *, operator: Operator | None = None) -> OpenedRig:
+    """Open the rig a run asks for (:class:`RigSpec`), wrapped in a recorder when ``options.record`` is set.
+
+    Args:
+        scene: the whole scene file (the simulated rig takes its real objects; other rigs ignore them).
+        options: see :class:`RunOptions`.
+        operator: shows an instruction to the person at a physical rig and waits (hardware rigs only).
+    """
+    spec = options.rig
+    opened = OpenedRig(rig=None)
+    if spec.kind == "sim":
+        from lftransfer.sim import SimRig, hidden_world
+
+        world, truth = hidden_world(scene, options.truth_seed)
+        rig = SimRig(world, truth=truth, capture_spp=options.capture_spp, operator_seed=options.truth_seed)
+        opened = OpenedRig(rig=rig, truth=rig.truth, world=world, truth_seed=options.truth_seed)
+    elif spec.kind == "hardware":
+        from lftransfer.rig.hardware import HardwareRig, load_rig_file
+
+        kwargs = {"operator": operator} if operator is not None else {}
+        opened = OpenedRig(rig=HardwareRig(load_rig_file(spec.path), **kwargs))
+    elif spec.kind == "replay":
+        from lftransfer.rig.replay import ReplayRig
+
+        rig = ReplayRig(spec.path)
+        meta = rig.meta or {}
+        opened = OpenedRig(rig=rig)
+        if meta.get("rig") == "sim" and "truth_seed" in meta:
+            from lftransfer.sim import hidden_world
+
+            seed = meta["truth_seed"]
+            world, truth = hidden_world(scene, seed)
+            opened = OpenedRig(rig=rig, truth=truth, world=world, truth_seed=seed)
+    else:
+        raise ValueError(f"unknown rig kind {spec.kind!r}")
+    if options.record is not None:
+        from lftransfer.rig.replay import RecordingRig
+
+        meta = {"rig": spec.kind, "truth_seed": opened.truth_seed if spec.kind == "sim" else None,
+                "scene": str(scene.source) if scene.source else None,
+                "options": {k: str(v) for k, v in options.__dict__.items()}}
+        opened.rig = RecordingRig(opened.rig, options.record, meta=meta)
+    return opened
+
+
+def _status(out: Path, state: str, **extra) -> None:
+    """``status.json`` of a run folder: "running" first, then "complete" or "failed" (with the error)."""
+    write_json(out / "status.json", {"state": state, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **extra})
+
+
+def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
+              progress: Progress | None = None, operator: Operator | None = None) -> dict:
+    """Run light field transfer on a scene with the chosen rig and write every output into ``out``.
+
+    ``out/status.json`` says whether the run is ``running``, ``complete`` or ``failed``; every file is written
+    atomically, so what a failed run wrote before its failure stays readable.
+
+    Args:
+        scene: ``lftransfer.scenes.SceneConfig`` (a simulated rig takes its real objects as its hidden world; the
+            pipeline gets ``scene.synthetic_part()`` only).
+        out: output folder (created).
+        options: see :class:`RunOptions`.
+        progress: called with a description and the number of steps done.
+        operator: shows an instruction to the person at a physical rig and waits.
+
+    Returns:
+        The report (also written as ``report.json``).
+    """
+    out = Path(out)
+    _status(out, "running", rig=str(options.rig))
+    opened = None
+    try:
+        opened = open_rig(scene, options, operator=operator)
+        report = _run(scene, out, options, opened, progress)
+    except BaseException as exc:
+        _status(out, "failed", error=f"{type(exc).__name__}: {exc}",
+                traceback=traceback.format_exc(limit=8).splitlines())
+        raise
+    finally:
+        if opened is not None:
+            opened.rig.close()
+    _status(out, "complete", rig=str(options.rig))
+    return report
+
+
+def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Progress | None) -> dict:
+    done = [0]
+
+    def step(msg: str) -> None:
+        done[0] += 1
+        if progress:
+            progress(msg, done[0])
+
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    step(f"set up the rig ({options.rig})")
+    if options.rig_model not in RIG_MODELS:
+        raise ValueError(f"rig_model must be one of {RIG_MODELS}, got {options.rig_model!r}")
+    if options.rig_model == "oracle" and opened.truth is None:
+        raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
+    rig = opened.rig
+    pipeline_scene = scene.synthetic_part()            # what the pipeline may know: no real objects
+    timings["setup"] = time.perf_counter() - t0
+    calibration, calibration_errors_ = None, None
+    if options.calibration is not None:
+        calibration = load_calibration(options.calibration, pipeline_scene)
+        model, rig_model = calibration.model, f"calibration file {options.calibration}"
+    elif options.rig_model == "calibrated":
+        t = time.perf_counter()
+        calibration = calibrate_rig(rig, pipeline_scene, progress=step)
+        timings["calibration"] = time.perf_counter() - t
+        model, rig_model = calibration.model, "calibrated"
+    elif options.rig_model == "oracle":
+        model, rig_model = opened.truth, "true (oracle)"
+    else:
+        model, rig_model = nominal_rig(scene.rig), "nominal (rig file)"
+    if calibration is not None:
+        step("calibration report")
+        calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth)
+    primary = options.lighting_model or scene.render.lighting_model
+    render = scene.render
+    settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
+                                lighting_model=primary, aperture_samples=render.aperture_samples,
+                                lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
+    result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
+    for k, v in result.timings_s.items():
+        timings[k] = timings.get(k, 0.0) + v
+
+    verified = options.verify and opened.world is not None
+    gt, metrics = None, {}
+    by_model = {primary: {}}
+    if verified:
+        from lftransfer.sim.verify import evaluate, render_ground_truth
+
+        t = time.perf_counter()
+        gt = render_ground_truth(opened.world, spp=options.gt_spp or render.gt_spp, use_cache=options.use_cache,
+                                 progress=step)
+        timings["ground_truth"] = time.perf_counter() - t
+        metrics = evaluate(result, gt)
+        by_model[primary] = {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+    for other in _other_models(scene, options):
+        t = time.perf_counter()
+        alt = run_transfer(rig, model, pipeline_scene, replace(settings, lighting_model=other, bounce_views=False),
+                           progress=step)
+        if verified:
+            m = evaluate(alt, gt)
+            by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+        timings[f"transfer_{other}_model"] = time.perf_counter() - t
+
+    comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+    timings["total"] = time.perf_counter() - t0
+    from lftransfer.backend import variant
+
+    metric_keys = ("psnr_db", "psnr_db_direct_only", "cross_transfer_rel_error", "gt_noise_psnr_db",
+                   "cross_gt_noise_rel")
+    report = {
+        **{k: metrics.get(k) for k in metric_keys},
+        "verification": "against path-traced ground truth" if verified else
+        f"none: the {options.rig.kind} rig's real scene is not known to lftransfer",
+        "lighting_model": primary,
+        "by_lighting_model": by_model,
+        "cross_term_rel_size": metrics.get("cross_term_rel_size"),
+        "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
+                     "projector_gain": b.projector_gain} for b in result.bounces],
+        "projector_clipped_fraction": result.clipped_fraction,
+        "timings_s": {k: round(v, 3) for k, v in timings.items()},
+        "resolution": {
+            "lenslets": [scene.rig.rows, scene.rig.cols], "lattice": scene.rig.lattice,
+            "lf_camera": list(scene.rig.lf_camera), "projector": list(scene.rig.projector),
+            "view": list(scene.view.resolution), "angular_samples": scene.rig.angular_samples,
+            "metrics": metrics.get("metric_resolution"),
+        },
+        "gt_spp": (options.gt_spp or render.gt_spp) if verified else None,
+        "renderer": resolve_renderer(pipeline_scene, options.renderer),
+        "rig": str(options.rig),
+        "truth_seed": opened.truth_seed,
+        "rig_model": rig_model,
+        "calibration_errors": calibration_errors_,
+        "variant": variant(),
+        "scene": str(scene.source) if scene.source else None,
+    }
+    step("write outputs")
+    write_outputs(out, result, gt.image if gt is not None else None, comp, report, captured_raw=result.captured_raw,
+                  camera_bits=scene.rig.lf_camera_bits)
+    return report

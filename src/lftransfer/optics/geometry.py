@@ -1,0 +1,106 @@
+"""Shared geometry: homographies, rotations, planes and the view camera's pinhole model (OpenCV conventions).
+
+Every module that maps points through a homography, turns a frame, places a board or casts a view camera ray
+calls these; none re-types them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = ["apply_homography", "backproject", "plane_axes", "project", "rectangle_to_world", "rotation_2d",
+           "rotation_xy", "rotation_z", "view_camera"]
+
+
+def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 2) points through a (3, 3) homography -> (N, 2) float64 (NaN where the point goes to infinity)."""
+    p = np.asarray(points, np.float64).reshape(-1, 2)
+    q = np.concatenate([p, np.ones((len(p), 1))], axis=1) @ np.asarray(H, np.float64).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return q[:, :2] / q[:, 2:3]
+
+
+def rotation_2d(theta: float) -> np.ndarray:
+    """(2, 2) rotation by ``theta`` radians (counter-clockwise)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def rotation_z(theta: float) -> np.ndarray:
+    """(3, 3) rotation about the z axis by ``theta`` radians."""
+    m = np.eye(3)
+    m[:2, :2] = rotation_2d(theta)
+    return m
+
+
+def rotation_xy(tilt: tuple[float, float]) -> np.ndarray:
+    """Rotation about the x axis by ``tilt[0]``, then about the y axis by ``tilt[1]`` (radians).
+
+    Returns:
+        (3, 3) float64 rotation matrix ``R_y @ R_x``.
+    """
+    return Rotation.from_euler("xy", [float(tilt[0]), float(tilt[1])]).as_matrix()
+
+
+def plane_axes(normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Right-handed in-plane axes of a plane with this normal: ``ex`` horizontal (perpendicular to world y where
+    the normal allows), ``ey = normal x ex``.
+
+    Returns:
+        ex, ey, n: (3,) unit vectors.
+    """
+    n = np.asarray(normal, np.float64)
+    n = n / np.linalg.norm(n)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    ex = np.cross(helper, n)
+    ex /= np.linalg.norm(ex)
+    return ex, np.cross(n, ex), n
+
+
+def rectangle_to_world(centre, normal, size) -> np.ndarray:
+    """(4, 4) ``to_world`` of a Mitsuba ``rectangle`` ([-1, 1]^2 in z = 0, normal +z) of ``size`` = (width,
+    height) metres centred at ``centre`` (3,) with unit ``normal`` (3,), its width along :func:`plane_axes`'s ex."""
+    ex, ey, n = plane_axes(normal)
+    m = np.eye(4)
+    m[:3, :3] = np.stack([ex * size[0] / 2, ey * size[1] / 2, n], axis=1)
+    m[:3, 3] = np.asarray(centre, np.float64)
+    return m
+
+
+def view_camera(view) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """OpenCV pinhole model of the view camera (``lftransfer.scenes.ViewConfig``).
+
+    Returns:
+        K (3, 3) pixels, R (3, 3) world -> camera rotation, t (3,) such that ``x_cam = R X + t`` (x right,
+        y down, z forward); pixel (0, 0) is the centre of the top-left pixel. It is the geometry of Mitsuba's
+        ``perspective`` sensor of :func:`lftransfer.render.camera.sensor_dict` (horizontal field of view).
+    """
+    w, h = view.resolution
+    origin, target, up = (np.asarray(v, np.float64) for v in (view.origin, view.target, view.up))
+    fwd = (target - origin) / np.linalg.norm(target - origin)
+    left = np.cross(up, fwd)
+    left /= np.linalg.norm(left)
+    upv = np.cross(fwd, left)
+    R = np.stack([-left, -upv, fwd])
+    fx = 0.5 * w / np.tan(np.radians(view.fov_deg) / 2)
+    K = np.array([[fx, 0.0, 0.5 * w - 0.5], [0.0, fx, 0.5 * h - 0.5], [0.0, 0.0, 1.0]])
+    return K, R, -R @ origin
+
+
+def project(view, X: np.ndarray) -> np.ndarray:
+    """(N, 3) world points -> (N, 2) view camera pixels."""
+    K, R, t = view_camera(view)
+    x = np.asarray(X, np.float64).reshape(-1, 3) @ R.T + t
+    return apply_homography(K, x[:, :2] / x[:, 2:3])
+
+
+def backproject(view, px: np.ndarray, point, normal) -> np.ndarray:
+    """(N, 2) view camera pixels -> (N, 3) world points where their rays meet the plane (point, normal)."""
+    K, R, t = view_camera(view)
+    rays = np.concatenate([np.asarray(px, np.float64).reshape(-1, 2), np.ones((len(px), 1))], 1) \
+        @ np.linalg.inv(K).T @ R                                           # world directions
+    centre = -R.T @ t
+    point, normal = np.asarray(point, np.float64), np.asarray(normal, np.float64)
+    lam = ((point - centre) @ normal) / (rays @ normal)
+    return centre + lam[:, None] * rays

@@ -1,0 +1,317 @@
+"""``SimRig``: a digital twin of the light field transfer rig.
+
+It owns a hidden truth (the real objects and their materials, the point light, the true lens array and device
+models, noise) and renders the real world physically with Mitsuba:
+
+- the projector's lenslets are direction-dependent area lights (their aperture is the lattice cell), all
+  summed at every shading point, with shadow rays (:class:`lftransfer.render.lights.LightFieldLight`);
+- each LF camera pixel averages the radiance arriving along its ray direction over its lenslet's aperture;
+- real-to-real interreflections come from path tracing inside the real half-space;
+- the lens array is a black absorber just behind the interface plane;
+- the LF camera adds shot and read noise, applies its response and quantises to its bit depth.
+
+Calibration set-ups (:mod:`lftransfer.rig.requests`) are simulated too: a collimator (one spot per lenslet), a white
+diffuser, a diffuser at the lenslets' focal plane, and a board held by an operator where the request says, off
+by a hidden hand error (:class:`OperatorError`, drawn from the operator seed, never from the rig's truth).
+
+The Monte Carlo sampling of the real world uses the same seed for every capture, like a deterministic physical
+process: its error then cancels when captures are differenced; sensor noise does not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dataclasses import dataclass
+
+from scipy.spatial.transform import Rotation
+
+from lftransfer.optics.geometry import apply_homography, rectangle_to_world
+from lftransfer.render.camera import sensor_dict
+from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
+from lftransfer.render.shapes import board_shapes, lens_array_absorber
+from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.rig.requests import (Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame, RealScene, RigInfo,
+                                     Setup, ViewCapture, ViewFrame, WhiteField)
+from lftransfer.scenes.frame import scene_in_frame
+
+
+@dataclass(frozen=True)
+class OperatorError:
+    """Sizes of the hidden errors of actions done by hand (drawn per action from the truth seed).
+
+    Attributes:
+        board_offset_m: a board's centre lands off the requested place by up to this much per axis.
+        board_tilt_deg: ... and turned about a random axis by about this angle (standard deviation per axis
+            of the rotation vector: ``board_tilt_deg / sqrt(3)``, so the angle's RMS is this).
+    """
+
+    board_offset_m: float = 0.003
+    board_tilt_deg: float = 1.0
+
+
+class SimRig:
+    """Simulated rig for a scene (``lftransfer.scenes.SceneConfig``): implements :class:`lftransfer.rig.Rig`.
+
+    Args:
+        scene: the scene; its ``real`` objects become the hidden real world.
+        truth: true rig model; defaults to the rig file's nominal values.
+        capture_spp: rays per LF camera pixel (points on the lenslet aperture).
+        view_spp: rays per view camera pixel.
+        projector_samples: angular resolution (per axis) at which each projector lenslet's emission is
+            resampled from the projector image.
+        aperture_samples: points per projector lenslet aperture for each shading point.
+        seed: seed of the hidden truth's noise.
+        operator_seed: seed of the operator's hand errors (default: ``seed``).
+        operator: sizes of the operator's hand errors (:class:`OperatorError`; ``OperatorError(0, 0)``: exact).
+
+    Example:
+        >>> rig = SimRig(load_scene(builtin_scene("fig4")))       # doctest: +SKIP
+        >>> rig.capture_lf().codes.shape                            # (1536, 2048, 3) uint16
+    """
+
+    def __init__(self, scene, *, truth: RigModel | None = None, capture_spp: int = 4, view_spp: int = 4,
+                 projector_samples: int = 64, aperture_samples: int = 2, seed: int | None = None,
+                 operator_seed: int | None = None, operator: OperatorError = OperatorError()) -> None:
+        from lftransfer.backend import mitsuba
+
+        mi = mitsuba()
+        self._truth = truth or nominal_rig(scene.rig)
+        self._world_to_array = self._truth.world_to_array()
+        # The real world seen from the true lens array's own frame (interface plane z = 0).
+        scene = scene_in_frame(scene, self._world_to_array)
+        self._scene = scene
+        self._seed = int(scene.rig.seed if seed is None else seed)
+        self._operator_seed = self._seed if operator_seed is None else int(operator_seed)
+        self._operator = operator
+        self._rng = np.random.default_rng(self._seed + 7)
+        self.capture_spp = int(capture_spp)
+        self.view_spp = int(view_spp)
+        self.aperture_samples = int(aperture_samples)
+        array = self._truth.array
+        self._absorber = lens_array_absorber(array)
+        self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
+                                       max_depth=scene.render.max_depth)
+        self._point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
+        cam = self._truth.camera
+        self._cam_shape = (cam.device.height, cam.device.width)
+        px = np.stack(np.meshgrid(np.arange(cam.device.width), np.arange(cam.device.height)), -1).reshape(-1, 2)
+        k, d = cam.device.pixel_to_ray(array, px.astype(np.float64))
+        self._pix = np.flatnonzero(k >= 0)                      # camera pixels behind a lenslet
+        self._pix_lenslet = k[self._pix]
+        self._pix_dir = d[self._pix].astype(np.float32)         # (P, 3), d_z > 0
+        prj = self._truth.projector
+        self._prj_encoder = self._truth.encoder(projector_samples, projector_samples)
+        self._prj_codec = self._prj_encoder.codec                 # projector pixels <-> emitted light field
+        self._info = RigInfo(lf_camera=(cam.device.width, cam.device.height), lf_camera_bits=cam.bits,
+                             projector=(prj.device.width, prj.device.height), projector_bits=prj.bits,
+                             view=tuple(scene.view.resolution), kind="sim")
+        self._projected = self._info.black()
+        self._projector_light: LightFieldLight | None = None
+        self._projector_light_stale = False
+        self._setup: Setup = RealScene()
+        self._world = self._real                                  # what the array faces now
+        self._boards = 0
+        self._view = scene.view
+        self._view_sensor = mi.load_dict(sensor_dict(self._view.origin, self._view.target, self._view.up,
+                                                     self._view.fov_deg, *self._view.resolution))
+
+    # -- the Rig protocol ---------------------------------------------------------------------------------
+    @property
+    def info(self) -> RigInfo:
+        return self._info
+
+    @property
+    def projector_shape(self) -> tuple[int, int]:
+        """(height, width) of a projector image."""
+        return self._info.projector_shape
+
+    def setup(self, request: Setup) -> None:
+        """Arrange the simulated world: the real scene, a collimator, a white diffuser, the focal-plane diffuser
+        or a board held by the (simulated) operator, who misplaces it by a hidden error."""
+        if isinstance(request, Board):
+            self._world = self._board_renderer(request)
+        elif isinstance(request, (RealScene, Collimator, WhiteField, FocalPlaneDiffuser)):
+            self._world = self._real if isinstance(request, RealScene) else None
+        else:
+            raise TypeError(f"SimRig.setup: not a set-up request: {request!r}")
+        self._setup = request
+
+    def project(self, image: np.ndarray) -> None:
+        """Show a projector image ((H, W, 3) unsigned integers of the projector's bit depth)."""
+        self._projected = self._info.check_projector_image(image).copy()
+        self._projector_light_stale = True
+
+    def capture_lf(self, request: LFCapture = LFCapture()) -> LFFrame:
+        """LF camera image of the current set-up (a mean of ``request.frames`` noisy frames)."""
+        if isinstance(self._setup, Collimator):
+            make = lambda: self._collimated_radiance(self._setup.direction)     # noqa: E731
+        elif isinstance(self._setup, WhiteField):
+            make = self._white_radiance
+        elif isinstance(self._setup, FocalPlaneDiffuser):
+            make = lambda: self._focal_plane_radiance(self._setup.transmission)  # noqa: E731
+        else:
+            lights = self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
+            make = lambda: self._lf_radiance(self._world, lights)               # noqa: E731
+        radiance = make() * np.float32(request.exposure_scale)
+        codes = self._expose_frames(radiance, request.frames)
+        return LFFrame(codes=codes, bits=self._truth.camera.bits, exposure_scale=request.exposure_scale)
+
+    def capture_view(self, request: ViewCapture = ViewCapture()) -> ViewFrame:
+        """View camera image ((H, W, 3) float32 linear radiance) of the current set-up.
+
+        A simulated view camera has no sensor noise; ``request.quality`` is its samples per pixel.
+        """
+        w, h = self._view.resolution
+        if self._world is None:                       # collimator or diffusers: the view camera sees darkness
+            return ViewFrame(radiance=np.zeros((h, w, 3), np.float32))
+        lights = self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
+        img = self._world.render_view(self._view_sensor, w, h, lights, spp=request.quality or self.view_spp,
+                                      seed=self._seed)
+        return ViewFrame(radiance=img.rgb)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    # -- the simulated physics ----------------------------------------------------------------------------------
+    def _projector_lights(self) -> list:
+        if self._projector_light_stale:
+            self._projector_light_stale = False
+            radiance = self._prj_encoder.emitted(self._projected)         # (H, W, 3) radiance per projector pixel
+            lf = self._prj_codec.image_to_lightfield(radiance)            # what each lenslet emits, per direction
+            self._projector_light = None
+            if np.any(lf.data != 0):
+                self._projector_light = LightFieldLight(lf, side="real", model="area",
+                                                        aperture_samples=self.aperture_samples, seed=self._seed + 3)
+        return [self._projector_light] if self._projector_light is not None else []
+
+    def _lights(self):
+        return [self._point_light] + self._projector_lights()
+
+    def _expose_frames(self, radiance: np.ndarray, frames: int) -> np.ndarray:
+        cam = self._truth.camera
+        if frames == 1:
+            return cam.expose(radiance, noise=self._sensor_noise)
+        acc = np.zeros(radiance.shape, np.float64)
+        for _ in range(frames):
+            acc += cam.expose(radiance, noise=self._sensor_noise)
+        return np.round(acc / frames).astype(np.uint16)
+
+    def _lf_radiance(self, renderer: HalfSpaceRenderer, lights) -> np.ndarray:
+        """(H, W, 3) float32 radiance at the LF camera's pixels: each pixel averages its ray direction over its
+        lenslet's aperture."""
+        array = self._truth.array
+        centres = array.centres[self._pix_lenslet]                 # (P, 2)
+        offsets = aperture_offsets(array, len(self._pix), self.capture_spp, seed=self._seed + 101)  # (P, S, 2)
+        acc = np.zeros((len(self._pix), 3), np.float64)
+        origins = np.zeros((len(self._pix), 3), np.float32)
+        for s in range(self.capture_spp):
+            origins[:, :2] = centres + offsets[:, s]
+            radiance, _, _ = renderer.render_rays(origins, self._pix_dir, lights, seed=self._seed + s)
+            acc += radiance
+        image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
+        image[self._pix] = acc / self.capture_spp
+        return image.reshape(*self._cam_shape, 3)
+
+    def _sensor_noise(self, signal: np.ndarray) -> np.ndarray:
+        """Shot noise (Poisson in electrons, ``full_well`` at full scale; its Gaussian limit above 64 electrons)
+        plus Gaussian read noise."""
+        rig = self._scene.rig
+        electrons = np.clip(signal, 0, None) * rig.full_well
+        # Poisson where few electrons arrive; its Gaussian limit (mean = variance) where many do, much faster
+        many = electrons >= 64
+        shot = np.where(many, electrons + np.sqrt(electrons) * self._rng.standard_normal(signal.shape, np.float32),
+                        0.0)
+        few = ~many
+        shot[few] = self._rng.poisson(electrons[few])
+        return shot / rig.full_well + self._rng.normal(0.0, rig.read_noise, signal.shape)
+
+    def _collimated_radiance(self, direction, spot_sigma_px: float = 1.2) -> np.ndarray:
+        """Radiance at the LF camera of a collimated source from ``direction`` (array frame; the collimator's
+        tilt is set on its mount relative to the array).
+
+        Every lenslet focuses the plane wave onto one point of its focal plane: on the array's axis its focal
+        point, so the camera sees one spot per lenslet at the image of its optical centre; tilted, the spot
+        moves by the (distorted) image of the beam's direction. Spots are as bright as the lenslet's
+        aperture collects (peak at 70 % of full scale before vignetting).
+        """
+        array, cam = self._truth.array, self._truth.camera
+        d = np.asarray(direction, np.float64)
+        k = np.arange(array.K)
+        spots = cam.device.ray_to_pixel(array, k, np.tile(d / np.linalg.norm(d), (array.K, 1)))    # (K, 2)
+        # a beam outside a lenslet's field lands outside its cell: that lenslet shows no spot
+        back = cam.device.pixel_to_ray(array, np.nan_to_num(spots, nan=-1e6))[0]
+        spots = spots[back == k]
+        h, w = self._cam_shape
+        r = int(np.ceil(4 * spot_sigma_px))
+        off = np.arange(-r, r + 1)
+        cx, cy = np.round(spots[:, 0]).astype(int), np.round(spots[:, 1]).astype(int)
+        xs = cx[:, None, None] + off[None, None, :]                       # (K, 1, n)
+        ys = cy[:, None, None] + off[None, :, None]                       # (K, n, 1)
+        weight = np.exp(-((xs - spots[:, 0, None, None]) ** 2 + (ys - spots[:, 1, None, None]) ** 2)
+                        / (2 * spot_sigma_px ** 2))
+        xs, ys = np.broadcast_arrays(xs, ys)
+        inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        image = np.zeros((h, w), np.float64)
+        np.add.at(image, (ys[inside], xs[inside]), np.broadcast_to(weight, xs.shape)[inside])
+        peak = 0.7 / (cam.exposure * np.max(weight))
+        return np.repeat((image * peak)[..., None], 3, axis=2).astype(np.float32)
+
+    def _white_radiance(self, level: float = 0.6) -> np.ndarray:
+        """Radiance at the LF camera of an evenly lit white diffuser against the array: every pixel behind a
+        lenslet sees the same radiance (60 % of full scale before vignetting)."""
+        image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
+        image[self._pix] = level / self._truth.camera.exposure
+        return image.reshape(*self._cam_shape, 3)
+
+    def _focal_plane_radiance(self, transmission: float) -> np.ndarray:
+        """Radiance at the LF camera of the projector's image on a diffuser at the lenslets' focal plane.
+
+        Both devices image that plane, so the camera sees the projector's pixels directly (through its own
+        homography and the projector's); the diffuser passes the fraction ``transmission`` of the light.
+        """
+        import cv2
+
+        cam, prj = self._truth.camera.device, self._truth.projector.device
+        if not hasattr(self, "_focal_map"):
+            h, w = self._cam_shape
+            px = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1).reshape(-1, 2).astype(np.float64)
+            p = apply_homography(prj.homography @ np.linalg.inv(cam.homography), px)
+            p = p.astype(np.float32).reshape(h, w, 2)
+            self._focal_map = (p[..., 0].copy(), p[..., 1].copy())
+        radiance = self._prj_encoder.emitted(self._projected)
+        seen = cv2.remap(radiance, *self._focal_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+        return np.float32(transmission) * seen
+
+    def _hand_error(self) -> np.ndarray:
+        """(4, 4) rigid error of the n-th board the operator holds: rotation about the board's centre and an offset
+        (drawn from the operator seed and the board's number; never from the rig's truth)."""
+        rng = np.random.default_rng([self._operator_seed, 31, self._boards])
+        self._boards += 1
+        m = np.eye(4)
+        sigma = np.radians(self._operator.board_tilt_deg) / np.sqrt(3.0)
+        m[:3, :3] = Rotation.from_rotvec(rng.normal(0.0, sigma, 3)).as_matrix()
+        m[:3, 3] = rng.uniform(-self._operator.board_offset_m, self._operator.board_offset_m, 3)
+        return m
+
+    def _held(self, request: Board) -> np.ndarray:
+        asked = rectangle_to_world(request.centre, request.normal, request.size)
+        error = self._hand_error()
+        held = asked.copy()
+        held[:3, :3] = error[:3, :3] @ asked[:3, :3]
+        held[:3, 3] = asked[:3, 3] + error[:3, 3]
+        return held
+
+    def _board_renderer(self, request: Board) -> HalfSpaceRenderer:
+        self.last_board_to_world = self._held(request)          # rig frame (verification only)
+        to_world = self._world_to_array @ self.last_board_to_world
+        shapes = {"lens_array_absorber": self._absorber, **board_shapes(to_world, request.albedo, request.chart)}
+        return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)
+
+    # -- for verification only (never used by the pipeline) ------------------------------------------------
+    @property
+    def truth(self) -> RigModel:
+        """The hidden true rig model. Only verification code may read it."""
+        return self._truth
