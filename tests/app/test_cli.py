@@ -42,3 +42,15 @@ def test_03_unknown_lighting_model(tmp_path):
 def test_04_help_lists_commands():
     result = runner.invoke(app, ["--help"])
     assert result.exit_code == 0 and "demo" in result.output and "run" in result.output
+
+
+def test_05_rig_spec_errors(tmp_path):
+    from lftransfer.scenes import builtin_scene
+
+    for spec, words in (("gpu", "expected 'sim'"), (f"hardware:{tmp_path / 'none.toml'}", "does not exist"),
+                        (f"replay:{tmp_path}", "not a recording")):
+        result = runner.invoke(app, ["run", str(builtin_scene("fig4")), "--rig", spec, "--out", str(tmp_path / "o")])
+        assert result.exit_code == 2 and words in _text(result), _text(result)
+    result = runner.invoke(app, ["run", str(builtin_scene("fig4")), "--rig", f"replay:{tmp_path}",
+                                 "--rig-model", "oracle", "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2

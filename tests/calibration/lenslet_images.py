@@ -12,7 +12,7 @@ The geometry, written out independently of :mod:`lftransfer.calibration.lenslets
    ``k1 < 0``: barrel.
 
 Rendering: spots are pixel-integrated Gaussians; white-image sub-images are soft disks or hexagons (flat-to-flat
-``aperture * local pitch``) with a soft edge and a radial fall-off inside, supersampled 4 x 4 per pixel; the
+``aperture * local pitch``) with a soft edge and a radial fall-off inside, supersampled (3 x 3 per pixel by default); the
 whole image is multiplied by a ``cos^4``-like vignetting, then photon (Poisson) and read (Gaussian) noise, a
 black level, and quantisation to 12 or 16 bits. Sub-images are centrally symmetric about the true centre, so
 the true centre is their centre of symmetry (up to the vignetting gradient across each one).
@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erfc, ndtr
+from scipy.special import ndtr
 
 ROW_STEP = {"hex": math.sqrt(3) / 2, "rect": 1.0}
 
@@ -77,6 +77,12 @@ class LensletImage:
         d = self._jacobian(uv)[:, 0]
         return math.hypot(*d), math.degrees(math.atan2(-d[1], d[0]))
 
+    def distortion_shift(self) -> float:
+        """Largest displacement by the radial distortion of an in-image lenslet, fraction of the half-diagonal."""
+        undistorted = _geometry(ideal_coordinates(self.indices, self.lattice), **dict(self.params, k=(0.0, 0.0)))
+        h, w = self.image.shape
+        return float(np.max(np.linalg.norm(self.centres - undistorted, axis=1)) / (0.5 * math.hypot(w, h)))
+
     def _jacobian(self, uv: np.ndarray, eps: float = 1e-5) -> np.ndarray:
         cols = [(self.to_pixels((uv + e)[None])[0] - self.to_pixels((uv - e)[None])[0]) / (2 * eps)
                 for e in (np.array([eps, 0.0]), np.array([0.0, eps]))]
@@ -98,7 +104,7 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
                        pp_offset=(12.0, -8.0), shift=(0.3, 0.6), sigma: float = 1.2, aperture: float = 0.9,
                        shape_kind: str | None = None, edge: float = 0.8, falloff: float = 0.4,
                        inner_falloff: float = 0.3, full_well: float = 5000.0, read_noise: float = 3.0,
-                       black: float = 0.01, bits: int = 12, seed: int = 0) -> LensletImage:
+                       black: float = 0.01, bits: int = 12, supersample: int = 3, seed: int = 0) -> LensletImage:
     """Render a spot or white image of a distorted, tilted, rotated lattice with vignetting and noise.
 
     Args:
@@ -120,6 +126,7 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
         full_well: electrons at full scale (photon noise); read_noise: electrons.
         black: black level, fraction of full scale.
         bits: 12 or 16.
+        supersample: white sub-images are rendered with ``supersample x supersample`` samples per pixel.
         seed: noise seed.
     """
     rng = np.random.default_rng(seed)
@@ -151,10 +158,9 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
     elif kind == "white":
         shape_kind = shape_kind or ("hex" if lattice == "hex" else "disk")
         radius = 0.5 * aperture * local_pitch
-        img = _render_white(shape, xy[near], radius[near], local_angle[near], shape_kind, edge, inner_falloff)
-        reach = radius + 2.5 * edge
-        if shape_kind == "hex":
-            reach = radius * 2 / math.sqrt(3) + 2.5 * edge          # the corners of the hexagon
+        img = _render_white(shape, xy[near], radius[near], local_angle[near], shape_kind, edge, inner_falloff,
+                            ss=supersample)
+        reach = radius * (2 / math.sqrt(3) if shape_kind == "hex" else 1.0) + 2 * edge   # hexagon: its corners
         img *= 0.85
     else:
         raise ValueError(kind)
@@ -198,35 +204,38 @@ def _render_spots(shape, xy, amp, sigma):
     return _scatter(shape, rows, cols, vals)
 
 
-def _render_white(shape, xy, radius, angle, shape_kind, edge, inner_falloff, ss=4, chunk=256):
-    """Soft disks / hexagons (flat-to-flat ``2 radius``), supersampled ``ss x ss`` per pixel; light adds."""
+def _render_white(shape, xy, radius, angle, shape_kind, edge, inner_falloff, ss=3, chunk=512):
+    """Soft disks / hexagons (flat-to-flat ``2 radius``), supersampled ``ss x ss`` per pixel; light adds.
+
+    The edge is a smoothstep from ``radius + 2 edge`` (0) to ``radius - 2 edge`` (1) of the distance to the
+    centre (disk) or of the largest distance along the three side normals (hexagon, sides facing the
+    neighbours); inside, ``1 - inner_falloff (r / radius)^2``.
+    """
     img = np.zeros(shape)
-    half = int(math.ceil(radius.max() * 2 / math.sqrt(3) + 4 * edge)) + 1
+    reach = radius.max() * (2 / math.sqrt(3) if shape_kind == "hex" else 1.0) + 2 * edge
+    half = int(math.ceil(reach)) + 1
     off = np.arange(-half, half + 1)
     sub = (np.arange(ss) + 0.5) / ss - 0.5
-    # sample offsets from the patch's integer centre: (P, ss) per axis
-    so = (off[:, None] + sub[None]).ravel()                       # (P * ss,)
-    normals = [0.0, math.pi / 3, 2 * math.pi / 3]
+    so = (off[:, None] + sub[None]).ravel().astype(np.float32)   # (P * ss,) sample offsets
+    p = len(off)
     for s in range(0, len(xy), chunk):
         c = xy[s:s + chunk]
-        base = np.rint(c).astype(np.int64)
-        fx = (base[:, :1] - c[:, :1]) + so[None]                  # (n, P*ss) x of samples relative to centre
-        fy = (base[:, 1:] - c[:, 1:]) + so[None]
-        dx = fx[:, None, :]
-        dy = fy[:, :, None]
-        rr = np.sqrt(dx * dx + dy * dy)
-        rad = radius[s:s + chunk, None, None]
-        if shape_kind == "hex":
-            a = angle[s:s + chunk, None, None]
-            d = np.zeros_like(rr)
-            for t in normals:
-                d = np.maximum(d, np.abs(dx * np.cos(a + t) + dy * np.sin(a + t)))
-        else:
-            d = rr
-        val = 0.5 * erfc((d - rad) / (math.sqrt(2.0) * edge)) * np.clip(1 - inner_falloff * (rr / rad) ** 2, 0, 1)
         n = len(c)
-        p = len(off)
-        val = val.reshape(n, p, ss, p, ss).mean(axis=(2, 4))
+        base = np.rint(c).astype(np.int64)
+        dx = ((base[:, :1] - c[:, :1]).astype(np.float32) + so[None])[:, None, :]      # (n, 1, P*ss)
+        dy = ((base[:, 1:] - c[:, 1:]).astype(np.float32) + so[None])[:, :, None]      # (n, P*ss, 1)
+        rad = radius[s:s + chunk, None, None].astype(np.float32)
+        rr2 = dx * dx + dy * dy
+        if shape_kind == "hex":                                   # sides normal to 0, 60 and 120 deg
+            a = angle[s:s + chunk, None, None]
+            p1 = dx * np.cos(a).astype(np.float32) + dy * np.sin(a).astype(np.float32)
+            p2 = dx * np.cos(a + math.pi / 3).astype(np.float32) + dy * np.sin(a + math.pi / 3).astype(np.float32)
+            d = np.maximum(np.maximum(np.abs(p1), np.abs(p2)), np.abs(p2 - p1))   # cos(x + 120) = cos(x + 60) - cos x
+        else:
+            d = np.sqrt(rr2)
+        t = np.clip((rad + 2 * edge - d) / np.float32(4 * edge), 0, 1)
+        val = t * t * (3 - 2 * t) * np.clip(1 - inner_falloff * rr2 / (rad * rad), 0, 1)
+        val = val.reshape(n, p, ss, p, ss).sum(axis=4).sum(axis=2).astype(np.float64) / (ss * ss)
         rows = np.broadcast_to((base[:, 1:] + off[None])[:, :, None], val.shape)
         cols = np.broadcast_to((base[:, :1] + off[None])[:, None, :], val.shape)
         img += _scatter(shape, rows, cols, val)

@@ -7,11 +7,14 @@ import math
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.special import ndtr
 
 from lftransfer.calibration.images import CalibrationImageError, read_image, to_grey
 from lftransfer.calibration.lenslets import (LatticeFit, NoSpotsError, find_lenslet_centres, lattice_coordinates,
                                              write_centres_csv)
+
+from .lenslet_images import ideal_coordinates, make_lenslet_image
 
 ROW_STEP = {"hex": math.sqrt(3) / 2, "rect": 1.0}
 
@@ -290,3 +293,147 @@ def test_10_simulated_rig(variant):
     err = np.linalg.norm(fit.centres - spots, axis=1)
     assert np.sqrt(np.mean(err ** 2)) <= 0.1
     assert fit.rms_px < 0.1                                      # the spots are a homography of the lattice
+
+
+# ------------------------------------------------------------------ distorted lattices, spot and white images
+def _score(fit, im):
+    """Compare a fit with the truth of a rendered image.
+
+    Returns:
+        dict: ``found`` (fraction of the lenslets wholly inside the image that were detected within 0.5 px),
+        ``rms`` / ``max`` (error of those, px), ``extra`` (detections farther than 0.5 px from every lenslet in
+        the image), ``indices_ok`` (the detected indices differ from the true ones by one lattice translation),
+        ``radial_bias`` (mean error along the radius from the image centre, px, of the outer lenslets: a
+        vignetting or distortion bias that the lattice fit would absorb), ``matched`` / ``true_idx`` (the
+        matched detections and their true indices).
+    """
+    d, j = cKDTree(fit.centres).query(im.centres)
+    hit = d < 0.5
+    err = fit.centres[j[hit & im.inside]] - im.centres[hit & im.inside]
+    length = np.linalg.norm(err, axis=1)
+    shift = lattice_coordinates(fit.indices[j[hit]], fit.lattice) - ideal_coordinates(im.indices[hit], im.lattice)
+    dd, _ = cKDTree(im.centres).query(fit.centres)
+    h, w = im.image.shape
+    outward = im.centres[hit & im.inside] - [(w - 1) / 2, (h - 1) / 2]
+    radius = np.linalg.norm(outward, axis=1)
+    outer = radius > 0.6 * radius.max()
+    radial = np.sum(err[outer] * outward[outer], axis=1) / radius[outer]
+    return {"found": float(np.count_nonzero(hit & im.inside) / np.count_nonzero(im.inside)),
+            "rms": float(np.sqrt(np.mean(length ** 2))), "max": float(length.max()), "extra": int(np.sum(dd >= 0.5)),
+            "indices_ok": bool(len(shift) and np.allclose(shift, shift[0], atol=1e-9)),
+            "radial_bias": float(np.mean(radial)), "matched": j[hit], "true_idx": im.indices[hit]}
+
+
+def _indices_of(uv, lattice):
+    """Integer (row, col) of ideal lattice coordinates (inverse of ``ideal_coordinates``)."""
+    r = np.rint(uv[:, 1] / ROW_STEP[lattice]).astype(np.int64)
+    c = np.rint(uv[:, 0] - (0.5 * (r % 2) if lattice == "hex" else 0.0)).astype(np.int64)
+    return np.stack([r, c], axis=1)
+
+
+def _check_distorted(fit, im, k1):
+    """The accuracy target and the fields' meaning on a distorted image (see test_11)."""
+    score = _score(fit, im)
+    assert score["found"] >= 0.98 and score["rms"] <= 0.1, score
+    assert score["indices_ok"] and score["extra"] == 0, score
+    assert abs(score["radial_bias"]) <= 0.025, score              # no systematic radial bias at the borders
+    # The lattice model: homography + radial distortion of the right sign; a homography alone cannot fit.
+    assert fit.rms_px <= 0.05 and np.sign(fit.distortion[0]) == np.sign(k1)
+    assert fit.homography_rms_px >= 1.0                         # negative control: the old model's residual
+    np.testing.assert_allclose(fit.residuals, fit.centres - fit.predicted(fit.indices), atol=1e-9)
+    assert abs(np.sqrt(np.mean(np.sum(fit.residuals ** 2, axis=1))) - fit.rms_px) < 1e-12
+    pitch, rot = im.pitch_rotation_at_centre()
+    assert abs(fit.pitch_px / pitch - 1) <= 0.002 and abs(fit.rotation_deg - rot) <= 0.05
+    # Lenslets within a pitch of the image border, inside or outside (not detected), are predicted by the model
+    # (in the fit's indexing).
+    shift = (lattice_coordinates(fit.indices[score["matched"][:1]], fit.lattice)
+             - ideal_coordinates(score["true_idx"][:1], im.lattice))
+    lo, hi = im.indices.min(axis=0) - 2, im.indices.max(axis=0) + 2
+    rows, cols = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    uv = ideal_coordinates(np.stack([rows.ravel(), cols.ravel()], axis=1), im.lattice)
+    xy = im.to_pixels(uv)
+    h, w = im.image.shape
+    inset = np.minimum(np.minimum(xy[:, 0], w - 1 - xy[:, 0]), np.minimum(xy[:, 1], h - 1 - xy[:, 1]))
+    border = np.abs(inset) < fit.pitch_px
+    assert border.sum() >= 50
+    guess = fit.predicted(_indices_of(uv[border] + shift, fit.lattice))
+    assert np.max(np.linalg.norm(guess - xy[border], axis=1)) <= 0.3
+    np.testing.assert_allclose(fit.to_lattice(fit.centres), lattice_coordinates(fit.indices, fit.lattice),
+                               atol=0.01)
+    assert "radial distortion" in fit.summary()
+    return score
+
+
+# (kind, lattice) -> pitch (px), rotation (deg), bits; barrel k1 = -0.07, pincushion k1 = +0.06 (OpenCV's k1 with
+# f = image width: the corners move by about 3 % of the half-diagonal, several pitches)
+_CASES = {("spots", "hex"): (22.0, 3.0, 12), ("spots", "rect"): (36.0, -4.0, 16),
+          ("white", "hex"): (30.0, -2.5, 12), ("white", "rect"): (38.0, 4.5, 16)}
+
+
+@pytest.mark.parametrize("distortion", ["barrel", "pincushion"])
+@pytest.mark.parametrize("lattice", ["hex", "rect"])
+@pytest.mark.parametrize("kind", ["spots", "white"])
+def test_11_distorted_lattice(kind, lattice, distortion):
+    """Main-lens distortion, tilt, vignetting, noise: >= 98 % of the lenslets wholly inside, <= 0.1 px RMS."""
+    pitch, rot, bits = _CASES[kind, lattice]
+    k1 = -0.07 if distortion == "barrel" else 0.06
+    seed = 11 + 4 * list(_CASES).index((kind, lattice)) + (distortion == "barrel")
+    im = make_lenslet_image(kind, lattice, shape=(800, 1000), pitch=pitch, rotation_deg=rot, k1=k1, bits=bits,
+                            seed=seed)
+    assert 0.02 <= im.distortion_shift() <= 0.05 and im.inside.sum() >= 400
+    fit = find_lenslet_centres(to_grey(im.image, levels=im.levels), lattice, kind=kind)
+    assert fit.kind == kind and fit.lattice == lattice
+    _check_distorted(fit, im, k1)
+
+
+def test_12_large_white_image():
+    """A 2048 x 1536 white image of ~6000 hexagonal sub-images, 24 px apart, pincushion distortion."""
+    im = make_lenslet_image("white", "hex", shape=(1536, 2048), pitch=24.0, rotation_deg=1.5, k1=0.07,
+                            tilt=(1e-5, 1e-5), pp_offset=(-20.0, 15.0), bits=12, supersample=2, seed=12)
+    fit = find_lenslet_centres(to_grey(im.image, levels=im.levels), "hex", kind="white")
+    score = _check_distorted(fit, im, 0.07)
+    assert len(fit.centres) >= 5500 and score["found"] >= 0.98
+    # the distortion centre is the principal point (image centre + pp_offset)
+    np.testing.assert_allclose(fit.distortion_centre, [1023.5 - 20.0, 767.5 + 15.0], atol=3.0)
+
+
+@pytest.mark.parametrize("kind", ["spots", "white"])
+def test_13_undistorted_reports_homography(kind):
+    """Without distortion the radial terms are not significant: the model is the least-squares homography."""
+    im = make_lenslet_image(kind, "hex", shape=(480, 640), pitch=28.0, rotation_deg=-1.0, k1=0.0, seed=13)
+    fit = find_lenslet_centres(to_grey(im.image, levels=im.levels), "hex", kind=kind)
+    score = _score(fit, im)
+    assert score["found"] >= 0.98 and score["rms"] <= 0.1 and score["indices_ok"] and score["extra"] == 0
+    assert np.all(fit.distortion == 0) and fit.rms_px == fit.homography_rms_px < 0.05
+    np.testing.assert_allclose(fit.residuals, fit.centres - fit.predicted(fit.indices), atol=1e-9)
+    assert "no significant radial distortion" in fit.summary()
+
+
+def test_14_kind_and_metric_controls():
+    """Controls: a wrong ``kind`` fails clearly, and the accuracy checks do fail on wrong results."""
+    im = make_lenslet_image("white", "rect", shape=(480, 640), pitch=30.0, rotation_deg=2.0, k1=-0.07, seed=14)
+    grey = to_grey(im.image, levels=im.levels)
+    with pytest.raises(ValueError, match="kind must be 'spots'.*'white'"):
+        find_lenslet_centres(grey, "rect", kind="flat")
+    with pytest.raises(NoSpotsError, match="kind='white'"):      # a white image read as spots
+        find_lenslet_centres(grey, "rect")
+    with pytest.raises(NoSpotsError, match="rect lattice|hex lattice"):
+        find_lenslet_centres(grey, "hex", kind="white")          # the wrong lattice kind
+    with pytest.raises(NoSpotsError, match="no lenslet sub-images"):
+        find_lenslet_centres(np.full((200, 300), 0.5), "hex", kind="white")
+    fit = find_lenslet_centres(grey, "rect", kind="white")
+    good = _score(fit, im)
+    assert good["found"] >= 0.98 and good["rms"] <= 0.1 and good["indices_ok"]
+    # The checks see: a 0.14 px bias, one mis-indexed lenslet, missing lenslets, a radial bias (which the RMS
+    # does not: a lattice model with a little more distortion would absorb it, the fit's residual too).
+    shifted = LatticeFit(**{**fit.__dict__, "centres": fit.centres + [0.1, 0.1]})
+    assert _score(shifted, im)["rms"] > 0.1
+    bad_idx = fit.indices.copy()
+    bad_idx[len(bad_idx) // 2] += [0, 1]
+    assert not _score(LatticeFit(**{**fit.__dict__, "indices": bad_idx}), im)["indices_ok"]
+    few = LatticeFit(**{**fit.__dict__, "centres": fit.centres[::2], "indices": fit.indices[::2]})
+    assert _score(few, im)["found"] < 0.98
+    h, w = im.image.shape
+    toward = fit.centres - 1.2e-4 * (fit.centres - [(w - 1) / 2, (h - 1) / 2])
+    shrunk = _score(LatticeFit(**{**fit.__dict__, "centres": toward}), im)
+    assert shrunk["radial_bias"] < -0.025 and shrunk["rms"] < 0.1

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.calibration.pose import (ArrayPose, apply_pose, backproject, board_pattern, checkerboard_lightfield,
-                                         solve_array_pose, view_camera)
+from lftransfer.optics.geometry import backproject, view_camera
+from lftransfer.calibration.pose import (ArrayPose, apply_pose, board_pattern, checkerboard_lightfield,
+                                         solve_array_pose)
 from lftransfer.rig.model import nominal_rig
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.scenes.frame import rotation_xy
@@ -37,7 +38,7 @@ def test_01_view_camera_matches_mitsuba(variant, scene):
     np.testing.assert_allclose(p[:, :2] / p[:, 2:3], px, atol=1e-3)
     # and back: pixels -> points on a plane -> the same pixels
     normal = np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0])
-    Y = backproject(px, v, np.array([0.0, 0.0, 0.1]), normal)
+    Y = backproject(v, px, np.array([0.0, 0.0, 0.1]), normal)
     q = (Y @ R.T + t) @ K.T
     np.testing.assert_allclose(q[:, :2] / q[:, 2:3], px, atol=1e-6)
     np.testing.assert_allclose((Y - [0.0, 0.0, 0.1]) @ normal, 0, atol=1e-12)
@@ -102,10 +103,64 @@ def test_05_no_board_in_view_is_a_clear_error(scene):
     """A rig whose board photographs are black: the pose step says what it could not find."""
     from lftransfer.calibration.pose import PoseError, calibrate_pose
 
-    class DarkRig:
-        def capture_board(self, image, centre, normal, size, printed=None, spp=None):
-            w, h = scene.view.resolution
-            return np.zeros((h, w, 3), np.float32)
+    from tests.fakes import DarkRig
 
+    rig = DarkRig(lf_camera=scene.rig.lf_camera, projector=scene.rig.projector, view=scene.view.resolution)
     with pytest.raises(PoseError, match="chessboard was not found"):
-        calibrate_pose(DarkRig(), nominal_rig(scene.rig), scene)
+        calibrate_pose(rig, nominal_rig(scene.rig), scene)
+    assert rig.setups[-1].chart is not None          # the operator was asked for the board with the chart
+
+
+def test_06_corners_land_where_their_rays_meet_the_board(scene):
+    """On the drawing plane a corner lands where it was drawn; on a board moved along the axis its rays' centroid
+    moves along the axis too (the lenslets that draw a central corner lie symmetrically around it)."""
+    from lftransfer.calibration.pose import corner_landing
+
+    array = nominal_rig(scene.rig).array
+    board = board_pattern(scene.view, 0.08, (5, 4), 0.028)
+    drawn = board.corners()
+    same = corner_landing(array, drawn, board.centre, board.normal)
+    np.testing.assert_allclose(same, drawn, atol=1e-12)
+    centre = np.array([[0.0, 0.0, 0.08]])
+    moved = corner_landing(array, centre, np.array([0.0, 0.0, 0.083]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(moved, [[0.0, 0.0, 0.083]], atol=2e-4)
+
+
+def test_07_pose_from_misplaced_boards(scene):
+    """Exact corner landings on two boards held off the asked-for planes recover a hidden pose, where fitting the
+    corners as drawn does not (negative control)."""
+    from lftransfer.calibration.pose import corner_landing
+
+    array = nominal_rig(scene.rig).array
+    truth = ArrayPose(tilt=(np.radians(0.3), np.radians(-0.4)), rotation=np.radians(1.5), offset=(0.002, -0.001),
+                      scale=1.006)
+    drawn, world, planes = [], [], []
+    for depth, shift, turn in ((0.07, 0.003, 1.0), (0.12, -0.002, -0.8)):
+        board = board_pattern(scene.view, depth, (5, 4), 0.028)
+        c = np.cos(np.radians(turn))
+        normal = truth.model_to_world(board.normal[None])[0] - truth.model_to_world(np.zeros((1, 3)))[0]
+        normal = normal / np.linalg.norm(normal)
+        normal = c * normal + np.sqrt(1 - c * c) * np.cross(normal, [0.0, 1.0, 0.0])
+        point = truth.model_to_world(board.centre[None])[0] + shift * normal
+        land = corner_landing(array, board.corners(), truth.world_to_model(point[None])[0],
+                              truth.direction_to_model(normal[None])[0])
+        drawn.append(board.corners())
+        world.append(truth.model_to_world(land))
+        planes.append((point, normal, len(land)))
+    drawn, world = np.concatenate(drawn), np.concatenate(world)
+
+    def landing(candidate):
+        out, i = [], 0
+        for point, normal, n in planes:
+            out.append(corner_landing(array, drawn[i:i + n], candidate.world_to_model(point[None])[0],
+                                      candidate.direction_to_model(normal[None])[0]))
+            i += n
+        return np.concatenate(out)
+
+    naive = solve_array_pose(drawn, world)
+    pose = solve_array_pose(drawn, world, landing=landing, start=naive)
+    assert abs(pose.scale - truth.scale) < 1e-5 and abs(pose.rotation - truth.rotation) < 1e-5
+    np.testing.assert_allclose(pose.tilt, truth.tilt, atol=1e-5)
+    np.testing.assert_allclose(pose.offset, truth.offset, atol=1e-6)
+    assert pose.residual_mm < 1e-3
+    assert naive.residual_mm > 0.3 or abs(naive.scale - truth.scale) > 1e-3

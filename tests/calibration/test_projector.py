@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from lftransfer.calibration.projector import decode_gray_code, fit_projector_camera, gray_code_patterns
+from lftransfer.optics.geometry import apply_homography
+from lftransfer.rig.requests import FocalPlaneDiffuser
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
@@ -34,16 +36,18 @@ def test_02_recovers_hidden_mapping(variant, seed):
     truth = perturbed_rig(scene.rig, seed)
     rig = SimRig(scene, truth=truth, capture_spp=1)
     h, w = rig.projector_shape
-    captures = [rig.capture_focal_plane(p).astype(np.float64)[..., 1] / 4095 for p in gray_code_patterns(w, h)]
+    rig.setup(FocalPlaneDiffuser())
+    captures = []
+    for p in gray_code_patterns(w, h):
+        rig.project(np.repeat(p[..., None], 3, axis=2))
+        captures.append(rig.capture_lf().codes.astype(np.float64)[..., 1] / 4095)
     col, row, valid = decode_gray_code(captures, w, h)
     fit = fit_projector_camera(col, row, valid)
     # Truth: camera pixel -> focal plane -> projector pixel.
     cam, prj = truth.camera.device, truth.projector.device
     ys, xs = np.nonzero(valid)
     xy = np.stack([xs, ys], 1)[:: 7].astype(np.float64)
-    q = np.concatenate([xy, np.ones((len(xy), 1))], 1) @ np.linalg.inv(cam.homography).T
-    p = q @ prj.homography.T
-    true = p[:, :2] / p[:, 2:3]
+    true = apply_homography(prj.homography @ np.linalg.inv(cam.homography), xy)
     err = np.linalg.norm(fit.camera_to_projector(xy) - true, axis=1)
     assert np.sqrt(np.mean(err ** 2)) < 0.1
     assert 0.3 < fit.rms_px < 0.6          # the codes' own one-pixel quantisation

@@ -13,6 +13,7 @@ from lftransfer.calibration.radiometric import (Radiometry, RadiometryError, Vig
 from lftransfer.lightfield import LightField, ResponseCurve
 from lftransfer.app.pipeline import quick_scene
 from lftransfer.rig.model import nominal_rig
+from lftransfer.rig.requests import FocalPlaneDiffuser, LFCapture
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import Perturbation, perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene
@@ -109,13 +110,14 @@ def test_04_focal_plane_exposure_scale(variant):
     scene = _scene()
     truth = perturbed_rig(scene.rig, 3)
     rig = SimRig(scene, truth=truth)
-    img = np.full((*rig.projector_shape, 3), 200, np.uint8)
+    rig.setup(FocalPlaneDiffuser())
+    rig.project(np.full((*rig.projector_shape, 3), 200, np.uint8))
     g = np.asarray(truth.camera.response.gamma)
-    lin = [((rig.capture_focal_plane(img, exposure_scale=e) / truth.camera.levels) ** g)[150:250, 200:300].mean((0, 1))
-           for e in (1.0, 0.25)]
+    lin = [((rig.capture_lf(LFCapture(exposure_scale=e)).codes / truth.camera.levels) ** g)[150:250, 200:300]
+           .mean((0, 1)) for e in (1.0, 0.25)]
     np.testing.assert_allclose(lin[1] / lin[0], 0.25, rtol=0.01)
     with pytest.raises(ValueError, match="exposure_scale"):
-        rig.capture_focal_plane(img, exposure_scale=0.0)
+        LFCapture(exposure_scale=0.0)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -182,14 +184,9 @@ def test_07_calibrated_encoder_emits_what_is_asked(variant):
     assert error(model) > 3 * calibrated                                 # nominal radiometry is visibly off
 
 
-class _DarkRig:
-    projector_shape = (48, 64)
-
-    def capture_focal_plane(self, image, exposure_scale=1.0):
-        return np.zeros((96, 128, 3), np.uint16)
-
-
 def test_08_nothing_seen_is_an_error():
+    from tests.fakes import DarkRig
+
     scene = _scene()
     with pytest.raises(RadiometryError, match="camera response"):
-        calibrate_radiometry(_DarkRig(), nominal_rig(scene.rig), scene)
+        calibrate_radiometry(DarkRig(), nominal_rig(scene.rig), scene)

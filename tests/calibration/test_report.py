@@ -64,7 +64,7 @@ def calibrated(variant, tmp_path_factory):
     """A rig with hidden truth (seed 1) at quarter resolution, calibrated from its images, and its report."""
     scene = quick_scene(load_scene(builtin_scene("fig4")))
     rig = SimRig(scene, truth=perturbed_rig(scene.rig, 1))
-    cal = calibrate_rig(rig, scene)
+    cal = calibrate_rig(rig, scene.synthetic_part())
     errors = calibration_errors(cal, rig.truth)
     path = write_calibration_report(tmp_path_factory.mktemp("report"), cal, errors)
     return scene, cal, errors, path

@@ -9,6 +9,8 @@ import pytest
 
 from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.app.pipeline import quick_scene
+from lftransfer.calibration.pose import POSE_DEPTHS
+from lftransfer.rig.requests import RealScene
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig, true_light_scene
 from lftransfer.scenes import builtin_scene, load_scene
@@ -17,26 +19,30 @@ from lftransfer.sim.verify import calibration_errors
 
 @pytest.fixture(scope="module")
 def calibrated(variant):
-    """A rig with hidden truth (seed 3) at quarter resolution, calibrated from its images alone."""
+    """A rig with hidden truth (seed 3) at quarter resolution, calibrated from its images alone; the simulated
+    operator misplaces every board by a hidden hand error."""
     scene = quick_scene(load_scene(builtin_scene("fig4")))
-    rig = SimRig(true_light_scene(scene, 3), truth=perturbed_rig(scene.rig, 3))
+    rig = SimRig(true_light_scene(scene, 3), truth=perturbed_rig(scene.rig, 3), operator_seed=3)
     messages = []
-    cal = calibrate_rig(rig, scene, progress=messages.append)
+    cal = calibrate_rig(rig, scene.synthetic_part(), progress=messages.append)
     return scene, rig, cal, messages
 
 
 def test_01_recovers_the_hidden_rig(calibrated):
     """The issue's targets for lenslet centres (<= 0.1 px), projector mapping (<= 0.5 px) and responses (within
-    1 % of full scale). The pose rests on the view camera, here 256 x 192 pixels: at a quarter of the paper's
-    resolution it reaches about 1 mm and 0.2 degree, five times worse than at full resolution, where
-    `lft calibrate seeds` measures the issue's targets (docs/calibration.md)."""
+    1 % of full scale). The pose rests on the view camera, here 256 x 192 pixels, and on boards held by hand a few
+    millimetres and about a degree off where they were asked for: at a quarter of the paper's resolution it
+    reaches about 3 mm and 1.2 degree, several times worse than at full resolution, where `lft calibrate seeds`
+    measures the issue's targets (docs/calibration.md)."""
     scene, rig, cal, messages = calibrated
     e = calibration_errors(cal, rig.truth)
     assert e["lenslets_found"] == 120
     assert e["lenslet_centre_rms_px"] <= 0.1
     assert e["projector_mapping_rms_px"] <= 0.5
-    assert e["pose_position_rms_mm"] <= 1.5 and e["pose_rotation_deg"] <= 0.4
-    assert abs(e["pitch_rel_error"]) < 0.005
+    assert e["pose_position_rms_mm"] <= 3.5 and e["pose_rotation_deg"] <= 1.5
+    assert abs(e["pitch_rel_error"]) < 0.012
+    assert isinstance(rig._setup, RealScene)             # calibration leaves the rig in the real scene
+    assert len(rig.boards_held) == 2 + len(POSE_DEPTHS)  # brightness, exposure, one per pose depth
     assert e["camera_response_error"] <= 0.01 and e["projector_response_error"] <= 0.01
     assert e["ray_direction_rms_deg"] < 0.3 and e["lenslet_assignment_agreement"] > 0.999
     assert abs(e["exposure_rel_error"]) < 0.02 and e["projector_mixing_rel_error"] < 0.02

@@ -28,7 +28,9 @@ def test_01_protocol_and_bad_projector_image(variant):
     assert isinstance(rig, Rig)
     with pytest.raises(ValueError, match="projector image"):
         rig.project(np.zeros((10, 10, 3), np.uint8))
-    raw = rig.capture_lf()
+    frame = rig.capture_lf()
+    raw = frame.codes
+    assert frame.bits == 12 and rig.info.projector_shape == (150, 150)
     assert raw.shape == (300, 300, 3) and raw.dtype == np.uint16 and raw.max() < 4096
 
 
@@ -38,7 +40,7 @@ def test_02_captured_direction_points_at_the_object(variant):
     scene = _scene()
     rig = SimRig(scene, capture_spp=16)
     model = nominal_rig(scene.rig)
-    lf = model.decoder(16, 16)(rig.capture_lf())
+    lf = model.decoder(16, 16)(rig.capture_lf().codes)
     target = np.array([0.01, -0.008, 0.09])
     step = 2 * model.array.half_width / 16
     uu, vv = np.meshgrid(lf.u, lf.v)
@@ -59,10 +61,10 @@ def test_03_projected_light_reaches_the_real_scene(variant):
     rig = SimRig(scene, capture_spp=1)
     black = np.zeros((150, 150, 3), np.uint8)
     rig.project(black)
-    a = rig.capture_lf().astype(float)
+    a = rig.capture_lf().codes.astype(float)
     rig.project(black)
-    b = rig.capture_lf().astype(float)
+    b = rig.capture_lf().codes.astype(float)
     rig.project(np.full((150, 150, 3), 255, np.uint8))
-    c = rig.capture_lf().astype(float)
+    c = rig.capture_lf().codes.astype(float)
     assert np.abs(a - b).max() <= 1            # same world, only quantisation
     assert c.sum() > 1.2 * a.sum()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from lftransfer.rig.model import nominal_rig
+from lftransfer.rig.requests import Collimator
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import Perturbation, perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
@@ -34,7 +35,9 @@ def test_01_deviations_within_sizes_and_seeded():
 def test_02_collimated_source_images_lenslet_centres(variant):
     scene = _scene()
     truth = perturbed_rig(scene.rig, 5)
-    img = SimRig(scene, truth=truth, capture_spp=1).capture_collimated().astype(np.float64)[..., 1]
+    rig = SimRig(scene, truth=truth, capture_spp=1)
+    rig.setup(Collimator())
+    img = rig.capture_lf().codes.astype(np.float64)[..., 1]
     spots = truth.camera.device.ray_to_pixel(truth.array, np.arange(truth.array.K),
                                              np.tile([0.0, 0.0, 1.0], (truth.array.K, 1)))
     errors = []

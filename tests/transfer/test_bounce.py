@@ -8,6 +8,8 @@ import pytest
 from lftransfer.lightfield import (CameraModel, LensletCodec, LightField, LightFieldDecoder, LightFieldEncoder,
                                    ProjectorModel, ResponseCurve)
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.rig.base import Rig
+from lftransfer.rig.requests import LFCapture, LFFrame, RigInfo, ViewCapture
 from lftransfer.transfer.bounce import projector_gain, real_response
 
 U = V = 8
@@ -36,8 +38,20 @@ class LinearRig:
         self._pattern = None
 
     @property
+    def info(self):
+        return RigInfo(lf_camera=(self.camera.device.width, self.camera.device.height), lf_camera_bits=12,
+                       projector=(self.projector.device.width, self.projector.device.height), projector_bits=8,
+                       view=(8, 6), kind="fake")
+
+    @property
     def projector_shape(self):
-        return (self.projector.device.height, self.projector.device.width)
+        return self.info.projector_shape
+
+    def setup(self, request):
+        pass
+
+    def close(self):
+        pass
 
     def respond(self, lf: LightField) -> LightField:
         out = LightField.zeros(self.array, U, V)
@@ -47,12 +61,12 @@ class LinearRig:
     def project(self, image):
         self._pattern = image
 
-    def capture_lf(self):
+    def capture_lf(self, request=LFCapture()):
         emitted = self.prj_codec.image_to_lightfield(self.prj_encoder.emitted(self._pattern))
         captured = self.direct + self.respond(emitted)
-        return self.decoder.expose(self.cam_codec.lightfield_to_image(captured))
+        return LFFrame(codes=self.decoder.expose(self.cam_codec.lightfield_to_image(captured)), bits=12)
 
-    def capture_view(self):
+    def capture_view(self, request=ViewCapture()):
         raise NotImplementedError
 
 
@@ -77,7 +91,8 @@ def test_01_differencing_recovers_linear_response(rig):
     ls = LightField.zeros(rig.array, U, V)
     ls.data[...] = 0.01 * rng.random((rig.array.K, 1, 1, 3)) * ls.mask()[None, :, :, None]  # weak, per lenslet
     rig.project(np.zeros((*rig.projector_shape, 3), np.uint8))
-    direct = rig.decoder(rig.capture_lf())
+    assert isinstance(rig, Rig)
+    direct = rig.decoder(rig.capture_lf().codes)
     gain = projector_gain(ls, rig.projector.max_radiance)
     assert gain > 50          # a weak light field is amplified into the projector's range
     encoder = LightFieldEncoder(rig.array, rig.projector, U, V)

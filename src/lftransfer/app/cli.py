@@ -395,20 +395,49 @@ def calibrate_seeds_cmd(seeds: str = typer.Option("1,2,3,4,5", help="Hidden-trut
 def calibrate_lenslets(image: Path = typer.Argument(..., help="Image of a collimated on-axis source through the array "
                                                           "(8/16-bit PNG or TIFF, grey or colour)."),
                        lattice: str = typer.Option("hex", help="hex | rect"),
+                       kind: str = typer.Option("spots", help="spots (collimator image) | white (white image)"),
                        out: Path = typer.Option(Path("centres.csv"), help="CSV of lenslet centres (header x,y).")) -> None:
-    """Find every lenslet's centre (sub-pixel spot detection) and fit the lattice."""
+    """Find every lenslet's centre (sub-pixel spot or sub-image detection) and fit the lattice."""
     from lftransfer.calibration.images import CalibrationImageError, read_image
     from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres, write_centres_csv
 
     if lattice not in ("hex", "rect"):
         _fail(f"--lattice: expected hex or rect, got {lattice!r}")
+    if kind not in ("spots", "white"):
+        _fail(f"--kind: expected spots or white, got {kind!r}")
     try:
-        fit = find_lenslet_centres(read_image(image), lattice)
+        fit = find_lenslet_centres(read_image(image), lattice, kind=kind)
     except (CalibrationImageError, NoSpotsError) as exc:
         _fail(f"{image}: {exc}" if str(image) not in str(exc) else str(exc))
     write_centres_csv(out, fit)
     Console().print(fit.summary())
     Console().print(f"wrote {len(fit.centres)} lenslet centres to {out}")
+
+
+@calibrate_app.command("latency")
+def calibrate_latency_cmd(rig_file: Path = typer.Argument(..., help="Hardware rig file (TOML)."),
+                          tries: int = typer.Option(20, min=1, help="Marker flashes to time."),
+                          timeout_s: float = typer.Option(2.0, help="Longest wait for one marker, seconds.")) -> None:
+    """Measure the projector-to-LF-camera delay (median and max over the tries) and write settle_s into the rig
+    file."""
+    from lftransfer.rig.base import RigError
+    from lftransfer.rig.hardware import calibrate_latency
+    from lftransfer.rig.hardware.config import RigFileError
+
+    if not rig_file.is_file():
+        _fail(f"{rig_file}: no such file")
+    with Progress(TextColumn("[bold]{task.description:<40}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("marker flashes", total=tries)
+        try:
+            result = calibrate_latency(rig_file, tries, timeout_s=timeout_s, operator=_operator(bar),
+                                       progress=lambda i, n, d: bar.update(task, completed=i,
+                                                                           description=f"last delay {1000 * d:.0f} ms"))
+        except (RigError, RigFileError) as exc:
+            bar.stop()
+            _fail(str(exc))
+    Console().print(f"display -> capture delay: median {1000 * result.median_s:.1f} ms, max {1000 * result.max_s:.1f} ms "
+                    f"over {len(result.samples)} tries; wrote projector.settle_s = {result.settle_s:.3f} s into {rig_file}")
 
 
 @calibrate_app.command("intrinsics")

@@ -267,12 +267,18 @@ def board_plane(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple
     return R.T @ (point_cam - t), R.T @ normal_cam, rms
 
 
-def solve_array_pose(corners_model: np.ndarray, corners_world: np.ndarray) -> ArrayPose:
+def solve_array_pose(corners_model: np.ndarray, corners_world: np.ndarray, *,
+                     landing: Callable[[ArrayPose], np.ndarray] | None = None,
+                     start: ArrayPose | None = None) -> ArrayPose:
     """The array pose (similarity with the tilt, rotation, offset and scale of :class:`ArrayPose`).
 
     Args:
         corners_model: (N, 3) model-frame corner positions.
         corners_world: (N, 3) the same corners measured in the world.
+        landing: where the corners really are in the model frame for a candidate pose (N, 3), when that depends on
+            the pose (corners drawn by light on a board whose world plane is measured: :func:`corner_landing`);
+            None: at ``corners_model``.
+        start: initial pose (default: the identity).
 
     Returns:
         ArrayPose; ``rms_px`` is left for the caller, ``residual_mm`` holds the 3-D fit's RMS.
@@ -284,9 +290,12 @@ def solve_array_pose(corners_model: np.ndarray, corners_world: np.ndarray) -> Ar
         return ArrayPose(tilt=(p[0], p[1]), rotation=p[2], offset=(p[3], p[4]), scale=1.0 + p[5])
 
     def residual(p):
-        return (pose(p).model_to_world(corners_model) - corners_world).ravel()
+        candidate = pose(p)
+        model = corners_model if landing is None else landing(candidate)
+        return (candidate.model_to_world(model) - corners_world).ravel()
 
-    sol = least_squares(residual, np.zeros(6), x_scale=1e-3, method="lm")
+    x0 = np.zeros(6) if start is None else np.array([*start.tilt, start.rotation, *start.offset, start.scale - 1.0])
+    sol = least_squares(residual, x0, x_scale=1e-3, method="lm")
     out = pose(sol.x)
     out.residual_mm = float(1000 * np.sqrt(np.mean(np.sum(residual(sol.x).reshape(-1, 3) ** 2, axis=1))))
     return out
@@ -343,70 +352,87 @@ def corner_landing(array: LensArray, corners: np.ndarray, point: np.ndarray, nor
     return np.where((n > 0)[:, None], mean, corners)
 
 
-def calibrate_pose(rig: Rig, model: RigModel, scene, *, depth: float = 0.08, squares=(5, 4), square_m: float = 0.028,
-                   chart=(7, 5, 0.022), spp: int = 16, refinements: int = 3,
+POSE_DEPTHS = (0.07, 0.12)      # metres: the boards' distances from the array (two, for parallax)
+
+
+def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, squares=(5, 4), square_m: float = 0.028,
+                   chart=(7, 5, 0.022), spp: int = 16,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
-    """Ask for the board, find its plane, project the checkerboard light field and its inverse, solve the pose.
+    """Ask for a board at each depth, find its plane, project the checkerboard light field and its inverse on it,
+    solve the pose from all boards at once.
 
     The board is asked for where the checkerboard is drawn (``depth`` in front of the array, turned towards the
     view camera); the operator puts it there only roughly. Its plane is measured in the world from the printed
-    chessboard; the pose is first solved as if the corners lay where they were drawn, then refined
-    ``refinements`` times with the corners where their rays land on the measured plane (:func:`corner_landing`),
-    which carries the board's depth and tilt errors into the fit instead of into the pose.
+    chessboard. A corner drawn by light lands where its rays meet the real board (:func:`corner_landing`), which
+    depends on the pose: the fit solves the pose with each corner where it lands for the candidate pose, so the
+    board's placement errors go into the fit, not into the pose. Seen on one board, rays along the array's axis
+    hide how the array is tilted (a tilt and an offset move every corner alike); boards at two depths see the
+    rays' parallax and fix the tilt.
 
     Args:
-        rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Board` with a printed chessboard and
-            shows the light fields on it.
+        rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Board` with a printed chessboard at each
+            depth and shows the light fields on it.
         model: the calibrated rig in the model frame (lenslets, projector mapping, distortion).
         scene: the scene (view camera, angular samples).
-        depth: distance of the board's centre from the array, metres (model frame).
+        depths: distances of the boards' centres from the array, metres (model frame).
         squares, square_m: layout of the projected checkerboard.
         chart: (columns, rows, square size in metres) of the printed chessboard.
         spp: view camera quality (samples per pixel of a simulated camera) of the calibration photographs.
-        refinements: fits with the corners moved onto the measured board plane.
         progress: called with a message per capture.
 
     Returns:
-        (ArrayPose, diagnostics: the view images, the corners and the board's placement error as measured, for
-        the report).
+        (ArrayPose, diagnostics: per board the view images, the corners and its placement error as measured, for
+        the report; the first board's also at the top level).
     """
-    board = board_pattern(scene.view, depth, squares, square_m)
     n = scene.rig.angular_samples
     level = 0.9 * model.projector.max_radiance
-    pattern, inverse = checkerboard_lightfield(model.array, n, n, board, level)
+    encoder = model.encoder(n, n)
     flood = LightField.zeros(model.array, n, n)
     flood.data[...] = 0.5 * level
-    encoder = model.encoder(n, n)
     size = ((chart[0] + 2) * chart[2], (chart[1] + 2) * chart[2])
-    rig.setup(Board(centre=tuple(board.centre), normal=tuple(board.normal), size=size, chart=tuple(chart)))
-    images = {}
-    for name, lf in (("flood", flood), ("pattern", pattern), ("inverse", inverse)):
-        if progress:
-            progress(f"pose: board photographed with the {name} light field")
-        rig.project(encoder(lf))
-        images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
-    rig.project(rig.info.black())
-    point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
-    corners_model = board.corners()
-    px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view)
-    if found.sum() < 4:
-        raise PoseError(f"found {int(found.sum())} of {len(found)} projected corners in the view camera image; "
-                        "is the board in view and lit?")
-    world = backproject(scene.view, px[found], point, normal)
-    drawn = corners_model[found]
-    pose = solve_array_pose(drawn, world)
-    for _ in range(refinements):
-        p_m = pose.world_to_model(point[None])[0]
-        n_m = pose.direction_to_model(normal[None])[0]
-        pose = solve_array_pose(corner_landing(model.array, drawn, p_m, n_m), world)
-    landed = corner_landing(model.array, drawn, pose.world_to_model(point[None])[0],
-                            pose.direction_to_model(normal[None])[0])
-    pose.corners_px = px[found]
-    pose.reprojected = project(scene.view, pose.model_to_world(landed))
+    boards = []
+    for depth in depths:
+        board = board_pattern(scene.view, depth, squares, square_m)
+        pattern, inverse = checkerboard_lightfield(model.array, n, n, board, level)
+        rig.setup(Board(centre=tuple(board.centre), normal=tuple(board.normal), size=size, chart=tuple(chart)))
+        images = {}
+        for name, lf in (("flood", flood), ("pattern", pattern), ("inverse", inverse)):
+            if progress:
+                progress(f"pose: board at {100 * depth:.0f} cm photographed with the {name} light field")
+            rig.project(encoder(lf))
+            images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
+        rig.project(rig.info.black())
+        point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
+        px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view)
+        if found.sum() < 4:
+            raise PoseError(f"board at {100 * depth:.0f} cm: found {int(found.sum())} of {len(found)} projected "
+                            "corners in the view camera image; is the board in view and lit?")
+        boards.append({"board": board, "point": point, "normal": normal, "chart_rms": chart_rms, "px": px[found],
+                       "found": found, "images": images, "normalised": norm,
+                       "world": backproject(scene.view, px[found], point, normal),
+                       "drawn": board.corners()[found]})
+
+    def landing(candidate: ArrayPose) -> np.ndarray:
+        return np.concatenate([corner_landing(model.array, b["drawn"], candidate.world_to_model(b["point"][None])[0],
+                                              candidate.direction_to_model(b["normal"][None])[0]) for b in boards])
+
+    drawn = np.concatenate([b["drawn"] for b in boards])
+    world = np.concatenate([b["world"] for b in boards])
+    pose = solve_array_pose(drawn, world, landing=landing, start=solve_array_pose(drawn, world))
+    pose.corners_px = np.concatenate([b["px"] for b in boards])
+    pose.reprojected = project(scene.view, pose.model_to_world(landing(pose)))
     pose.rms_px = float(np.sqrt(np.mean(np.sum((pose.reprojected - pose.corners_px) ** 2, axis=1))))
-    pose.pnp_rms_px = chart_rms
-    n_m = pose.direction_to_model(normal[None])[0]
-    placement = {"depth_mm": float(1000 * (pose.world_to_model(point[None])[0] - board.centre) @ n_m),
-                 "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ board.normal, -1.0, 1.0))))}
-    return pose, {"images": images, "normalised": norm, "found": found,
-                  "predicted": project(scene.view, corners_model), "board_placement": placement}
+    pose.pnp_rms_px = float(max(b["chart_rms"] for b in boards))
+    per_board = []
+    for b in boards:
+        n_m = pose.direction_to_model(b["normal"][None])[0]
+        if n_m @ b["board"].normal < 0:                   # the chart's normal may face either way
+            n_m = -n_m
+        placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["board"].centre) @ n_m),
+                     "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["board"].normal, -1.0, 1.0))))}
+        per_board.append({"images": b["images"], "normalised": b["normalised"], "found": b["found"],
+                          "predicted": project(scene.view, b["board"].corners()), "board_placement": placement,
+                          "depth_m": float(b["board"].centre[2])})
+    first = per_board[0]
+    worst = max(per_board, key=lambda d: abs(d["board_placement"]["depth_mm"]))["board_placement"]
+    return pose, {**first, "board_placement": worst, "boards": per_board}

@@ -12,7 +12,8 @@ A recording is a folder::
     projector/<digest[:16]>.png   each projector image once, as projected (8- or 16-bit RGB PNG), for viewing
     lf/<event:06d>.png            LF camera frames: 16-bit RGB PNG of the codes as they are (``bits`` bits, not
                                   scaled to 16 bits, so a viewer shows a 12-bit frame dark)
-    view/<event:06d>.exr          view camera frames: float32 RGB OpenEXR (PIZ, lossless), linear radiance
+    view/<event:06d>.pfm          view camera frames: float32 RGB portable float map (raw float32), linear
+                                  radiance; .exr (OpenEXR, PIZ) with ``view_format="exr"``
 
 Events (``manifest["events"]``, ``index`` = position, which also names the files)::
 
@@ -24,14 +25,19 @@ Events (``manifest["events"]``, ``index`` = position, which also names the files
 
 Formats: the LF codes are uint16 and a 16-bit PNG holds them losslessly and opens in any viewer; it is written
 with OpenCV (zlib level 1, Huffman-only, "sub" filter: sensor noise leaves little for LZ77 to find, so this is
-about twice as fast as OpenCV's default for the same size). Mitsuba's ``Bitmap`` keeps float32 when it writes
-OpenEXR (PIZ, lossless): every bit pattern, NaN payloads and -0.0 included, reads back unchanged. An answer
-that is not (H, W, 3) uint8/uint16 (LF) or float32 (view) is stored as ``.npy`` so that it is still exact.
+about twice as fast as OpenCV's default for a file 5 % smaller). View frames are float32: a portable float map
+(OpenCV) stores their bits as they are. Mitsuba's ``Bitmap`` also keeps float32 when it writes OpenEXR (PIZ,
+lossless: every bit pattern, NaN payloads and -0.0 included, reads back unchanged), but PIZ gains about 1 % on
+noisy float32 and costs some 0.5-0.9 CPU seconds per 1024 x 768 frame against 0.02-0.04 s for PFM, so EXR is
+the option, PFM the default. An answer that is not (H, W, 3) uint8/uint16 (LF) or float32 (view) is stored as
+``.npy``, so that it too comes back exactly.
 
-Encoding a frame takes longer than a physical camera's capture (a 2048 x 1536 PNG some 0.3 s, a 1024 x 768
-EXR some 0.4 s on two cores), so by default it runs on one background thread, in call order, while the rig
-takes its next frame: a capture call only copies its answer (a few ms). At most ``max_pending`` events wait
-to be stored; a storage failure is raised (as :class:`~lftransfer.rig.base.RigError`) by the next call.
+Encoding a 2048 x 1536 LF frame takes longer than a fast camera's capture (0.3-0.6 s on two cores), so by
+default frames are encoded and written on ``workers`` background threads while the rig takes its next frames,
+and one more thread adds each event to the manifest in call order once its file is written: a capture call
+then only copies its answer (a few ms) as long as the storage keeps up. At most ``max_pending`` events wait to
+be stored (then a call waits); a storage failure is raised (as :class:`~lftransfer.rig.base.RigError`) by the
+next call, :meth:`RecordingRig.flush` or :meth:`RecordingRig.close`.
 """
 
 from __future__ import annotations
@@ -104,11 +110,12 @@ def _write_bytes(path: Path, data) -> None:
 
 
 def _suffix(a: np.ndarray, image_format: str) -> str:
-    """File suffix an array is stored with: ".png" (``image_format`` "png"), ".exr" ("exr") or ".npy"."""
+    """File suffix array ``a`` is stored with: "." + ``image_format`` ("png": (H, W, 3) uint8/uint16; "exr",
+    "pfm": (H, W, 3) float32), ".npy" for any other array."""
     if image_format == "png" and _is_rgb(a, (np.dtype(np.uint8), np.dtype(np.uint16))):
         return ".png"
-    if image_format == "exr" and _is_rgb(a, (np.dtype(np.float32),)):
-        return ".exr"
+    if image_format in ("exr", "pfm") and _is_rgb(a, (np.dtype(np.float32),)):
+        return "." + image_format
     return ".npy"
 
 
@@ -116,7 +123,8 @@ def _store(path: Path, a: np.ndarray) -> str:
     """Write array ``a`` to ``path`` in the format its suffix names, atomically.
 
     Args:
-        path: destination ending in ".png" ((H, W, 3) uint8/uint16, RGB), ".exr" ((H, W, 3) float32) or ".npy".
+        path: destination ending in ".png" ((H, W, 3) uint8/uint16, RGB), ".exr" or ".pfm" ((H, W, 3) float32)
+            or ".npy" (any array).
         a: the array.
 
     Returns:
@@ -126,10 +134,11 @@ def _store(path: Path, a: np.ndarray) -> str:
     if path.suffix == ".exr":
         write_exr(path, a)
         return hashlib.sha256(path.read_bytes()).hexdigest()
-    if path.suffix == ".png":
-        ok, buf = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2BGR), _PNG_PARAMS)
+    if path.suffix in (".png", ".pfm"):
+        params = _PNG_PARAMS if path.suffix == ".png" else []
+        ok, buf = cv2.imencode(path.suffix, cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2BGR), params)
         if not ok:
-            raise RuntimeError(f"OpenCV could not encode a {a.shape} {a.dtype} PNG")
+            raise RuntimeError(f"OpenCV could not encode a {a.shape} {a.dtype} image as {path.suffix}")
         data = memoryview(buf)
     else:
         stream = io.BytesIO()
@@ -143,10 +152,10 @@ def _decode(path: Path, data: bytes) -> np.ndarray:
     """The array a file written by :func:`_store` holds; ``data`` are its (already verified) bytes."""
     if path.suffix == ".exr":
         return read_exr(path)
-    if path.suffix == ".png":
+    if path.suffix in (".png", ".pfm"):
         a = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         if a is None:
-            raise ValueError("not a PNG OpenCV can read")
+            raise ValueError(f"not a {path.suffix} file OpenCV can read")
         return cv2.cvtColor(a, cv2.COLOR_BGR2RGB) if a.ndim == 3 and a.shape[2] == 3 else a
     return np.load(io.BytesIO(data), allow_pickle=False)
 
@@ -170,14 +179,17 @@ def _now() -> str:
 # -- recording ------------------------------------------------------------------------------------------------
 
 class _Storer:
-    """Runs a recording's storage jobs in call order, on one background thread or in the caller's.
+    """Runs a recording's storage: file writing on ``workers`` threads, each event's commit (its manifest entry)
+    on one more thread in call order; with ``workers`` 0 everything runs inside the call.
 
-    After the first failure later jobs are skipped (the recording would have a hole) and every call raises it.
+    After the first failure later commits are skipped (the recording would have a hole) and every call raises
+    it.
     """
 
-    def __init__(self, folder: Path, background: bool, max_pending: int) -> None:
+    def __init__(self, folder: Path, workers: int, max_pending: int) -> None:
         self._folder = folder
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="lft-recording") if background else None
+        self._files = ThreadPoolExecutor(workers, thread_name_prefix="lft-recording-file") if workers > 0 else None
+        self._commits = ThreadPoolExecutor(1, thread_name_prefix="lft-recording") if workers > 0 else None
         self._pending: deque[Future] = deque()
         self._max_pending = max(1, int(max_pending))
         self._error: BaseException | None = None
@@ -199,28 +211,32 @@ class _Storer:
             raise RigError(f"recording to {self._folder}: storing failed ({type(self._error).__name__}: "
                            f"{self._error}); the recording holds what came before") from self._error
 
-    def submit(self, job: Callable[[], None]) -> None:
-        """Run ``job`` after every earlier one; waits while ``max_pending`` jobs are queued."""
+    def submit(self, commit: Callable[[object], None], write: Callable[[], object] | None = None) -> None:
+        """Run ``write()`` (if given), then ``commit(what write returned)`` after every earlier commit; waits
+        while ``max_pending`` events are queued."""
         self.check()
-        if self._pool is None:
+        if self._commits is None:
             try:
-                self._run(job)
+                self._run(lambda: commit(write() if write is not None else None))
             except Exception:
                 self.check()
             return
         while len(self._pending) >= self._max_pending:
             self._pending.popleft().exception()
-        self._pending.append(self._pool.submit(self._run, job))
+        written = self._files.submit(write) if write is not None else None
+        self._pending.append(self._commits.submit(
+            self._run, lambda: commit(written.result() if written is not None else None)))
 
     def flush(self) -> None:
-        """Wait for every queued job; raise the first failure."""
+        """Wait for every queued event; raise the first failure."""
         while self._pending:
             self._pending.popleft().exception()
         self.check()
 
     def shutdown(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
+        for pool in (self._commits, self._files):
+            if pool is not None:
+                pool.shutdown(wait=True)
 
 
 class RecordingRig:
@@ -236,17 +252,26 @@ class RecordingRig:
         folder: where the recording goes (created; must not hold a recording already).
         meta: what the caller wants kept with the recording (e.g. the scene file and the truth seed); stored
             as JSON, values JSON does not know (paths, ...) as their ``str``.
-        background: store frames on a background thread (default) instead of inside each call.
+        view_format: "pfm" (portable float map through OpenCV, raw float32) or "exr" (OpenEXR through
+            Mitsuba, lossless PIZ: about 1 % smaller, some 20 times slower to write) for view frames.
+        workers: threads that encode and write frames (they overlap with the rig's next captures and with one
+            another); 0: store everything inside each call, no threads; None: 2 on four or more CPU cores,
+            else 1.
         max_pending: events that may wait to be stored before a call waits for the storage (memory bound:
-            each pending LF frame is a copy of it).
+            each pending frame is a copy of it).
 
     Raises:
         FileExistsError: ``folder`` holds a recording already.
     """
 
     def __init__(self, inner: Rig, folder: str | os.PathLike, *, meta: dict | None = None,
-                 background: bool = True, max_pending: int = 4) -> None:
+                 view_format: str = "pfm", workers: int | None = None, max_pending: int = 6) -> None:
+        if view_format not in ("pfm", "exr"):
+            raise ValueError(f"view_format must be 'pfm' or 'exr', got {view_format!r}")
+        if workers is None:
+            workers = 2 if (os.cpu_count() or 1) >= 4 else 1
         self.folder = Path(folder)
+        self._view_format = view_format
         if (self.folder / MANIFEST).exists():
             raise FileExistsError(f"{self.folder} holds a recording already ({MANIFEST}); choose a new folder")
         self._inner = inner
@@ -263,7 +288,7 @@ class RecordingRig:
         self._closed = False
         self._mitsuba_ready = False
         self._write_manifest()
-        self._storer = _Storer(self.folder, background, max_pending)
+        self._storer = _Storer(self.folder, int(workers), max_pending)
 
     # -- the protocol
 
@@ -283,7 +308,7 @@ class RecordingRig:
         self._inner.setup(request)
         self._setup = request
         entry = {"index": self._next_index(), "event": "setup", "setup": describe(request)}
-        self._storer.submit(lambda: self._events.append(entry))
+        self._storer.submit(lambda _: self._events.append(entry))
 
     def project(self, image: np.ndarray) -> None:
         """Forward the projector image ((H, W, 3) uint8 or uint16) and record its digest; each distinct image
@@ -300,14 +325,17 @@ class RecordingRig:
             self._saved_digests.add(digest)
             copy = image.copy()
 
-        def job() -> None:
-            if copy is not None:
-                file = f"projector/{digest[:16]}{_suffix(copy, 'png')}"
-                self._projector_files[digest] = (file, _store(self.folder / file, copy))
+        def write() -> tuple[str, str]:
+            file = f"projector/{digest[:16]}{_suffix(copy, 'png')}"
+            return file, _store(self.folder / file, copy)
+
+        def commit(written: tuple[str, str] | None) -> None:
+            if written is not None:
+                self._projector_files[digest] = written
             entry["file"], entry["sha256"] = self._projector_files[digest]
             self._events.append(entry)
 
-        self._storer.submit(job)
+        self._storer.submit(commit, write if copy is not None else None)
 
     def capture_lf(self, request: LFCapture = LFCapture()) -> LFFrame:
         """Forward the capture; record the request and the frame (its codes as a 16-bit PNG)."""
@@ -318,23 +346,23 @@ class RecordingRig:
         codes = np.array(frame.codes, copy=True)
         entry = self._capture_entry("capture_lf", request, codes, "lf", "png", elapsed)
         entry.update(bits=int(frame.bits), exposure_scale=float(frame.exposure_scale))
-        self._storer.submit(lambda: self._store_capture(entry, codes))
+        self._storer.submit(self._commit_capture(entry), self._write_capture(entry, codes))
         return frame
 
     def capture_view(self, request: ViewCapture = ViewCapture()) -> ViewFrame:
-        """Forward the capture; record the request and the frame (float32 OpenEXR)."""
+        """Forward the capture; record the request and the frame (float32 PFM or OpenEXR)."""
         self._check_open()
         start = time.perf_counter()
         frame = self._inner.capture_view(request)
         elapsed = time.perf_counter() - start
         radiance = np.array(frame.radiance, copy=True)
-        entry = self._capture_entry("capture_view", request, radiance, "view", "exr", elapsed)
+        entry = self._capture_entry("capture_view", request, radiance, "view", self._view_format, elapsed)
         if entry["file"].endswith(".exr") and not self._mitsuba_ready:
             from lftransfer.backend import mitsuba
 
             mitsuba()                     # pick the variant here, not on the storage thread
             self._mitsuba_ready = True
-        self._storer.submit(lambda: self._store_capture(entry, radiance))
+        self._storer.submit(self._commit_capture(entry), self._write_capture(entry, radiance))
         return frame
 
     def flush(self) -> None:
@@ -390,12 +418,20 @@ class RecordingRig:
                 "shape": list(a.shape), "dtype": a.dtype.str, "file": f"{folder}/{index:06d}{_suffix(a, image_format)}",
                 "capture_s": round(elapsed, 6)}
 
-    def _store_capture(self, entry: dict, a: np.ndarray) -> None:
-        start = time.perf_counter()
-        entry["sha256"] = _store(self.folder / entry["file"], a)
-        entry["store_s"] = round(time.perf_counter() - start, 6)
-        self._events.append(entry)
-        self._write_manifest()
+    def _write_capture(self, entry: dict, a: np.ndarray) -> Callable[[], tuple[str, float]]:
+        def write() -> tuple[str, float]:
+            start = time.perf_counter()
+            return _store(self.folder / entry["file"], a), round(time.perf_counter() - start, 6)
+
+        return write
+
+    def _commit_capture(self, entry: dict) -> Callable[[tuple[str, float]], None]:
+        def commit(written: tuple[str, float]) -> None:
+            entry["sha256"], entry["store_s"] = written
+            self._events.append(entry)
+            self._write_manifest()
+
+        return commit
 
     def _write_manifest(self) -> None:
         write_text(self.folder / MANIFEST, json.dumps(self._manifest, indent=1) + "\n")
@@ -442,7 +478,8 @@ class ReplayRig:
             self._projected_digests = {e["digest"] for e in events if e["event"] == "project"}
             for e in events:
                 if e["event"] in _CAPTURES:
-                    missing = [f for f in _CAPTURE_FIELDS if f not in e]
+                    fields = _CAPTURE_FIELDS + (("bits", "exposure_scale") if e["event"] == "capture_lf" else ())
+                    missing = [f for f in fields if f not in e]
                     if missing:
                         raise KeyError(f"event {e.get('index')} ({e['event']}) lacks {missing}")
                     self._answers.setdefault(e["key"], []).append(e)
@@ -468,6 +505,11 @@ class ReplayRig:
     def info(self) -> RigInfo:
         """The recorded rig's info with kind "replay" (the recorded one is :attr:`recorded_info`)."""
         return self._info
+
+    @property
+    def meta(self) -> dict:
+        """What the recording's caller stored with it (``RecordingRig(meta=...)``)."""
+        return self.manifest.get("meta") or {}
 
     def setup(self, request: Setup) -> None:
         """Follow a set-up (:data:`~lftransfer.rig.requests.Setup`)."""
@@ -579,7 +621,7 @@ class ReplayRig:
             recorded = sorted({_json(e["request"]) for e in same_image})
             listing = f": {', '.join(recorded[:6])}{' ...' if len(recorded) > 6 else ''}" if recorded else ""
             raise ReplayError(
-                f"replay of {self.folder}: the recording holds no answer to {what} {self._state()}; it holds "
+                f"replay of {self.folder}: {what} {self._state()} is not in the recording; it holds "
                 f"{len(same_setup)} capture(s) under this set-up, {len(same_image)} of them with this projector "
                 f"image{listing}")
         if served >= len(answers):

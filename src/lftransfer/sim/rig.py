@@ -113,6 +113,7 @@ class SimRig:
         self._setup: Setup = RealScene()
         self._world = self._real                                  # what the array faces now
         self._boards = 0
+        self.boards_held: list[np.ndarray] = []                 # (4, 4) where each board really stood (truth)
         self._view = scene.view
         self._view_sensor = mi.load_dict(sensor_dict(self._view.origin, self._view.target, self._view.up,
                                                      self._view.fov_deg, *self._view.resolution))
@@ -305,8 +306,9 @@ class SimRig:
         return held
 
     def _board_renderer(self, request: Board) -> HalfSpaceRenderer:
-        self.last_board_to_world = self._held(request)          # rig frame (verification only)
-        to_world = self._world_to_array @ self.last_board_to_world
+        held = self._held(request)
+        self.boards_held.append(held)                            # rig frame (verification only)
+        to_world = self._world_to_array @ held
         shapes = {"lens_array_absorber": self._absorber, **board_shapes(to_world, request.albedo, request.chart)}
         return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)
 
