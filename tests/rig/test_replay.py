@@ -444,8 +444,6 @@ def test_11_describe_round_trip_and_request_key(build, request, projected):
     assert json.loads(key) == {"setup": data, "projected": digest, "capture": describe(request)}
 
 
-@pytest.mark.xfail(strict=True, reason="requests.py: Collimator/Board normalise their direction/normal again "
-                   "when rebuilt, which can move the last bit (setup_from_json(describe(s)) != s)")
 def test_12_setup_from_json_is_exact():
     s = Collimator(direction=(0.4355934636912273, 0.4441463831072985, 0.5))
     assert setup_from_json(describe(s)) == s

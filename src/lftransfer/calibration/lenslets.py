@@ -124,6 +124,8 @@ _F_RADIAL = 10.0           # radial terms kept if F of (homography vs homography
 _WHITE_SMOOTH = 0.2        # white images: detection smoothing sigma, pitches
 _WHITE_WINDOW = 0.5        # ... centroid window radius, pitches
 _WHITE_BRIGHT = 0.3        # ... a sub-image's brightness: mean within this radius (pitches) of its centre
+_CELL_DISK = 0.72          # ... second pass: the cell window is cut by a disk of this radius (pitches; beyond the
+                           #     corners of hex and rect cells) or of the distance to the image border
 _WHITE_REL = 0.3           # ... a peak's contrast at least this fraction of the typical peak's
 _WHITE_ENVELOPE = 0.1      # ... where the vignetting envelope is at least this fraction of its top
 
@@ -324,7 +326,7 @@ def find_lenslet_centres(image: np.ndarray, lattice: str, *, expected_shape: tup
                                    "pass kind='white'") from None
             raise
     else:
-        points, sigma = _detect_white(img)
+        points, sigma = _detect_white(img, lattice)
     if len(points) < 4:
         what = "spot(s)" if kind == "spots" else "sub-image(s)"
         raise NoSpotsError(f"found {len(points)} lenslet {what}; at least 4 are needed to fit a lattice")
@@ -589,7 +591,7 @@ def _windowed_centroids(res: np.ndarray, xy: np.ndarray, sigma: float, pitch: fl
 
 
 # ------------------------------------------------------------------------------------------- white images
-def _detect_white(img: np.ndarray) -> tuple[np.ndarray, float]:
+def _detect_white(img: np.ndarray, lattice: str) -> tuple[np.ndarray, float]:
     """Sub-pixel sub-image centres ``(N, 2)`` (x, y) pixels of a white image and the centroid window's radius.
 
     The first pass uses a window of half the pitch everywhere, the second one of half the local pitch of each
@@ -631,17 +633,17 @@ def _detect_white(img: np.ndarray) -> tuple[np.ndarray, float]:
     gamma, bright, typical = _relative_gradient(img, centres, _WHITE_BRIGHT * local_pitch, local_pitch)
     nominal = _WHITE_WINDOW * local_pitch
     extent = _subimage_extent(img, centres, nominal, bright)
-    # Second pass: window of half the local pitch, smaller near the image border (down to the sub-images' own
-    # extent, if they do not touch), so that it stays inside the image; a sub-image cut by the border is
-    # dropped.
-    extent = nominal - 0.5 if extent is None else np.full(len(centres), extent)
-    radius = np.minimum(nominal, _inset(centres, (h, w)))
+    axes, apothem = _local_cells(centres, local_pitch, lattice)
+    # Second pass: the window is the sub-image's lattice cell, cut by a disk that keeps it inside the image
+    # near the border (down to the sub-images' own extent, or half the pitch if they touch); a sub-image cut
+    # by the border is dropped.
+    extent = nominal - 0.5 if extent is None else np.minimum(extent, nominal - 0.5)
+    radius = np.minimum(_CELL_DISK * local_pitch, _inset(centres, (h, w)))
     keep = (bright >= 0.75 * typical) & (radius >= extent)
-    extent = extent[keep]
-    radius = radius[keep]
-    centres, ok = _disk_centroids(img, centres[keep], radius, gamma[keep])
-    ok[ok] &= np.minimum(radius[ok], _inset(centres[ok], (h, w)) + 0.5) >= extent
-    centres, radius = centres[ok], radius[ok]
+    extent, radius, nominal = extent[keep], radius[keep], nominal[keep]
+    centres, ok = _disk_centroids(img, centres[keep], radius, gamma[keep], axes[keep], apothem[keep])
+    ok[ok] &= np.minimum(radius[ok], _inset(centres[ok], (h, w)) + 0.5) >= extent[ok]
+    centres, radius = centres[ok], np.minimum(radius[ok], nominal[ok])
     if len(centres) >= 2:                                        # two peaks that found one sub-image: one
         pairs = cKDTree(centres).query_pairs(0.3 * pitch, output_type="ndarray")
         if len(pairs):
@@ -691,6 +693,49 @@ def _subimage_extent(img: np.ndarray, centres: np.ndarray, radius: np.ndarray, b
     if not (len(low) and peak > floor) or (peak_at + low[0] + 1) * 0.25 > 0.98 * float(np.min(radius[sel])):
         return None
     return (peak_at + low[0] + 1) * 0.25
+
+
+def _local_cells(centres: np.ndarray, local_pitch: np.ndarray, lattice: str) -> tuple[np.ndarray, np.ndarray]:
+    """Each sub-image's lattice cell: directions to its neighbours and half their distances.
+
+    The neighbours within 0.7..1.3 local pitches are sorted onto the lattice's K axes (3 for ``hex``, 2 for
+    ``rect``) by their direction relative to the lattice's overall orientation; an axis' direction is the
+    mean of its neighbours' (both signs) and its apothem half their mean distance, so the cell is centrally
+    symmetric and follows the local distortion. Axes without neighbours take the overall direction and the
+    mean of the other apothems (or half the local pitch).
+
+    Returns:
+        ``(N, K, 2)`` unit axes and ``(N, K)`` apothems, pixels.
+    """
+    n = len(centres)
+    kk = 3 if lattice == "hex" else 2
+    d, j = cKDTree(centres).query(centres, k=min(2 * kk + 3, n))
+    d, j = d[:, 1:], j[:, 1:]
+    near = (d > 0.7 * local_pitch[:, None]) & (d < 1.3 * local_pitch[:, None]) & (j < n)
+    vec = centres[np.minimum(j, n - 1)] - centres[:, None, :]
+    phi = np.arctan2(vec[..., 1], vec[..., 0])
+    z = np.exp(2j * kk * phi)[near]
+    theta = float(np.angle(np.mean(z))) / (2 * kk) if len(z) else 0.0
+    sector = np.rint((phi - theta) / (math.pi / kk)).astype(np.int64)
+    axis = sector % kk
+    sign = np.where(sector % (2 * kk) < kk, 1.0, -1.0)                # the neighbours on both sides, one way
+    unit = vec / np.maximum(d, 1e-9)[..., None] * sign[..., None]
+    axes = np.zeros((n, kk, 2))
+    apothem = np.zeros((n, kk))
+    for k in range(kk):
+        on = near & (axis == k)
+        cnt = on.sum(axis=1)
+        mean_dir = np.einsum("nm,nmi->ni", on.astype(np.float64), unit)
+        default = np.array([math.cos(theta + k * math.pi / kk), math.sin(theta + k * math.pi / kk)])
+        norm = np.linalg.norm(mean_dir, axis=1, keepdims=True)
+        axes[:, k] = np.where((cnt > 0)[:, None] & (norm > 0), mean_dir / np.maximum(norm, 1e-12), default)
+        apothem[:, k] = np.where(cnt > 0, 0.5 * (on * d).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)           # no neighbour on any axis: half the pitch
+        fill = np.nanmean(apothem, axis=1)
+    fill = np.where(np.isfinite(fill), fill, 0.5 * local_pitch)
+    apothem = np.where(np.isfinite(apothem), apothem, fill[:, None])
+    return axes, apothem
 
 
 def _local_pitch(xy: np.ndarray, pitch: float) -> np.ndarray:
@@ -766,14 +811,15 @@ def _envelope(img: np.ndarray, pitch: float) -> np.ndarray:
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR).astype(np.float64)
 
 
-def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius: float, gamma: np.ndarray | None = None,
-                    iterations: int = 60, chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius, gamma: np.ndarray | None = None,
+                    axes: np.ndarray | None = None, apothem: np.ndarray | None = None, iterations: int = 60,
+                    chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
     """Centroids of the image within a flat disk window (soft edge) iterated to their fixed points.
 
     The fixed point of a centrally symmetric window is the centre of any centrally symmetric sub-image it
-    holds, neighbours included (a lattice is centrally symmetric about each node). The window's weight is
-    ``clip(((radius + 1)^2 - r^2) / (4 radius), 0, 1)``: 1 within about ``radius - 1``, 0 beyond
-    ``radius + 1``. The iteration converges geometrically (the slivers of the neighbours at the window's rim
+    holds, neighbours included (a lattice is centrally symmetric about each node, to first order in the
+    distortion). The disk window's weight is ``clip(((radius + 1)^2 - r^2) / (4 radius), 0, 1)``: 1 within
+    about ``radius - 1``, 0 beyond ``radius + 1``. The iteration converges geometrically (the slivers of the neighbours at the window's rim
     move with it); it is sped up by extrapolating the geometric series of the steps (Aitken). The patches
     are cut around the rounded start with a 3 px margin around the window, the most a centre may move.
 
@@ -783,6 +829,10 @@ def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius: float, gamma: np.nd
         radius: ``(N,)`` window radii, pixels.
         gamma: ``(N, 2)`` relative brightness gradient (1/px) of each sub-image's surroundings, divided out of
             its window (``image / (1 + gamma . (x - start))``), or None.
+        axes: ``(N, K, 2)`` unit vectors towards the neighbours (K = 3 for ``hex``, 2 for ``rect``) and
+        apothem: ``(N, K)`` half the neighbour distances, pixels: the window is also cut to the sub-image's
+            lattice cell, ``|axis . (x - c)| <= apothem - 1`` (weight falling from 1 to 0 over the 2 px inside
+            that), which keeps the neighbours of touching sub-images out; or None.
         iterations: most iterations per stage.
         chunk: sub-images processed at once (memory).
 
@@ -797,6 +847,10 @@ def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius: float, gamma: np.nd
     off = offi.astype(np.float32)
     outer2 = ((radius + 1.0) ** 2).astype(np.float32)[:, None, None]
     inv_ramp = (1.0 / (4.0 * radius)).astype(np.float32)[:, None, None]
+    if axes is not None:
+        ax32 = np.asarray(axes, dtype=np.float32)
+        import os
+        ap32 = (np.asarray(apothem, dtype=np.float64) - float(os.environ.get("CELLOFF", "1"))).astype(np.float32)
     start = np.asarray(xy, dtype=np.float64)
     p = start.copy()
     ok = np.ones(len(p), bool)
@@ -824,7 +878,14 @@ def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius: float, gamma: np.nd
                 break
             qa = q[a].astype(np.float32)
             r2 = (off[None, None, :] - qa[:, 0, None, None]) ** 2 + (off[None, :, None] - qa[:, 1, None, None]) ** 2
-            wv = np.clip((outer2[sl][a] - r2) * inv_ramp[sl][a], 0.0, 1.0) * patch[a]
+            wgt = np.clip((outer2[sl][a] - r2) * inv_ramp[sl][a], 0.0, 1.0)
+            if axes is not None:                                 # cut to the cell
+                dxa = off[None, None, :] - qa[:, 0, None, None]
+                dya = off[None, :, None] - qa[:, 1, None, None]
+                for k in range(ax32.shape[1]):
+                    proj = np.abs(ax32[sl][a, k, 0, None, None] * dxa + ax32[sl][a, k, 1, None, None] * dya)
+                    wgt = np.minimum(wgt, np.clip(0.5 * (ap32[sl][a, k, None, None] - proj), 0.0, 1.0))
+            wv = wgt * patch[a]
             cols = wv.sum(axis=1, dtype=np.float64)          # (n, P): sums over rows
             rows = wv.sum(axis=2, dtype=np.float64)
             tot = cols.sum(axis=1)

@@ -67,7 +67,9 @@ class Collimator:
         if not d[2] > 0:
             raise ValueError(f"Collimator.direction must point to the real side (z > 0), got {d}")
         n = float(np.linalg.norm(d))
-        object.__setattr__(self, "direction", tuple(x / n for x in d))
+        if abs(n - 1.0) > 1e-12:              # normalise once: a described set-up rebuilds to the same values
+            d = tuple(x / n for x in d)
+        object.__setattr__(self, "direction", d)
 
     def prompt(self) -> str:
         tx, ty = self.direction[0] / self.direction[2], self.direction[1] / self.direction[2]
@@ -128,7 +130,7 @@ class Board:
         if norm == 0:
             raise ValueError("Board.normal must not be zero")
         object.__setattr__(self, "centre", c)
-        object.__setattr__(self, "normal", tuple(x / norm for x in n))
+        object.__setattr__(self, "normal", n if abs(norm - 1.0) <= 1e-12 else tuple(x / norm for x in n))
         object.__setattr__(self, "size", tuple(float(s) for s in self.size))
         if self.chart is not None:
             cols, rows, square = self.chart
