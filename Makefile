@@ -23,6 +23,7 @@ calibration-table: $(STAMP)
 	$(VENV)/bin/lft calibrate seeds --seeds 1,2,3,4,5 --out out/calibration
 
 test: $(STAMP)
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -q tests
 
 clean:

@@ -271,8 +271,9 @@ def test_09_to_grey_and_read_errors(tmp_path):
 
 def test_10_simulated_rig(variant):
     """The simulator's collimated-source image (quick fig4 rig, perturbed truth): every lenslet to < 0.1 px."""
-    from lftransfer.rig.sim import SimRig
-    from lftransfer.rig.truth import perturbed_rig
+    from lftransfer.rig.requests import Collimator
+    from lftransfer.sim.rig import SimRig
+    from lftransfer.sim.truth import perturbed_rig
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
     full = load_scene(builtin_scene("fig4"))
@@ -281,7 +282,9 @@ def test_10_simulated_rig(variant):
     scene = with_overrides(full, rig={"lf_camera": [v // 4 for v in full.rig.lf_camera],
                                       "projector": [v // 4 for v in full.rig.projector], "angular_samples": 16})
     truth = perturbed_rig(scene.rig, seed=1)
-    raw = SimRig(scene, truth=truth, capture_spp=1).capture_collimated()
+    rig = SimRig(scene, truth=truth, capture_spp=1)
+    rig.setup(Collimator())
+    raw = rig.capture_lf().codes
     assert raw.shape == (384, 512, 3) and raw.dtype == np.uint16
     K = truth.array.K
     spots = truth.camera.device.ray_to_pixel(truth.array, np.arange(K), np.tile([0.0, 0.0, 1.0], (K, 1)))

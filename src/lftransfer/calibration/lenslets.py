@@ -3,7 +3,7 @@
 Two kinds of calibration image are understood (``kind=`` of :func:`find_lenslet_centres`):
 
 * ``"spots"``: a collimated on-axis source seen through the lens array. Every lenslet focuses the plane wave
-  into one small spot at the image of its optical centre (see ``lftransfer.rig.sim.SimRig.capture_collimated``);
+  into one small spot at the image of its optical centre (see the simulated rig's ``Collimator`` set-up);
   the spot's centroid is the lenslet's centre.
 * ``"white"``: a uniformly lit diffuser in front of the array (the usual light-field camera calibration
   image). Every lenslet's sub-image is a bright blob about one pitch wide (the footprint of its aperture, a
@@ -633,15 +633,23 @@ def _detect_white(img: np.ndarray, lattice: str) -> tuple[np.ndarray, float]:
     gamma, bright, typical = _relative_gradient(img, centres, _WHITE_BRIGHT * local_pitch, local_pitch)
     nominal = _WHITE_WINDOW * local_pitch
     extent = _subimage_extent(img, centres, nominal, bright)
-    axes, apothem = _local_cells(centres, local_pitch, lattice)
-    # Second pass: the window is the sub-image's lattice cell, cut by a disk that keeps it inside the image
-    # near the border (down to the sub-images' own extent, or half the pitch if they touch); a sub-image cut
-    # by the border is dropped.
-    extent = nominal - 0.5 if extent is None else np.minimum(extent, nominal - 0.5)
-    radius = np.minimum(_CELL_DISK * local_pitch, _inset(centres, (h, w)))
+    # Second pass. Sub-images apart: a disk of half the local pitch, smaller near the image border down to
+    # the sub-images' own extent. Touching sub-images: the sub-image's own lattice cell (1 px in), which
+    # keeps the neighbours out, cut by a disk that keeps it inside the image, down to half the pitch. A
+    # sub-image cut by the border is dropped.
+    if extent is None:
+        extent = nominal - 0.5
+        axes, apothem = _local_cells(centres, local_pitch, lattice)
+        radius = np.minimum(_CELL_DISK * local_pitch, _inset(centres, (h, w)))
+    else:
+        extent = np.minimum(extent, nominal - 0.5)
+        axes = apothem = None
+        radius = np.minimum(nominal, _inset(centres, (h, w)))
     keep = (bright >= 0.75 * typical) & (radius >= extent)
     extent, radius, nominal = extent[keep], radius[keep], nominal[keep]
-    centres, ok = _disk_centroids(img, centres[keep], radius, gamma[keep], axes[keep], apothem[keep])
+    if axes is not None:
+        axes, apothem = axes[keep], apothem[keep]
+    centres, ok = _disk_centroids(img, centres[keep], radius, gamma[keep], axes, apothem)
     ok[ok] &= np.minimum(radius[ok], _inset(centres[ok], (h, w)) + 0.5) >= extent[ok]
     centres, radius = centres[ok], np.minimum(radius[ok], nominal[ok])
     if len(centres) >= 2:                                        # two peaks that found one sub-image: one
@@ -849,8 +857,7 @@ def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius, gamma: np.ndarray |
     inv_ramp = (1.0 / (4.0 * radius)).astype(np.float32)[:, None, None]
     if axes is not None:
         ax32 = np.asarray(axes, dtype=np.float32)
-        import os
-        ap32 = (np.asarray(apothem, dtype=np.float64) - float(os.environ.get("CELLOFF", "1"))).astype(np.float32)
+        ap32 = (np.asarray(apothem, dtype=np.float64) - 1.0).astype(np.float32)   # weight 0 there, 1 at -2
     start = np.asarray(xy, dtype=np.float64)
     p = start.copy()
     ok = np.ones(len(p), bool)
