@@ -12,10 +12,11 @@ The geometry, written out independently of :mod:`lftransfer.calibration.lenslets
    ``k1 < 0``: barrel.
 
 Rendering: spots are pixel-integrated Gaussians; white-image sub-images are soft disks or hexagons (flat-to-flat
-``aperture * local pitch``) with a soft edge and a radial fall-off inside, supersampled (3 x 3 per pixel by default); the
-whole image is multiplied by a ``cos^4``-like vignetting, then photon (Poisson) and read (Gaussian) noise, a
-black level, and quantisation to 12 or 16 bits. Sub-images are centrally symmetric about the true centre, so
-the true centre is their centre of symmetry (up to the vignetting gradient across each one).
+``aperture * local pitch``) with a soft edge and a radial fall-off inside, supersampled (3 x 3 per pixel by
+default); the whole image is multiplied by a ``cos^4``-like vignetting, then photon (Poisson) and read
+(Gaussian) noise, a black level, and quantisation to 12 or 16 bits. Sub-images are centrally symmetric about
+the true centre, so the true centre is their centre of symmetry (up to the vignetting gradient across each
+one).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Lenslet centres from collimated-source images: spot detection, sub-pixel centres, lattice fit, files."""
+"""Lenslet centres from spot and white images: detection, sub-pixel centres, lattice growth and model, files."""
 
 from __future__ import annotations
 

@@ -214,7 +214,9 @@ def _lenslet_section(cal, diag: dict) -> str:
     text = (f"A collimated source on the array's axis focuses behind every lenslet into one small spot, photographed "
             f"by the LF camera. The spots' centres are found to a fraction of a pixel (Gaussian-windowed centroids "
             f"on the background-subtracted image; spot sigma {lat.spot_sigma_px:.2f} px), and a {lat.lattice} lattice "
-            f"is fitted through them by a homography: {len(lat.centres)} lenslets, pitch {lat.pitch_px:.3f} px, "
+            f"is fitted through them (a homography"
+            f"{'' if not np.any(lat.distortion) else ', then the main lens' + chr(39) + 's radial distortion'}): "
+            f"{len(lat.centres)} lenslets, pitch {lat.pitch_px:.3f} px, "
             f"rotation {lat.rotation_deg:.3f} deg, residual RMS {lat.rms_px:.4f} px (max "
             f"{lat.max_residual_px:.4f} px). The homography from the rig file's nominal lattice to these centres "
             f"is the LF camera's model.")

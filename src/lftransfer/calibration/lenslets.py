@@ -40,15 +40,19 @@ Two kinds of calibration image are understood (``kind=`` of :func:`find_lenslet_
       becomes one peak near its centre), and its local maxima (one per 0.7 pitch) that stand out from their
       surroundings (at least 30 % of the typical peak's contrast, where the envelope is above 10 % of its
       top) are the sub-images;
-   c. sub-pixel centres: centroid of the image within a flat disk window of radius half the pitch (a 2 px
-      soft edge), iterated to its fixed point. The window holds the whole sub-image, and the slivers of the
-      neighbours it reaches into are placed symmetrically, so the fixed point is the sub-image's centre of
-      symmetry. The main lens' vignetting tilts each sub-image (a bias of ``gradient * radius^2 / 4``, a few
-      hundredths of a pixel, towards the image centre), so each sub-image's relative brightness gradient is
-      measured from its neighbours' mean brightnesses (a plane fitted to those within 2.3 pitches) and divided
-      out of its window in a second pass, whose window is half the *local* pitch (follows the distortion).
-      Sub-images darker than 75 % of their neighbours (cut by the edge of the lit area) and those whose window
-      reaches past the image border are dropped;
+   c. sub-pixel centres: centroid of the image within a flat, centrally symmetric window (2 px soft edge),
+      iterated to its fixed point: the sub-image's centre of symmetry. A first pass uses a disk of radius
+      half the pitch. The main lens' vignetting tilts each sub-image (a bias of ``gradient * radius^2 / 4``,
+      a few hundredths of a pixel, towards the image centre), so each sub-image's relative brightness gradient
+      is measured from its neighbours' mean brightnesses (a plane fitted to those within 2.3 pitches) and
+      divided out of its window in a second pass. That pass's window follows the distorted lattice: a disk of
+      half the local pitch for sub-images apart from each other, or, for touching ones (whose radial profile
+      does not fall to a dark gap within half a pitch), the sub-image's own lattice cell (hexagon or
+      rectangle through the midpoints to its neighbours, 1 px in, symmetrised), so that no neighbour, nearer
+      on one side than on the other where the pitch changes, reaches into it. Near the image border the window
+      is cut by a disk that stays inside the image, down to the sub-image's extent. Sub-images darker than
+      75 % of their neighbours (cut by the edge of the lit area) and those cut by the image border are
+      dropped;
 
 3. lattice (both kinds): pitch from nearest-neighbour distances, rotation from the neighbours' directions
    (modulo 60 deg for ``hex``, 90 deg for ``rect``). Integer indices are assigned by growing the lattice from
@@ -302,8 +306,9 @@ def find_lenslet_centres(image: np.ndarray, lattice: str, *, expected_shape: tup
             lit diffuser: one bright sub-image about a pitch wide per lenslet).
 
     Returns:
-        The fit; ``centres`` holds only lenslets whose spot (white: centroid window, half a pitch around the
-        centre) is wholly inside the image (missing ones are absent).
+        The fit; ``centres`` holds only lenslets whose spot (white: sub-image, or half a pitch around the centre
+        where sub-images touch) is wholly inside the image (missing ones are absent), and ``LatticeFit.kind``
+        is ``kind``.
 
     Raises:
         ValueError: ``lattice`` is neither ``"hex"`` nor ``"rect"``, ``kind`` neither ``"spots"`` nor
@@ -592,13 +597,23 @@ def _windowed_centroids(res: np.ndarray, xy: np.ndarray, sigma: float, pitch: fl
 
 # ------------------------------------------------------------------------------------------- white images
 def _detect_white(img: np.ndarray, lattice: str) -> tuple[np.ndarray, float]:
-    """Sub-pixel sub-image centres ``(N, 2)`` (x, y) pixels of a white image and the centroid window's radius.
+    """Sub-pixel sub-image centres of a white image (see the module's docstring).
 
-    The first pass uses a window of half the pitch everywhere, the second one of half the local pitch of each
-    sub-image (median distance to its nearest neighbours after the first pass), so that it follows a
-    distorted lattice; the radius returned is the median one. Sub-images
-    whose window mean is below 75 % of the median of their neighbours' (cut by the edge of the lit area, or
-    by mechanical vignetting) are dropped.
+    The first pass uses a disk window of half the pitch everywhere. The second one divides out each
+    sub-image's vignetting gradient and follows the distorted lattice: sub-images apart from each other (their
+    mean radial profile falls to the dark gap within half a pitch) get a disk of half their local pitch
+    (median distance to their nearest neighbours), touching ones their own lattice cell (:func:`_local_cells`,
+    1 px in), so that no neighbour reaches into the window. Near the image border the window is cut by a
+    disk that stays inside the image, down to the sub-images' extent (half the pitch if they touch); sub-images
+    whose window would have to be smaller, and those whose mean brightness is below 75 % of the median of
+    their neighbours' (cut by the edge of the lit area), are dropped.
+
+    Args:
+        img: ``(H, W)`` grey image.
+        lattice: ``"hex"`` or ``"rect"`` (the shape of the cells).
+
+    Returns:
+        ``(N, 2) float64`` centres (x, y), pixels, and the median window radius (half the pitch), pixels.
     """
     h, w = img.shape
     pitch = _autocorr_pitch(img)
@@ -629,6 +644,8 @@ def _detect_white(img: np.ndarray, lattice: str) -> tuple[np.ndarray, float]:
             pitch = float(np.median(d[near, 1]))
     centres, ok = _disk_centroids(img, xy, _WHITE_WINDOW * pitch)
     centres = centres[ok]
+    if len(centres) < 4:
+        return centres, _WHITE_WINDOW * pitch                    # too few: find_lenslet_centres says so
     local_pitch = _local_pitch(centres, pitch)
     gamma, bright, typical = _relative_gradient(img, centres, _WHITE_BRIGHT * local_pitch, local_pitch)
     nominal = _WHITE_WINDOW * local_pitch
@@ -822,14 +839,15 @@ def _envelope(img: np.ndarray, pitch: float) -> np.ndarray:
 def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius, gamma: np.ndarray | None = None,
                     axes: np.ndarray | None = None, apothem: np.ndarray | None = None, iterations: int = 60,
                     chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
-    """Centroids of the image within a flat disk window (soft edge) iterated to their fixed points.
+    """Centroids of the image within a flat disk (or cell) window (soft edge) iterated to their fixed points.
 
     The fixed point of a centrally symmetric window is the centre of any centrally symmetric sub-image it
     holds, neighbours included (a lattice is centrally symmetric about each node, to first order in the
     distortion). The disk window's weight is ``clip(((radius + 1)^2 - r^2) / (4 radius), 0, 1)``: 1 within
-    about ``radius - 1``, 0 beyond ``radius + 1``. The iteration converges geometrically (the slivers of the neighbours at the window's rim
-    move with it); it is sped up by extrapolating the geometric series of the steps (Aitken). The patches
-    are cut around the rounded start with a 3 px margin around the window, the most a centre may move.
+    about ``radius - 1``, 0 beyond ``radius + 1``. The iteration converges geometrically (what the window's
+    rim cuts moves with it); it is sped up by extrapolating the geometric series of the steps (Aitken). The
+    patches are cut around the rounded start with a 3 px margin around the window, the most a centre may
+    move.
 
     Args:
         img: ``(H, W)`` image.
@@ -1038,21 +1056,15 @@ def _closest_per_node(idx: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return unique
 
 
-def _homography(nodes: np.ndarray, points: np.ndarray, ransac_px: float | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Homography ideal -> pixels (least squares, or RANSAC with threshold ``ransac_px``) and its inlier mask."""
+def _homography(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Least-squares homography ideal ``(N, 2)`` -> pixels ``(N, 2)``, normalised to ``h[2, 2] = 1``."""
     if len(nodes) < 4 or len(np.unique(nodes[:, 0])) < 2 or len(np.unique(nodes[:, 1])) < 2:
-        raise NoSpotsError(f"the {len(nodes)} spots on the lattice do not span two rows and columns; "
+        raise NoSpotsError(f"the {len(nodes)} detections on the lattice do not span two rows and columns; "
                            "cannot fit a lattice")
-    src, dst = nodes.astype(np.float64), points.astype(np.float64)
-    if ransac_px is None:
-        h, mask = cv2.findHomography(src, dst, 0)
-    else:
-        h, mask = cv2.findHomography(src, dst, cv2.RANSAC, ransac_px, maxIters=2000, confidence=0.999)
+    h, _ = cv2.findHomography(nodes.astype(np.float64), points.astype(np.float64), 0)
     if h is None or not np.all(np.isfinite(h)) or abs(np.linalg.det(h)) < 1e-12:
-        raise NoSpotsError(f"could not fit a lattice homography to {len(nodes)} spots")
-    inl = np.ones(len(nodes), bool) if mask is None else mask.ravel().astype(bool)
-    return h / h[2, 2], inl
+        raise NoSpotsError(f"could not fit a lattice homography to {len(nodes)} detections")
+    return h / h[2, 2]
 
 
 def _fit_model(ideal: np.ndarray, points: np.ndarray, shape: tuple[int, int], radial: bool = True
@@ -1070,7 +1082,7 @@ def _fit_model(ideal: np.ndarray, points: np.ndarray, shape: tuple[int, int], ra
     h_img, w_img = shape
     c0 = np.array([(w_img - 1) / 2.0, (h_img - 1) / 2.0])
     scale = max(0.5 * math.hypot(h_img - 1, w_img - 1), 1.0)
-    hom, _ = _homography(ideal, points)
+    hom = _homography(ideal, points)
     res_h = points - _apply(hom, ideal)
     rss_h = float(np.sum(res_h ** 2))
     n = len(points)
