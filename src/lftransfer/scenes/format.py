@@ -34,6 +34,8 @@ from pydantic import (
     field_validator,
 )
 
+from lftransfer.validation import validation_message
+
 __all__ = [
     "SceneError",
     "RigConfig",
@@ -565,47 +567,19 @@ def check_synthetic(scene) -> SyntheticScene:
 # --------------------------------------------------------------------------------------------------------------
 # Loading
 
-def _field_path(loc: tuple) -> str:
-    parts: list[str] = []
-    for i, item in enumerate(loc):
-        if isinstance(item, int):
-            parts.append(f"[{item}]")
-            continue
-        if item in _MATERIAL_TAGS and i > 0 and loc[i - 1] == "material":
-            continue            # the discriminated union's tag, not a field
-        if item.startswith("function-") or item.startswith("list["):
-            continue
-        parts.append(("." if parts else "") + item)
-    return "".join(parts) or "<scene>"
+def _material_tag(loc: tuple, i: int) -> bool:
+    """``loc[i]`` is the material union's tag (``material.diffuse.albedo``), not a field."""
+    return loc[i] in _MATERIAL_TAGS and i > 0 and loc[i - 1] == "material"
 
 
-def _describe(err: dict) -> str:
-    path = _field_path(tuple(err.get("loc", ())))
-    msg = err.get("msg", "invalid")
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    if err.get("type") == "extra_forbidden":
-        msg = "unknown key (not a field of this table)"
-    elif err.get("type") == "missing":
-        msg = "required field is missing"
-    text = f"{path}: {msg}"
+def _unknown_material(err: dict) -> str:
     if err.get("type") == "material_type" and isinstance(err.get("input"), dict):
-        text += f", found type = {err['input'].get('type')!r}"
-    if err.get("type") not in ("value_error", "missing", "assertion_error") and "input" in err:
-        found = err["input"]
-        if not isinstance(found, (dict, BaseModel)):
-            text += f", found {found!r}"
-    return text
+        return f", found type = {err['input'].get('type')!r}"
+    return ""
 
 
 def _scene_error(name: str, exc: ValidationError) -> SceneError:
-    errors = exc.errors(include_url=False)
-    text = f"{name}: {_describe(errors[0])}"
-    if len(errors) > 1:
-        text += f" (and {len(errors) - 1} more: " + "; ".join(_describe(e) for e in errors[1:4])
-        text += "; ..." if len(errors) > 4 else ""
-        text += ")"
-    return SceneError(text)
+    return SceneError(validation_message(name, exc, root="<scene>", is_tag=_material_tag, extra=_unknown_material))
 
 
 def load_scene(path: str | Path) -> SceneConfig:

@@ -42,6 +42,7 @@ from pydantic import (
 
 from lftransfer.imageio_utils import write_text
 from lftransfer.rig.requests import RigInfo
+from lftransfer.validation import validation_message
 
 __all__ = ["CameraConfig", "HardwareRigConfig", "ProjectorConfig", "RigFileError", "ViewCameraConfig",
            "load_rig_file", "parse_rig_file", "write_rig_value"]
@@ -260,49 +261,9 @@ class HardwareRigConfig(_Model):
 
 # -- loading ---------------------------------------------------------------------------------------------------
 
-def _field_path(loc: tuple) -> str:
-    parts: list[str] = []
-    for item in loc:
-        if isinstance(item, int):
-            parts.append(f"[{item}]")
-            continue
-        if item.startswith(("function-", "list[", "union[")) or item in ("int", "str", "float", "constrained-int",
-                                                                             "constrained-float"):
-            continue
-        parts.append(("." if parts else "") + item)
-    return "".join(parts) or "<rig>"
-
-
-def _describe(err: dict) -> str:
-    path = _field_path(tuple(err.get("loc", ())))
-    msg = err.get("msg", "invalid")
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    if err.get("type") == "extra_forbidden":
-        msg = "unknown key (not a field of this table)"
-    elif err.get("type") == "missing":
-        msg = "required field is missing"
-    text = f"{path}: {msg}"
-    if err.get("type") not in ("value_error", "missing", "assertion_error") and "input" in err:
-        found = err["input"]
-        if not isinstance(found, (dict, BaseModel)):
-            text += f", found {found!r}"
-    return text
-
-
 def _rig_file_error(name: str, exc: ValidationError) -> RigFileError:
-    errors = exc.errors(include_url=False)
     # a union (response_gamma = number | list) reports one error per member: keep the first of each field
-    seen: dict[str, dict] = {}
-    for e in errors:
-        seen.setdefault(_field_path(tuple(e.get("loc", ()))), e)
-    unique = list(seen.values())
-    text = f"{name}: {_describe(unique[0])}"
-    if len(unique) > 1:
-        text += f" (and {len(unique) - 1} more: " + "; ".join(_describe(e) for e in unique[1:4])
-        text += "; ..." if len(unique) > 4 else ""
-        text += ")"
-    return RigFileError(text)
+    return RigFileError(validation_message(name, exc, root="<rig>", first_per_field=True))
 
 
 def parse_rig_file(data: dict, name: str = "<rig>", base_dir: str | Path | None = None) -> HardwareRigConfig:
