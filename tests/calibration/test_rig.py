@@ -9,7 +9,7 @@ import pytest
 
 from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.app.pipeline import quick_scene
-from lftransfer.calibration.pose import POSE_DEPTHS
+from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS
 from lftransfer.rig.requests import RealScene
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig, true_light_scene
@@ -42,7 +42,7 @@ def test_01_recovers_the_hidden_rig(calibrated):
     assert e["pose_position_rms_mm"] <= 3.5 and e["pose_rotation_deg"] <= 1.5
     assert abs(e["pitch_rel_error"]) < 0.012
     assert isinstance(rig._setup, RealScene)             # calibration leaves the rig in the real scene
-    assert len(rig.boards_held) == 2 + len(POSE_DEPTHS)  # brightness, exposure, one per pose depth
+    assert len(rig.boards_held) == 2 + POSE_ROUNDS * len(POSE_DEPTHS)  # brightness, exposure, pose boards
     assert e["camera_response_error"] <= 0.01 and e["projector_response_error"] <= 0.01
     assert e["ray_direction_rms_deg"] < 1.5 and e["lenslet_assignment_agreement"] > 0.999
     assert abs(e["exposure_rel_error"]) < 0.02 and e["projector_mixing_rel_error"] < 0.02

@@ -35,7 +35,7 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["ArrayPose", "BoardPattern", "PoseError", "apply_pose", "board_pattern", "calibrate_pose",
+__all__ = ["POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "PoseError", "apply_pose", "board_pattern", "calibrate_pose",
            "checkerboard_lightfield", "corner_landing", "find_board_corners", "solve_array_pose", "view_camera"]
 
 
@@ -353,13 +353,25 @@ def corner_landing(array: LensArray, corners: np.ndarray, point: np.ndarray, nor
 
 
 POSE_DEPTHS = (0.07, 0.12)      # metres: the boards' distances from the array (two, for parallax)
+POSE_ROUNDS = 2                 # the second round draws each checkerboard on the board where it really stands
 
 
-def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, squares=(5, 4), square_m: float = 0.028,
-                   chart=(7, 5, 0.022), spp: int = 16,
+def _drawn_on(board: BoardPattern, point: np.ndarray, normal: np.ndarray) -> BoardPattern:
+    """The same checkerboard moved onto the plane through ``point`` with ``normal`` (model frame): its centre is
+    the asked-for centre's foot on that plane; the normal keeps the asked-for side."""
+    n = np.asarray(normal, np.float64) / np.linalg.norm(normal)
+    if n @ board.normal < 0:
+        n = -n
+    centre = board.centre - ((board.centre - point) @ n) * n
+    ex, ey, n = plane_axes(n)
+    return BoardPattern(centre, n, ex, ey, board.squares, board.square_m)
+
+
+def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, rounds: int = POSE_ROUNDS,
+                   squares=(5, 4), square_m: float = 0.028, chart=(7, 5, 0.022), spp: int = 16,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
     """Ask for a board at each depth, find its plane, project the checkerboard light field and its inverse on it,
-    solve the pose from all boards at once.
+    solve the pose from all boards at once; then again, with the pattern drawn on each board where it stands.
 
     The board is asked for where the checkerboard is drawn (``depth`` in front of the array, turned towards the
     view camera); the operator puts it there only roughly. Its plane is measured in the world from the printed
@@ -369,70 +381,98 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, squa
     hide how the array is tilted (a tilt and an offset move every corner alike); boards at two depths see the
     rays' parallax and fix the tilt.
 
+    A board a few millimetres off the drawing plane sees each corner as the overlap of several lenslets' slightly
+    different images (out of focus), which biases its detection. From the second round on, the boards are asked
+    for again, and each checkerboard is drawn on the board's measured plane carried into the model frame by the
+    previous round's pose: in focus up to that pose's error. The last round's corners give the pose.
+
     Args:
         rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Board` with a printed chessboard at each
-            depth and shows the light fields on it.
+            depth (``rounds`` times) and shows the light fields on it.
         model: the calibrated rig in the model frame (lenslets, projector mapping, distortion).
         scene: the scene (view camera, angular samples).
         depths: distances of the boards' centres from the array, metres (model frame).
+        rounds: rounds of boards (1: the pattern drawn where the board was asked for, only).
         squares, square_m: layout of the projected checkerboard.
         chart: (columns, rows, square size in metres) of the printed chessboard.
         spp: view camera quality (samples per pixel of a simulated camera) of the calibration photographs.
         progress: called with a message per capture.
 
     Returns:
-        (ArrayPose, diagnostics: per board the view images, the corners and its placement error as measured, for
-        the report; the first board's also at the top level).
+        (ArrayPose, diagnostics: per board of the last round the view images, the corners and its placement error
+        as measured, for the report; the first board's also at the top level; ``rounds``: the pose after each).
     """
+    if rounds < 1:
+        raise ValueError(f"rounds: expected at least 1, got {rounds}")
     n = scene.rig.angular_samples
     level = 0.9 * model.projector.max_radiance
     encoder = model.encoder(n, n)
     flood = LightField.zeros(model.array, n, n)
     flood.data[...] = 0.5 * level
     size = ((chart[0] + 2) * chart[2], (chart[1] + 2) * chart[2])
-    boards = []
-    for depth in depths:
-        board = board_pattern(scene.view, depth, squares, square_m)
-        pattern, inverse = checkerboard_lightfield(model.array, n, n, board, level)
-        rig.setup(Board(centre=tuple(board.centre), normal=tuple(board.normal), size=size, chart=tuple(chart)))
-        images = {}
-        for name, lf in (("flood", flood), ("pattern", pattern), ("inverse", inverse)):
+    pose: ArrayPose | None = None
+    history = []
+    for r in range(rounds):
+        boards = []
+        for depth in depths:
+            asked = board_pattern(scene.view, depth, squares, square_m)
+            rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart)))
+            tag = f"pose round {r + 1}: board at {100 * depth:.0f} cm" if rounds > 1 else \
+                f"pose: board at {100 * depth:.0f} cm"
+            images = {}
             if progress:
-                progress(f"pose: board at {100 * depth:.0f} cm photographed with the {name} light field")
-            rig.project(encoder(lf))
-            images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
-        rig.project(rig.info.black())
-        point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
-        px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view)
-        if found.sum() < 4:
-            raise PoseError(f"board at {100 * depth:.0f} cm: found {int(found.sum())} of {len(found)} projected "
-                            "corners in the view camera image; is the board in view and lit?")
-        boards.append({"board": board, "point": point, "normal": normal, "chart_rms": chart_rms, "px": px[found],
-                       "found": found, "images": images, "normalised": norm,
-                       "world": backproject(scene.view, px[found], point, normal),
-                       "drawn": board.corners()[found]})
+                progress(f"{tag} photographed with the flood light field")
+            rig.project(encoder(flood))
+            images["flood"] = rig.capture_view(ViewCapture(quality=spp)).radiance
+            point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
+            board = asked if pose is None else _drawn_on(asked, pose.world_to_model(point[None])[0],
+                                                        pose.direction_to_model(normal[None])[0])
+            pattern, inverse = checkerboard_lightfield(model.array, n, n, board, level)
+            for name, lf in (("pattern", pattern), ("inverse", inverse)):
+                if progress:
+                    progress(f"{tag} photographed with the {name} light field")
+                rig.project(encoder(lf))
+                images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
+            rig.project(rig.info.black())
+            px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view,
+                                                 None if pose is None else pose.model_to_world)
+            if found.sum() < 4:
+                raise PoseError(f"board at {100 * depth:.0f} cm: found {int(found.sum())} of {len(found)} "
+                                "projected corners in the view camera image; is the board in view and lit?")
+            boards.append({"asked": asked, "board": board, "point": point, "normal": normal, "chart_rms": chart_rms,
+                           "px": px[found], "found": found, "images": images, "normalised": norm,
+                           "world": backproject(scene.view, px[found], point, normal),
+                           "drawn": board.corners()[found]})
+        pose = _solve_boards(model.array, boards, scene.view, start=pose)
+        history.append(pose.to_json())
+
+    per_board = []
+    for b in boards:
+        n_m = pose.direction_to_model(b["normal"][None])[0]
+        if n_m @ b["asked"].normal < 0:                   # the chart's normal may face either way
+            n_m = -n_m
+        placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["asked"].centre) @ n_m),
+                     "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["asked"].normal, -1.0, 1.0))))}
+        per_board.append({"images": b["images"], "normalised": b["normalised"], "found": b["found"],
+                          "predicted": project(scene.view, pose.model_to_world(b["board"].corners())),
+                          "board_placement": placement, "depth_m": float(b["asked"].centre[2])})
+    first = per_board[0]
+    worst = max(per_board, key=lambda d: abs(d["board_placement"]["depth_mm"]))["board_placement"]
+    return pose, {**first, "board_placement": worst, "boards": per_board, "rounds": history}
+
+
+def _solve_boards(array: LensArray, boards: list[dict], view, start: ArrayPose | None) -> ArrayPose:
+    """The pose from one round of boards: each corner where its rays land on its board's measured plane."""
 
     def landing(candidate: ArrayPose) -> np.ndarray:
-        return np.concatenate([corner_landing(model.array, b["drawn"], candidate.world_to_model(b["point"][None])[0],
+        return np.concatenate([corner_landing(array, b["drawn"], candidate.world_to_model(b["point"][None])[0],
                                               candidate.direction_to_model(b["normal"][None])[0]) for b in boards])
 
     drawn = np.concatenate([b["drawn"] for b in boards])
     world = np.concatenate([b["world"] for b in boards])
-    pose = solve_array_pose(drawn, world, landing=landing, start=solve_array_pose(drawn, world))
+    pose = solve_array_pose(drawn, world, landing=landing, start=start or solve_array_pose(drawn, world))
     pose.corners_px = np.concatenate([b["px"] for b in boards])
-    pose.reprojected = project(scene.view, pose.model_to_world(landing(pose)))
+    pose.reprojected = project(view, pose.model_to_world(landing(pose)))
     pose.rms_px = float(np.sqrt(np.mean(np.sum((pose.reprojected - pose.corners_px) ** 2, axis=1))))
     pose.pnp_rms_px = float(max(b["chart_rms"] for b in boards))
-    per_board = []
-    for b in boards:
-        n_m = pose.direction_to_model(b["normal"][None])[0]
-        if n_m @ b["board"].normal < 0:                   # the chart's normal may face either way
-            n_m = -n_m
-        placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["board"].centre) @ n_m),
-                     "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["board"].normal, -1.0, 1.0))))}
-        per_board.append({"images": b["images"], "normalised": b["normalised"], "found": b["found"],
-                          "predicted": project(scene.view, b["board"].corners()), "board_placement": placement,
-                          "depth_m": float(b["board"].centre[2])})
-    first = per_board[0]
-    worst = max(per_board, key=lambda d: abs(d["board_placement"]["depth_mm"]))["board_placement"]
-    return pose, {**first, "board_placement": worst, "boards": per_board}
+    return pose

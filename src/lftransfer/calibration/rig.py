@@ -27,7 +27,7 @@ import numpy as np
 from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
 from lftransfer.calibration.images import to_grey
 from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
-from lftransfer.calibration.pose import POSE_DEPTHS, ArrayPose, apply_pose, calibrate_pose
+from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS, ArrayPose, apply_pose, calibrate_pose
 from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
                                               gray_code_patterns)
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
@@ -236,7 +236,7 @@ def _as_projector_image(pattern: np.ndarray, rig: Rig) -> np.ndarray:
 
 SWEEP_STEPS = 5                   # collimator tilts per axis
 _RADIOMETRY_MESSAGES = 5          # progress messages of calibrate_radiometry
-_POSE_MESSAGES = 3 * len(POSE_DEPTHS)     # progress messages of calibrate_pose
+_POSE_MESSAGES = 3 * len(POSE_DEPTHS) * POSE_ROUNDS     # progress messages of calibrate_pose
 
 
 def _gray_groups(scene) -> int:
