@@ -1,14 +1,22 @@
 """Image files: linear float images as EXR (through Mitsuba's Bitmap), display images as sRGB PNG.
 
 Every write goes to a temporary file in the destination folder and is renamed into place, so an interrupted
-run never leaves a half-written file and never destroys an earlier complete one.
+run never leaves a half-written file and never destroys an earlier complete one. Image decoders that print on
+the process's standard error (libpng, OpenCV) are read through :func:`native_messages`, so their words end up in
+the caller's error message instead of the terminal.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
+import re
+import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -41,6 +49,32 @@ def write_text(path: str | Path, text: str) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def strict_json(value):
+    """``value`` as plain, strict JSON data: numpy scalars and arrays as Python numbers and lists, tuples as
+    lists, paths as strings, and every non-finite float (NaN, infinity) as None, which JSON can hold (``NaN`` is
+    not JSON)."""
+    if isinstance(value, dict):
+        return {str(k): strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return strict_json(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def write_json(path: str | Path, data, indent: int = 2) -> Path:
+    """Write strict JSON (:func:`strict_json`: no NaN or infinity) atomically (:func:`write_text`)."""
+    return write_text(path, json.dumps(strict_json(data), indent=indent, allow_nan=False) + "\n")
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
@@ -92,3 +126,39 @@ def read_exr(path: str | Path) -> np.ndarray:
 
     mi = mitsuba()
     return np.array(mi.Bitmap(str(path)), dtype=np.float32)
+
+
+_OPENCV_LOG = re.compile(r"^\[\s*\w+:[^\]]*\]\s*(?:global\s+)?\S+\s+\S+\s+(.*)$")
+
+
+@contextmanager
+def native_messages() -> Iterator[list[str]]:
+    """Capture what native code (libpng, libtiff, OpenCV's log) writes to file descriptor 2 during the block.
+
+    Yields:
+        A list that, once the block ends, holds the captured lines, cleaned (``"libpng error: bad adaptive
+        filter value"``, ``"PNG input buffer is incomplete"``); nothing reaches the terminal.
+    """
+    lines: list[str] = []
+    try:
+        sys.stderr.flush()
+    except (AttributeError, ValueError):  # pragma: no cover - a closed or replaced stream
+        pass
+    try:
+        saved = os.dup(2)
+    except OSError:  # pragma: no cover - no descriptor 2: nothing to capture
+        yield lines
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            for raw in sink.read().decode("utf-8", "replace").splitlines():
+                m = _OPENCV_LOG.match(raw.strip())
+                text = (m.group(1) if m else raw).strip()
+                if text:
+                    lines.append(text)

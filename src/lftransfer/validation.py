@@ -1,17 +1,25 @@
-"""One wording for every validated file (scene files, rig files): a pydantic error as one line that names the file,
-the field path and what was expected, e.g. ``scene.toml: real[0].material.roughness: Input should be ...``."""
+"""One wording for every validated file (scene files, rig files, calibration files): a pydantic error as one line
+that names the file, the field path and what was expected, e.g.
+``scene.toml: real[0].material.roughness: Input should be ...``; and one way to read such a file's text: UTF-8,
+a leading byte order mark accepted, anything else one line naming the file, where the bad byte is and what was
+expected (``scene.toml: <encoding>: not UTF-8 text: byte 0xe9 on line 3 ...``)."""
 
 from __future__ import annotations
 
+import json
+import re
+import tomllib
+from pathlib import Path
 from typing import Callable
 
 from pydantic import BaseModel, ValidationError
 
-__all__ = ["field_path", "validation_message"]
+__all__ = ["field_path", "read_json", "read_text", "read_toml", "validation_message"]
 
 # pydantic loc entries that name a validator or a union member, not a field of the file
 _NOT_FIELDS = ("function-", "list[", "union[")
 _TYPE_NAMES = ("int", "str", "float", "constrained-int", "constrained-float")
+_PLAIN_KEY = re.compile(r"[A-Za-z0-9_\-]+")
 
 
 def field_path(loc: tuple, root: str, is_tag: Callable[[tuple, int], bool] | None = None) -> str:
@@ -28,6 +36,9 @@ def field_path(loc: tuple, root: str, is_tag: Callable[[tuple, int], bool] | Non
             parts.append(f"[{item}]")
             continue
         if (is_tag and is_tag(loc, i)) or item.startswith(_NOT_FIELDS) or item in _TYPE_NAMES:
+            continue
+        if not _PLAIN_KEY.fullmatch(item):               # a key with blanks, line breaks, dots: quoted, one line
+            parts.append(f"[{item!r}]")
             continue
         parts.append(("." if parts else "") + item)
     return "".join(parts) or root
@@ -74,3 +85,60 @@ def validation_message(name: str, exc: ValidationError, *, root: str,
         text += "; ..." if len(errors) > 4 else ""
         text += ")"
     return text
+
+
+def read_text(path: str | Path, what: str, error: type[Exception]) -> str:
+    """A text file's contents, decoded as UTF-8 (a leading byte order mark is dropped).
+
+    Args:
+        path: the file.
+        what: what the file is, for messages (``"scene file"``).
+        error: the exception class to raise (the caller's own, e.g. ``SceneError``).
+
+    Raises:
+        error: the file cannot be read (``<path>: cannot read the <what>: <reason>``) or is not UTF-8 text
+            (``<path>: <encoding>: not UTF-8 text: byte 0x.. on line N, column C; save it as UTF-8``).
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise error(f"{path}: <encoding>: not UTF-8 text: byte 0x{data[exc.start]:02x} on line {line}, column "
+                    f"{column}; save the {what} as UTF-8") from None
+
+
+def read_toml(path: str | Path, what: str, error: type[Exception]) -> dict:
+    """A TOML file's tables (read with :func:`read_text`).
+
+    Raises:
+        error: unreadable, not UTF-8, or malformed TOML (``<path>: <toml>: malformed TOML: <where and why>``).
+    """
+    text = read_text(path, what, error)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: <toml>: malformed TOML: {exc}") from None
+    except RecursionError:
+        raise error(f"{path}: <toml>: malformed TOML: nested too deeply") from None
+
+
+def read_json(path: str | Path, what: str, error: type[Exception]) -> object:
+    """A JSON file's value (read with :func:`read_text`; ``NaN`` and ``Infinity`` are read as floats).
+
+    Raises:
+        error: unreadable, not UTF-8, or malformed JSON (``<path>: <json>: malformed JSON: <why> (line L, column
+            C)``).
+    """
+    text = read_text(path, what, error)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: <json>: malformed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except RecursionError:
+        raise error(f"{path}: <json>: malformed JSON: nested too deeply") from None

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import to_display, write_exr, write_png, write_text
+from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
 
 
 def display_scale(image: np.ndarray, percentile: float = 99.5, target: float = 0.9) -> float:
@@ -66,11 +65,6 @@ def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndar
         last_row = np.pad(last_row, ((0, 0), (0, width - last_row.shape[1]), (0, 0)))
     rows.append(last_row[:, :width])
     return np.concatenate(rows, axis=0)
-
-
-def write_json(path: str | Path, data: dict) -> Path:
-    """Write JSON atomically."""
-    return write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,

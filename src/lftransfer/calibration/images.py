@@ -13,6 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from lftransfer.imageio_utils import native_messages
+
 __all__ = ["CalibrationImageError", "read_image", "to_grey"]
 
 _EXPECTED = "an 8- or 16-bit PNG or TIFF image (grey, RGB or RGBA)"
@@ -91,9 +93,11 @@ def read_image(path) -> np.ndarray:
         data = np.fromfile(str(path), dtype=np.uint8)        # = cv2.imread(IMREAD_UNCHANGED), for any path name
     except OSError as exc:
         raise CalibrationImageError(f"{path}: cannot be read ({exc.strerror or exc}); expected {_EXPECTED}") from exc
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    with native_messages() as said:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if image is None:
-        raise CalibrationImageError(f"{path}: not a readable image (expected {_EXPECTED})")
+        why = f" ({'; '.join(said)})" if said else ""
+        raise CalibrationImageError(f"{path}: not a readable image{why} (expected {_EXPECTED})")
     if image.dtype not in _FULL_SCALE:
         raise CalibrationImageError(f"{path}: unsupported pixel type {image.dtype} (expected {_EXPECTED})")
     try:

@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import write_text
+from lftransfer.imageio_utils import native_messages, write_text
 
 __all__ = [
     "Intrinsics",
@@ -209,12 +209,15 @@ def _load_image(path) -> np.ndarray:
     if not p.is_file():
         raise IntrinsicsError(f"cannot read calibration image {str(path)!r}: not a file")
     try:
-        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        with native_messages() as said:
+            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     except cv2.error as exc:  # pragma: no cover - depends on the OpenCV build
         raise IntrinsicsError(f"cannot read calibration image {str(path)!r}: {exc}") from None
     if img is None or img.size == 0:
+        why = f": {'; '.join(said)}" if said else ""
         raise IntrinsicsError(
-            f"cannot read calibration image {str(path)!r}: not a readable image file (corrupt or unsupported format)"
+            f"cannot read calibration image {str(path)!r}: not a readable image file (corrupt or unsupported "
+            f"format{why})"
         )
     return img
 

@@ -16,7 +16,6 @@ which is written as JSON in OpenCV's conventions (camera matrices, distortion ``
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -24,6 +23,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from lftransfer.calibration.calibration_file import FORMAT, CalibrationFileError, parse_calibration_file
 from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
 from lftransfer.calibration.images import to_grey
 from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
@@ -31,23 +31,19 @@ from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS, ArrayPose, app
 from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
                                               gray_code_patterns)
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
-from lftransfer.imageio_utils import write_text
+from lftransfer.imageio_utils import write_json
 from lftransfer.optics import LensArray, LensletDevice
 from lftransfer.optics.geometry import apply_homography, project
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.rig.requests import Board, Collimator, FocalPlaneDiffuser, RealScene
 from lftransfer.scenes import check_synthetic
+from lftransfer.validation import read_json
 
 __all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_exposure", "calibrate_rig",
            "count_calibration_steps", "load_calibration"]
 
 STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose")
-FORMAT = "lftransfer-calibration/1"
-
-
-class CalibrationFileError(ValueError):
-    """A calibration file that cannot be read or does not fit the scene's rig."""
 
 
 @dataclass
@@ -100,8 +96,8 @@ class Calibration:
         return data
 
     def write(self, path) -> Path:
-        """Write the JSON file atomically."""
-        return write_text(path, json.dumps(self.to_json(), indent=1) + "\n")
+        """Write the JSON file atomically, as strict JSON (a measurement that is NaN is written as null)."""
+        return write_json(path, self.to_json(), indent=1)
 
 
 def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
@@ -129,46 +125,84 @@ def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
 def load_calibration(path, scene) -> Calibration:
     """Read a calibration file written by :meth:`Calibration.write` for the scene's rig.
 
+    The file is validated field by field (:mod:`lftransfer.calibration.calibration_file`: types, ranges, no
+    unknown keys), then against the scene's rig: the array's lattice and size, the devices' sizes and bit depths,
+    one lenslet camera per lenslet, the vignetting map's size.
+
+    Args:
+        path: the JSON file (UTF-8; a byte order mark is accepted).
+        scene: the scene (or its synthetic part) whose ``rig`` the file must describe.
+
+    Returns:
+        Calibration (without the fits' details: ``lattice``, ``distortion`` and ``projector_fit`` are None).
+
     Raises:
-        CalibrationFileError: unreadable file, wrong format, or a rig that does not match the scene's.
+        CalibrationFileError: unreadable file, malformed JSON, wrong format, an invalid field or a rig that does
+            not match the scene's; one line naming the file and the field.
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise CalibrationFileError(f"{path}: cannot read a calibration file: {exc}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise CalibrationFileError(f"{path}: field 'format': expected {FORMAT!r}, "
-                                   f"found {data.get('format') if isinstance(data, dict) else type(data).__name__!r}")
-    try:
-        nominal = nominal_rig(scene.rig)
-        la = data["lens_array"]
-        if (la["lattice"], la["rows"], la["cols"]) != (nominal.array.lattice, nominal.array.rows, nominal.array.cols):
-            raise CalibrationFileError(
-                f"{path}: field 'lens_array': a {la['rows']} x {la['cols']} {la['lattice']} array, but the scene's "
-                f"rig has {nominal.array.rows} x {nominal.array.cols} {nominal.array.lattice}")
-        array = LensArray(lattice=la["lattice"], rows=la["rows"], cols=la["cols"], pitch=la["pitch_m"],
-                          focal_length=la["focal_length_m"], aperture=la["aperture"], offset=tuple(la["offset_m"]),
-                          rotation=float(np.radians(la["rotation_deg"])))
+    entry = parse_calibration_file(read_json(path, "calibration file", CalibrationFileError), str(path))
+    nominal = nominal_rig(scene.rig)
+    _check_fits_scene(path, entry, nominal, scene)
+    la = entry.lens_array
 
-        def device(d, name):
-            dev = d[name]
-            k = np.array([lens["dist_coeffs"][:2] for lens in dev["lenslets"]], float)
-            return LensletDevice(width=int(dev["width"]), height=int(dev["height"]),
-                                 homography=np.array(dev["homography"], float), distortion=k)
+    def bad(field_name: str, exc: Exception) -> CalibrationFileError:
+        return CalibrationFileError(f"{path}: {field_name}: {exc}")
 
-        model = replace(nominal, array=array, tilt=tuple(np.radians(la["tilt_deg"]).tolist()),
-                        camera=replace(nominal.camera, device=device(data, "lf_camera")),
-                        projector=replace(nominal.projector, device=device(data, "projector")))
-        radiometry = Radiometry.from_json(data["radiometry"])
+    try:
+        array = LensArray(lattice=la.lattice, rows=la.rows, cols=la.cols, pitch=la.pitch_m,
+                          focal_length=la.focal_length_m, aperture=la.aperture, offset=tuple(la.offset_m),
+                          rotation=float(np.radians(la.rotation_deg)))
+    except (TypeError, ValueError) as exc:
+        raise bad("lens_array", exc) from None
+
+    def device(dev, name):
+        k = np.array([lens.dist_coeffs[:2] for lens in dev.lenslets], float)
+        try:
+            return LensletDevice(width=dev.width, height=dev.height, homography=np.array(dev.homography, float),
+                                 distortion=k)
+        except (TypeError, ValueError) as exc:
+            raise bad(name, exc) from None
+
+    model = replace(nominal, array=array, tilt=tuple(np.radians(la.tilt_deg).tolist()),
+                    camera=replace(nominal.camera, device=device(entry.lf_camera, "lf_camera")),
+                    projector=replace(nominal.projector, device=device(entry.projector, "projector")))
+    try:
+        radiometry = Radiometry.from_json(entry.radiometry.model_dump())
         model = radiometry.apply(model)
-        pose = ArrayPose.from_json(data["pose"])
-    except CalibrationFileError:
-        raise
     except (KeyError, TypeError, ValueError) as exc:
-        raise CalibrationFileError(f"{path}: malformed calibration ({type(exc).__name__}: {exc})") from None
+        raise bad("radiometry", exc) from None
+    try:
+        pose = ArrayPose.from_json({k: float("nan") if v is None else v for k, v in entry.pose.model_dump().items()})
+    except (KeyError, TypeError, ValueError) as exc:
+        raise bad("pose", exc) from None
     return Calibration(model=model, lattice=None, distortion=None, projector_fit=None, radiometry=radiometry,
                        pose=pose)
+
+
+def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
+    """A CalibrationFileError naming the first field of the file that does not fit the scene's rig."""
+    la, a = entry.lens_array, nominal.array
+    if (la.lattice, la.rows, la.cols) != (a.lattice, a.rows, a.cols):
+        raise CalibrationFileError(
+            f"{path}: lens_array: a {la.rows} x {la.cols} {la.lattice} array, but the scene's rig has "
+            f"{a.rows} x {a.cols} {a.lattice}")
+    want = {"lf_camera": (tuple(scene.rig.lf_camera), scene.rig.lf_camera_bits),
+            "projector": (tuple(scene.rig.projector), scene.rig.projector_bits)}
+    for name, (size, bits) in want.items():
+        dev = getattr(entry, name)
+        if (dev.width, dev.height) != size:
+            raise CalibrationFileError(f"{path}: {name}.width, {name}.height: {dev.width} x {dev.height} pixels, "
+                                       f"but the scene's rig has {size[0]} x {size[1]}")
+        if dev.bits != bits:
+            raise CalibrationFileError(f"{path}: {name}.bits: {dev.bits}, but the scene's rig has {bits}")
+        if len(dev.lenslets) != a.K:
+            raise CalibrationFileError(f"{path}: {name}.lenslets: {len(dev.lenslets)} lenslet cameras, but the "
+                                       f"array has {a.rows} x {a.cols} = {a.K} lenslets")
+    shape = entry.radiometry.vignetting.shape
+    if tuple(shape) != (scene.rig.lf_camera[1], scene.rig.lf_camera[0]):
+        raise CalibrationFileError(f"{path}: radiometry.vignetting.shape: {shape} ([height, width]), but the LF "
+                                   f"camera is {scene.rig.lf_camera[1]} x {scene.rig.lf_camera[0]} ([height, width])")
 
 
 def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.01,

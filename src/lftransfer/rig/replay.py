@@ -61,7 +61,7 @@ import cv2
 import numpy as np
 
 import lftransfer
-from lftransfer.imageio_utils import _atomic_target, read_exr, write_exr, write_text
+from lftransfer.imageio_utils import _atomic_target, native_messages, read_exr, write_exr, write_text
 from lftransfer.rig.base import Rig, RigError
 from lftransfer.rig.requests import (SETUPS, LFCapture, LFFrame, RealScene, RigInfo, Setup, ViewCapture, ViewFrame,
                                      describe, image_digest, request_key)
@@ -153,9 +153,10 @@ def _decode(path: Path, data: bytes) -> np.ndarray:
     if path.suffix == ".exr":
         return read_exr(path)
     if path.suffix in (".png", ".pfm"):
-        a = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        with native_messages() as said:
+            a = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         if a is None:
-            raise ValueError(f"not a {path.suffix} file OpenCV can read")
+            raise ValueError(f"not a {path.suffix} file OpenCV can read" + (f" ({'; '.join(said)})" if said else ""))
         return cv2.cvtColor(a, cv2.COLOR_BGR2RGB) if a.ndim == 3 and a.shape[2] == 3 else a
     return np.load(io.BytesIO(data), allow_pickle=False)
 

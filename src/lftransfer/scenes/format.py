@@ -15,7 +15,6 @@ import functools
 import math
 import numbers
 import re
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -34,7 +33,7 @@ from pydantic import (
     field_validator,
 )
 
-from lftransfer.validation import validation_message
+from lftransfer.validation import read_toml, validation_message
 
 __all__ = [
     "SceneError",
@@ -488,9 +487,9 @@ def _in_half_space(side: str):
     def check(obj: ObjectConfig) -> ObjectConfig:
         lo, hi = obj.bounds()
         if side == "real" and lo[2] <= 0:
-            raise ValueError(f"a real object must lie in z > 0; '{obj.name}' spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
+            raise ValueError(f"a real object must lie in z > 0; {obj.name!r} spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
         if side == "synthetic" and hi[2] >= 0:
-            raise ValueError(f"a synthetic object must lie in z < 0; '{obj.name}' spans z in "
+            raise ValueError(f"a synthetic object must lie in z < 0; {obj.name!r} spans z in "
                              f"[{lo[2]:.4g}, {hi[2]:.4g}] m")
         return obj
 
@@ -592,18 +591,11 @@ def load_scene(path: str | Path) -> SceneConfig:
         The validated scene, with ``source`` set to the file's absolute path.
 
     Raises:
-        SceneError: unreadable file, malformed TOML or an invalid field; one message naming the file and the
-            field path (e.g. ``real[0].material.roughness``).
+        SceneError: unreadable file, not UTF-8 (a leading byte order mark is fine), malformed TOML or an
+            invalid field; one message naming the file and the field path (e.g. ``real[0].material.roughness``).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read the scene file: {exc.strerror or exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: <toml>: malformed TOML: {exc}") from None
+    data = read_toml(path, "scene file", SceneError)
     if "source" in data:
         raise SceneError(f"{path}: source: not a scene field (it is set by the loader), found {data['source']!r}")
     data["source"] = path.resolve()

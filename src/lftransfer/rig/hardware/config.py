@@ -42,7 +42,7 @@ from pydantic import (
 
 from lftransfer.imageio_utils import write_text
 from lftransfer.rig.requests import RigInfo
-from lftransfer.validation import validation_message
+from lftransfer.validation import read_toml, validation_message
 
 __all__ = ["CameraConfig", "HardwareRigConfig", "ProjectorConfig", "RigFileError", "ViewCameraConfig",
            "load_rig_file", "parse_rig_file", "write_rig_value"]
@@ -303,14 +303,7 @@ def load_rig_file(path: str | Path) -> HardwareRigConfig:
             field path (e.g. ``rig.toml: lf_camera.width: Input should be greater than 0, found -3``).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise RigFileError(f"{path}: cannot read the rig file: {exc.strerror or exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RigFileError(f"{path}: <toml>: malformed TOML: {exc}") from None
+    data = read_toml(path, "rig file", RigFileError)
     config = parse_rig_file(data, str(path), path.resolve().parent)
     return config.model_copy(update={"source": path.resolve()})
 
