@@ -4,14 +4,16 @@ a simulated rig's hidden truth.
 The ground truth is the union scene (real objects + synthetic objects + point light, no lens array) path traced
 from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
 with the same seeds so that their noise cancels in the cross-transfer term. Two independent seeds give the
-ground truth's own noise. Renders are cached under a hash of everything they depend on.
+ground truth's own noise. Renders are cached under a hash of everything they depend on, each entry with its
+checksum (:mod:`lftransfer.sim.gt_cache`). A metric that a scene leaves undefined (no light, no cross term) is
+None, with the reason in ``undefined``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -19,10 +21,13 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.composite import composite
-from lftransfer.imageio_utils import read_exr, write_exr
 from lftransfer.optics.geometry import apply_homography, rotation_xy, rotation_z
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
+from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
+
+__all__ = ["GroundTruth", "NoiseVerdict", "cache_dir", "calibration_errors", "downsample", "evaluate",
+           "gt_noise_verdict", "metric_factor", "psnr", "render_ground_truth"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -50,12 +55,8 @@ class GroundTruth:
         return self.union.mean(axis=0)
 
 
-def cache_dir() -> Path:
-    """Folder of cached ground-truth renders: ``$LFT_CACHE_DIR`` or ``~/.cache/lftransfer``."""
-    return Path(os.environ.get("LFT_CACHE_DIR", Path.home() / ".cache" / "lftransfer")) / "ground_truth"
-
-
-def _key(scene, spp: int, seeds: tuple[int, ...]) -> str:
+def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
+    """SHA-256 (hex) of everything the ground-truth renders depend on."""
     import mitsuba
 
     def objects(objs):
@@ -72,33 +73,41 @@ def _key(scene, spp: int, seeds: tuple[int, ...]) -> str:
         "light": scene.light.model_dump(mode="json"), "view": scene.view.model_dump(mode="json"),
         "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:20]
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real and synthetic alphas
 
 
 def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
-                        progress: Callable[[str], None] | None = None) -> GroundTruth:
+                        progress: Callable[[str], None] | None = None,
+                        warn: Callable[[str], None] | None = None) -> GroundTruth:
     """Path trace the union, real-alone and synthetic-alone scenes from the view camera.
 
     Args:
         scene: ``lftransfer.scenes.SceneConfig`` (its ``real`` objects are the hidden truth).
         spp: samples per pixel of each render.
         seeds: the two independent seeds.
-        use_cache: read and write the cache (:func:`cache_dir`).
+        use_cache: read and write the cache (:mod:`lftransfer.sim.gt_cache`); an entry that fails its checks is
+            rendered again and replaced.
         progress: called before each render.
+        warn: called with one line when a cache entry is bad.
 
     Returns:
         GroundTruth.
     """
     from lftransfer.backend import mitsuba
 
-    key = _key(scene, spp, seeds)
-    path = cache_dir() / f"{key}.exr"
-    if use_cache and path.exists():
-        stack = read_exr(path)                                           # (H, W, 3*3*2 + 2)
-        return _unpack(stack)
+    w, h = scene.view.resolution
+    inputs = _inputs_hash(scene, spp, seeds)
+    if use_cache:
+        cached = read_entry(inputs, (h, w, STACK_CHANNELS))
+        if isinstance(cached, np.ndarray):
+            return _unpack(cached)
+        if isinstance(cached, CacheProblem) and warn is not None:
+            warn(cached.message())
     mi = mitsuba()
     view = scene.view
-    w, h = view.resolution
     light = {"type": "point", "position": list(map(float, scene.light.position)),
              "intensity": {"type": "rgb", "value": list(map(float, scene.light.intensity))}}
     extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
@@ -115,7 +124,7 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
     stack = np.concatenate([images[n][i][..., :3] for n in ("union", "real", "synthetic") for i in range(2)]
                            + [images["real"][0][..., 3:4], images["synthetic"][0][..., 3:4]], axis=-1)
     if use_cache:
-        write_exr(path, stack)
+        write_entry(inputs, stack)
     return _unpack(stack)
 
 
@@ -135,10 +144,17 @@ def downsample(image: np.ndarray, factor: int) -> np.ndarray:
 
 
 def psnr(image: np.ndarray, reference: np.ndarray, peak: float | None = None) -> float:
-    """Peak signal-to-noise ratio in dB; ``peak`` defaults to the reference's maximum."""
+    """Peak signal-to-noise ratio in dB; ``peak`` defaults to the reference's maximum.
+
+    Returns:
+        dB; ``inf`` for identical images, ``nan`` for a peak of 0 (both undefined: :func:`evaluate` reports them
+        as None with a reason).
+    """
     peak = float(np.max(reference)) if peak is None else peak
     mse = float(np.mean((np.asarray(image, np.float64) - reference) ** 2))
-    return float("inf") if mse == 0 else 10.0 * np.log10(peak * peak / mse)
+    if not peak > 0:
+        return float("nan")
+    return float("inf") if mse == 0 else 10.0 * math.log10(peak * peak / mse)
 
 
 def metric_factor(width: int, target_width: int = 256) -> int:
@@ -146,8 +162,19 @@ def metric_factor(width: int, target_width: int = 256) -> int:
     return max(1, int(round(width / target_width)))
 
 
+NO_LIGHT = "the ground truth is black: no light reaches anything the view camera sees (light intensity 0, or " \
+           "the light lights nothing in view)"
+NO_CROSS = "the ground truth has no cross term: the real and synthetic objects add nothing to each other's " \
+           "appearance (one side has no objects, or no light reaches them)"
+NO_PIXELS = "no pixel of the view shows an object"
+IDENTICAL = "the images are identical (PSNR is infinite)"
+
+
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     """Metrics of a transfer result against the ground truth (DESIGN.md section 6).
+
+    A metric that the scene leaves undefined (a black ground truth, no cross term, identical images) is None
+    and ``undefined`` says why; every other value is a finite float.
 
     Args:
         result: ``lftransfer.transfer.TransferResult``.
@@ -156,7 +183,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
 
     Returns:
         dict with psnr_db, psnr_db_direct_only, cross_transfer_rel_error, gt_noise_psnr_db, cross_gt_noise_rel,
-        metric_resolution and the energies of the cross terms.
+        cross_term_rel_size, metric_resolution, metric_pixels and undefined (metric -> reason).
     """
     f = metric_factor(result.real_view.shape[1], target_width)
     alpha = result.synthetic_view.alpha
@@ -172,17 +199,78 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     c_lft = ds(comp_n - comp_0)
     mask = (ds(gt.alpha_real) > 0) | (ds(gt.alpha_synthetic) > 0)
     norm = lambda x: float(np.sqrt(np.sum(x[mask] ** 2)))  # noqa: E731
-    c_norm = norm(c_gt)
+    c_norm, u_norm = norm(c_gt), norm(union)
+    undefined: dict[str, str] = {}
+
+    def defined(key: str, value: float, reason: str) -> float | None:
+        if math.isfinite(value):
+            return float(value)
+        undefined[key] = reason
+        return None
+
+    def psnr_of(key: str, image: np.ndarray, reference: np.ndarray) -> float | None:
+        return defined(key, psnr(image, reference, peak), NO_LIGHT if not peak > 0 else IDENTICAL)
+
+    def ratio(key: str, num: float, den: float, reason: str) -> float | None:
+        if not mask.any():
+            return defined(key, float("nan"), NO_PIXELS)
+        return defined(key, num / den if den > 0 else float("nan"), reason)
+
     return {
-        "psnr_db": psnr(ds(comp_n), union, peak),
-        "psnr_db_direct_only": psnr(ds(comp_0), union, peak),
-        "cross_transfer_rel_error": norm(c_lft - c_gt) / c_norm if c_norm > 0 else float("nan"),
-        "gt_noise_psnr_db": psnr(ds(gt.union[0]), ds(gt.union[1]), peak),
-        "cross_gt_noise_rel": norm(c_gt_pair[0] - c_gt_pair[1]) / c_norm if c_norm > 0 else float("nan"),
-        "cross_term_rel_size": c_norm / float(np.sqrt(np.sum(union[mask] ** 2))),
+        "psnr_db": psnr_of("psnr_db", ds(comp_n), union),
+        "psnr_db_direct_only": psnr_of("psnr_db_direct_only", ds(comp_0), union),
+        "cross_transfer_rel_error": ratio("cross_transfer_rel_error", norm(c_lft - c_gt), c_norm, NO_CROSS),
+        "gt_noise_psnr_db": psnr_of("gt_noise_psnr_db", ds(gt.union[0]), ds(gt.union[1])),
+        "cross_gt_noise_rel": ratio("cross_gt_noise_rel", norm(c_gt_pair[0] - c_gt_pair[1]), c_norm, NO_CROSS),
+        "cross_term_rel_size": ratio("cross_term_rel_size", c_norm, u_norm, NO_LIGHT),
         "metric_resolution": [int(union.shape[1]), int(union.shape[0])],
         "metric_pixels": int(mask.sum()),
+        "undefined": undefined,
     }
+
+
+@dataclass(frozen=True)
+class NoiseVerdict:
+    """The ground truth's own noise on the cross term, set against the error it measures.
+
+    Attributes:
+        noise: ``cross_gt_noise_rel``, the difference of the two independent ground truths' cross terms over the
+            cross term.
+        error: ``cross_transfer_rel_error``.
+        spp: the ground truth's samples per pixel.
+        spp_needed: samples per pixel at which the noise would fall to a quarter of the error (it falls as
+            1 / sqrt(spp)), rounded up to a power of two.
+    """
+
+    noise: float
+    error: float
+    spp: int
+    spp_needed: int
+
+    def message(self) -> str:
+        """One line for the terminal and the report."""
+        return (f"the ground truth's own noise on the cross term ({self.noise:.3g}) is more than half the "
+                f"cross-transfer error it measures ({self.error:.3g}) at {self.spp} samples per pixel, so the error "
+                f"is mostly noise; --gt-spp {self.spp_needed} would bring the noise to about a quarter of it")
+
+
+def gt_noise_verdict(metrics: dict, spp: int, *, threshold: float = 0.5, target: float = 0.25) -> NoiseVerdict | None:
+    """A :class:`NoiseVerdict` when ``cross_gt_noise_rel`` exceeds ``threshold`` x ``cross_transfer_rel_error``,
+    else None (also when either is undefined).
+
+    Args:
+        metrics: from :func:`evaluate`.
+        spp: the ground truth's samples per pixel.
+        threshold: noise / error above which the error is not trusted.
+        target: noise / error the suggested sample count reaches.
+    """
+    noise, error = metrics.get("cross_gt_noise_rel"), metrics.get("cross_transfer_rel_error")
+    if noise is None or error is None or not noise > threshold * error:
+        return None
+    factor = (noise / (target * error)) ** 2 if error > 0 else float("inf")
+    needed = spp * factor
+    spp_needed = int(2 ** math.ceil(math.log2(needed))) if math.isfinite(needed) and needed >= 1 else 2 ** 20
+    return NoiseVerdict(noise=float(noise), error=float(error), spp=int(spp), spp_needed=max(spp_needed, 2 * spp))
 
 
 # ---- calibration against the hidden truth -----------------------------------------------------------------------
