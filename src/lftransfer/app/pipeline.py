@@ -19,12 +19,14 @@ from typing import Callable
 from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.composite import composite
 from lftransfer.app.report import write_json, write_outputs
+from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, write_status
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
 Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
+Warn = Callable[[str], None]            # shows one line of warning
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,9 @@ class RigSpec:
 
     def __str__(self) -> str:
         return self.kind if self.path is None else f"{self.kind}:{self.path}"
+
+
+RIG_MODELS = ("calibrated", "nominal", "oracle")
 
 
 @dataclass(frozen=True)
@@ -100,23 +105,87 @@ class RunOptions:
     record: Path | None = None
     verify: bool = True
 
+    def __post_init__(self) -> None:
+        problems = []
+        if not (isinstance(self.bounces, int) and self.bounces >= 0):
+            problems.append(f"bounces must be an integer >= 0, got {self.bounces!r}")
+        if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
+            problems.append(f"gt_spp must be an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
+        if not (isinstance(self.capture_spp, int) and self.capture_spp >= 1):
+            problems.append(f"capture_spp must be an integer >= 1, got {self.capture_spp!r}")
+        if self.truth_seed is not None and not (isinstance(self.truth_seed, int) and self.truth_seed >= 0):
+            problems.append(f"truth_seed must be an integer >= 0 (or None), got {self.truth_seed!r}")
+        if self.rig_model not in RIG_MODELS:
+            problems.append(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
+        if self.renderer not in ("auto", "fast", "exact"):
+            problems.append(f"renderer must be auto, fast or exact, got {self.renderer!r}")
+        if problems:
+            raise ValueError("; ".join(problems))
+
+
+QUICK_FACTOR = 4
+MIN_VIEW_PIXELS = 8             # the view camera's smaller side (metrics are box-downsampled images of it)
+MIN_PIXELS_PER_LENSLET = 2      # LF camera and projector pixels across one lenslet's pitch
+
+
+def _too_small(scene, factor: int = 1) -> list[str]:
+    """What of a scene is below the sizes the pipeline works at, after dividing every device by ``factor``."""
+    rig, view = scene.rig, scene.view
+    problems = []
+    w, h = (v // factor for v in view.resolution)
+    if min(w, h) < MIN_VIEW_PIXELS:
+        problems.append(f"view.resolution {list(view.resolution)} gives {w} x {h} (at least {MIN_VIEW_PIXELS} "
+                        f"pixels a side)")
+    spacing = (rig.rows * (3 ** 0.5 / 2 if rig.lattice == "hex" else 1.0) + 1, rig.cols + 0.5)
+    for name in ("lf_camera", "projector"):
+        size = getattr(rig, name)
+        across = min(size[0] // factor / spacing[1], size[1] // factor / spacing[0])
+        if across < MIN_PIXELS_PER_LENSLET:
+            problems.append(f"rig.{name} {list(size)} gives {size[0] // factor} x {size[1] // factor}, "
+                            f"{across:.1f} pixels per lenslet for {rig.rows} x {rig.cols} lenslets (at least "
+                            f"{MIN_PIXELS_PER_LENSLET})")
+    return problems
+
+
+def check_resolution(scene, quick: bool = False) -> None:
+    """Refuse a scene whose devices are too small for the pipeline, before any work.
+
+    Args:
+        scene: ``SceneConfig``.
+        quick: check the sizes that ``--quick`` (:func:`quick_scene`) would give.
+
+    Raises:
+        SceneError: naming the scene's file, the fields and the sizes.
+    """
+    from lftransfer.scenes import SceneError
+
+    problems = _too_small(scene, QUICK_FACTOR if quick else 1)
+    if problems:
+        name = str(scene.source) if scene.source else "<scene>"
+        how = f"--quick divides every device by {QUICK_FACTOR}: " if quick else ""
+        raise SceneError(f"{name}: {how}{'; '.join(problems)}" + ("; run it without --quick" if quick and not
+                                                                    _too_small(scene) else ""))
+
 
 def quick_scene(scene):
-    """The same scene at a small resolution (for ``--quick``): every device at a quarter size."""
+    """The same scene at a small resolution (for ``--quick``): every device at a quarter size, a third of the
+    angular samples (at least 8), a quarter of the ground-truth samples (at least 16).
+
+    Raises:
+        SceneError: the quarter sizes are too small (:func:`check_resolution`).
+    """
     from lftransfer.scenes import with_overrides
 
+    check_resolution(scene, quick=True)
     rig, view, render = scene.rig, scene.view, scene.render
     return with_overrides(
         scene,
-        rig={"lf_camera": [rig.lf_camera[0] // 4, rig.lf_camera[1] // 4],
-             "projector": [rig.projector[0] // 4, rig.projector[1] // 4],
+        rig={"lf_camera": [rig.lf_camera[0] // QUICK_FACTOR, rig.lf_camera[1] // QUICK_FACTOR],
+             "projector": [rig.projector[0] // QUICK_FACTOR, rig.projector[1] // QUICK_FACTOR],
              "angular_samples": max(8, rig.angular_samples // 3)},
-        view={"resolution": [view.resolution[0] // 4, view.resolution[1] // 4]},
-        render={"gt_spp": max(16, render.gt_spp // 4)},
+        view={"resolution": [view.resolution[0] // QUICK_FACTOR, view.resolution[1] // QUICK_FACTOR]},
+        render={"gt_spp": max(16, render.gt_spp // QUICK_FACTOR)},
     )
-
-
-RIG_MODELS = ("calibrated", "nominal", "oracle")
 
 
 def _calibrates(options: RunOptions) -> bool:
@@ -125,6 +194,35 @@ def _calibrates(options: RunOptions) -> bool:
 
 def _verifies(options: RunOptions, truth_seed_known: bool = True) -> bool:
     return options.verify and (options.rig.kind == "sim" or (options.rig.kind == "replay" and truth_seed_known))
+
+
+class CalibrationFailedError(RuntimeError):
+    """A calibration step could not measure the rig from its images; the message names the step, why, and the
+    sizes that matter."""
+
+
+def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None):
+    """:func:`lftransfer.calibration.rig.calibrate_rig`, its failures (other than a rig fault) as one
+    :class:`CalibrationFailedError` that says what to try.
+
+    Args:
+        rig: the rig.
+        scene: the synthetic part of the scene.
+        progress: called with a message per capture or step.
+    """
+    from lftransfer.rig.base import RigError
+
+    try:
+        return calibrate_rig(rig, scene, progress=progress)
+    except RigError:
+        raise
+    except (ValueError, RuntimeError) as exc:
+        r, v = scene.rig, scene.view
+        raise CalibrationFailedError(
+            f"calibration failed: {exc} (view camera {v.resolution[0]} x {v.resolution[1]}, LF camera "
+            f"{r.lf_camera[0]} x {r.lf_camera[1]}, projector {r.projector[0]} x {r.projector[1]} pixels for "
+            f"{r.rows} x {r.cols} lenslets; small devices may be too coarse to calibrate: try a larger scene or "
+            f"no --quick, a calibration file, or --rig-model nominal)") from exc
 
 
 def count_run_steps(scene, options: RunOptions) -> int:
@@ -143,13 +241,16 @@ def _other_models(scene, options: RunOptions) -> list[str]:
     return [m for m in options.compare_models if m != primary]
 
 
-def write_calibration(path: Path, calibration, truth=None) -> dict | None:
+def write_calibration(path: Path, calibration, truth=None, source: Path | None = None) -> dict | None:
     """Write a calibration file, its HTML report and (simulated rig only) its errors against the hidden truth.
 
     Args:
-        path: the calibration file; ``calibration_report.html`` and ``calibration_errors.json`` go beside it.
+        path: the calibration file; ``calibration_report.html`` and ``calibration_errors.json`` go beside it (a
+            ``calibration_errors.json`` there is removed when there is no truth to compare with).
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
         truth: the simulated rig's true ``RigModel``, or None (a physical rig or a recording: no errors).
+        source: the file the calibration was read from, if any: it is not written over with the (shorter)
+            calibration read from it.
 
     Returns:
         The errors (:func:`lftransfer.sim.verify.calibration_errors`), or None without a truth.
@@ -157,11 +258,16 @@ def write_calibration(path: Path, calibration, truth=None) -> dict | None:
     from lftransfer.app.calibration_report import write_calibration_report
     from lftransfer.sim.verify import calibration_errors
 
-    calibration.write(path)
+    path = Path(path)
+    if not (source is not None and path.exists() and path.resolve() == Path(source).resolve()):
+        calibration.write(path)
     errors = None
+    errors_path = path.parent / "calibration_errors.json"
     if truth is not None:
         errors = calibration_errors(calibration, truth)
-        write_json(path.parent / "calibration_errors.json", errors)
+        write_json(errors_path, errors)
+    else:
+        errors_path.unlink(missing_ok=True)            # an earlier calibration's, which this one does not match
     write_calibration_report(path.parent / "calibration_report.html", calibration, errors)
     return errors
 
@@ -228,17 +334,15 @@ def open_rig(scene, options: RunOptions, *, operator: Operator | None = None) ->
     return opened
 
 
-def _status(out: Path, state: str, **extra) -> None:
-    """``status.json`` of a run folder: "running" first, then "complete" or "failed" (with the error)."""
-    write_json(out / "status.json", {"state": state, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **extra})
-
-
 def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
-              progress: Progress | None = None, operator: Operator | None = None) -> dict:
+              progress: Progress | None = None, operator: Operator | None = None,
+              warn: Warn | None = None) -> dict:
     """Run light field transfer on a scene with the chosen rig and write every output into ``out``.
 
-    ``out/status.json`` says whether the run is ``running``, ``complete`` or ``failed``; every file is written
-    atomically, so what a failed run wrote before its failure stays readable.
+    ``out/status.json`` says whether the run is ``running``, ``complete``, ``failed`` or ``interrupted``
+    (:mod:`lftransfer.app.run_folder`); an earlier run's outputs in ``out`` are removed first, so the folder
+    never mixes two runs, and no temporary file stays. Every file is written atomically, so what a failed run
+    wrote before its failure stays readable.
 
     Args:
         scene: ``lftransfer.scenes.SceneConfig`` (a simulated rig takes its real objects as its hidden world; the
@@ -247,29 +351,45 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
         options: see :class:`RunOptions`.
         progress: called with a description and the number of steps done.
         operator: shows an instruction to the person at a physical rig and waits.
+        warn: called with one line for each warning (also listed in the report's ``warnings``): a bad
+            ground-truth cache entry, a ground truth too noisy for the error it measures.
 
     Returns:
         The report (also written as ``report.json``).
     """
     out = Path(out)
-    _status(out, "running", rig=str(options.rig))
+    write_status(out, "running", rig=str(options.rig))
+    clear_run_folder(out, keep=[options.calibration] if options.calibration is not None else [])
     opened = None
     try:
         opened = open_rig(scene, options, operator=operator)
-        report = _run(scene, out, options, opened, progress)
+        report = _run(scene, out, options, opened, progress, warn)
+    except KeyboardInterrupt:
+        write_status(out, "interrupted", rig=str(options.rig), error="interrupted (Ctrl-C)")
+        raise
     except BaseException as exc:
-        _status(out, "failed", error=f"{type(exc).__name__}: {exc}",
-                traceback=traceback.format_exc(limit=8).splitlines())
+        write_status(out, "failed", rig=str(options.rig), error=f"{type(exc).__name__}: {exc}",
+                     traceback=traceback.format_exc(limit=8).splitlines())
         raise
     finally:
-        if opened is not None:
-            opened.rig.close()
-    _status(out, "complete", rig=str(options.rig))
+        try:
+            if opened is not None:
+                opened.rig.close()
+        finally:
+            remove_temporaries(out)
+    write_status(out, "complete", rig=str(options.rig))
     return report
 
 
-def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Progress | None) -> dict:
+def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Progress | None,
+         warn: Warn | None) -> dict:
     done = [0]
+    warnings: list[str] = []
+
+    def warning(msg: str) -> None:
+        warnings.append(msg)
+        if warn:
+            warn(msg)
 
     def step(msg: str) -> None:
         done[0] += 1
@@ -292,7 +412,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         model, rig_model = calibration.model, f"calibration file {options.calibration}"
     elif options.rig_model == "calibrated":
         t = time.perf_counter()
-        calibration = calibrate_rig(rig, pipeline_scene, progress=step)
+        calibration = calibrate(rig, pipeline_scene, progress=step)
         timings["calibration"] = time.perf_counter() - t
         model, rig_model = calibration.model, "calibrated"
     elif options.rig_model == "oracle":
@@ -301,7 +421,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         model, rig_model = nominal_rig(scene.rig), "nominal (rig file)"
     if calibration is not None:
         step("calibration report")
-        calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth)
+        calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth,
+                                                source=options.calibration)
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
@@ -312,17 +433,22 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         timings[k] = timings.get(k, 0.0) + v
 
     verified = options.verify and opened.world is not None
-    gt, metrics = None, {}
+    gt_spp = options.gt_spp if options.gt_spp is not None else render.gt_spp
+    gt, metrics, gt_spp_needed = None, {}, None
     by_model = {primary: {}}
     if verified:
-        from lftransfer.sim.verify import evaluate, render_ground_truth
+        from lftransfer.sim.verify import evaluate, gt_noise_verdict, render_ground_truth
 
         t = time.perf_counter()
-        gt = render_ground_truth(opened.world, spp=options.gt_spp or render.gt_spp, use_cache=options.use_cache,
-                                 progress=step)
+        gt = render_ground_truth(opened.world, spp=gt_spp, use_cache=options.use_cache, progress=step,
+                                 warn=warning)
         timings["ground_truth"] = time.perf_counter() - t
         metrics = evaluate(result, gt)
         by_model[primary] = {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+        noisy = gt_noise_verdict(metrics, gt_spp)
+        if noisy is not None:
+            warning(noisy.message())
+            gt_spp_needed = noisy.spp_needed
     for other in _other_models(scene, options):
         t = time.perf_counter()
         alt = run_transfer(rig, model, pipeline_scene, replace(settings, lighting_model=other, bounce_views=False),
@@ -344,6 +470,9 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         f"none: the {options.rig.kind} rig's real scene is not known to lftransfer",
         "lighting_model": primary,
         "by_lighting_model": by_model,
+        "undefined_metrics": metrics.get("undefined", {}),
+        "warnings": warnings,
+        "gt_spp_needed": gt_spp_needed,
         "cross_term_rel_size": metrics.get("cross_term_rel_size"),
         "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
                      "projector_gain": b.projector_gain} for b in result.bounces],
@@ -355,7 +484,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
             "view": list(scene.view.resolution), "angular_samples": scene.rig.angular_samples,
             "metrics": metrics.get("metric_resolution"),
         },
-        "gt_spp": (options.gt_spp or render.gt_spp) if verified else None,
+        "gt_spp": gt_spp if verified else None,
         "renderer": resolve_renderer(pipeline_scene, options.renderer),
         "rig": str(options.rig),
         "truth_seed": opened.truth_seed,

@@ -1,0 +1,109 @@
+"""Whole runs of the ``lft`` command on a tiny rig (a few seconds each): reusing a calibration file, degenerate
+scenes, a ground truth too noisy for the error it measures, a rerun into a used folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from typer.testing import CliRunner
+
+from lftransfer.app.cli import app
+from lftransfer.scenes import load_scene
+from tests.app.small import nominal_calibration, write_tiny_scene
+
+runner = CliRunner()
+
+
+def _strict_report(out) -> dict:
+    """report.json, read as strict JSON (NaN or Infinity fail)."""
+    def refuse(constant):
+        raise AssertionError(f"report.json holds {constant}, which is not JSON")
+
+    return json.loads((out / "report.json").read_text(), parse_constant=refuse)
+
+
+@pytest.fixture(scope="module")
+def calibrated_run(tmp_path_factory):
+    """``lft run SCENE --calibration FILE`` on the tiny rig (the rig exactly as its file says, the calibration the
+    file's own values), with 8 ground-truth samples per pixel."""
+    d = tmp_path_factory.mktemp("calibrated_run")
+    scene = write_tiny_scene(d / "tiny.toml", gt_spp=8)
+    calibration = nominal_calibration(load_scene(scene)).write(d / "calibration.json")
+    out = d / "out"
+    result = runner.invoke(app, ["run", str(scene), "--calibration", str(calibration), "--exact-rig", "--bounces",
+                                 "1", "--out", str(out)], env={"COLUMNS": "200"})
+    return scene, calibration, out, result
+
+
+def test_01_run_with_a_calibration_file(calibrated_run):
+    """Item 1: the README's ``lft run SCENE.toml --calibration calibration.json`` works to the end."""
+    scene, calibration, out, result = calibrated_run
+    assert result.exit_code == 0, (result.output, result.exception)
+    report = _strict_report(out)
+    assert report["rig_model"] == f"calibration file {calibration}"
+    assert report["calibration_errors"]["pose_position_rms_mm"] < 1e-6          # the file holds the exact rig
+    assert "lenslet_centre_rms_px" not in report["calibration_errors"]          # a file has no spot fit
+    assert "light field transfer ->" in result.stdout and "calibration: pose error" in result.stdout
+    assert json.loads((out / "status.json").read_text())["state"] == "complete"
+    for name in ("composite.png", "ground_truth.png", "calibration.json", "calibration_report.html"):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_02_noisy_ground_truth_is_named_in_terminal_and_report(calibrated_run):
+    """Item 8: at 8 samples per pixel the ground truth's noise on the cross term exceeds half the error."""
+    _, _, out, result = calibrated_run
+    report = _strict_report(out)
+    noise, error = report["cross_gt_noise_rel"], report["cross_transfer_rel_error"]
+    assert noise > 0.5 * error
+    assert report["gt_spp_needed"] > 8 and report["gt_spp_needed"] & (report["gt_spp_needed"] - 1) == 0
+    (warning,) = [w for w in report["warnings"] if "own noise" in w]
+    assert f"--gt-spp {report['gt_spp_needed']}" in warning
+    terminal = " ".join(result.stderr.split())
+    assert "warning: the ground truth's own noise on the cross term" in terminal
+    assert f"--gt-spp {report['gt_spp_needed']}" in terminal
+
+
+def test_03_rerun_into_a_used_folder_keeps_only_its_own_files(calibrated_run, tmp_path):
+    """Item 6: a nominal run into the folder of the calibrated run leaves no calibration files of that run."""
+    scene, _, out, _ = calibrated_run
+    again = tmp_path / "again"
+    shutil.copytree(out, again)
+    result = runner.invoke(app, ["run", str(scene), "--rig-model", "nominal", "--exact-rig", "--bounces", "1",
+                                 "--out", str(again)])
+    assert result.exit_code == 0, result.output
+    names = {p.name for p in again.iterdir()}
+    assert not names & {"calibration.json", "calibration_report.html", "calibration_errors.json"}, names
+    assert _strict_report(again)["rig_model"] == "nominal (rig file)"
+    assert not [n for n in names if n.startswith(".")]
+
+
+@pytest.mark.parametrize("kind, undefined", [
+    ("zero light", {"psnr_db": "black", "cross_transfer_rel_error": "no cross term", "cross_term_rel_size": "black"}),
+    # the block hides the light: the view sees nothing lit; the cross term (the block's shadow on the cube, which
+    # the synthetic side alone would see lit) is still defined
+    ("light reaches nothing", {"psnr_db": "black", "cross_term_rel_size": "black"}),
+    ("synthetic objects only", {"cross_transfer_rel_error": "no cross term", "cross_gt_noise_rel": "no cross term"}),
+])
+def test_04_degenerate_scenes_write_images_and_null_metrics(tmp_path, kind, undefined):
+    """Item 4: undefined metrics are null with a reason in strict JSON, the others are numbers; the images are
+    written."""
+    kw = {"zero light": {"intensity": (0.0, 0.0, 0.0)},
+          "light reaches nothing": {"light": (0.0, -0.005, 0.08)},        # inside the real block
+          "synthetic objects only": {"real": False}}[kind]
+    scene = write_tiny_scene(tmp_path / "scene.toml", view=(32, 24), gt_spp=4, **kw)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(scene), "--rig-model", "nominal", "--exact-rig", "--bounces", "1",
+                                 "--out", str(out)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, (result.output, result.exception)
+    report = _strict_report(out)
+    for key, words in undefined.items():
+        assert report[key] is None and words in report["undefined_metrics"][key], (key, report["undefined_metrics"])
+    for key in ("psnr_db", "cross_transfer_rel_error", "cross_term_rel_size"):
+        if key not in undefined:
+            assert isinstance(report[key], float), (key, report[key])
+    for name in ("composite.png", "composite.exr", "ground_truth.png", "bounces.png", "projected_lf.png"):
+        assert (out / name).stat().st_size > 0, name
+    shown = " ".join(result.stdout.split())
+    assert all(f"{key} is undefined" in shown for key in undefined)
