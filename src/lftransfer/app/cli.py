@@ -449,16 +449,17 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml
     scene = _load(scene_file, quick)
     options = RunOptions(truth_seed=None if exact_rig else truth_seed, rig=_rig_spec(rig))
     _check_before_work(scene, out_file=out, example="calibration.json", max_memory=max_memory)
-    with _step_bar(count_calibration_steps(scene)) as progress:
-        opened = open_rig(scene, options, operator=_operator())
-        try:
-            cal = calibrate(opened.rig, scene.synthetic_part(), progress=progress)
-        except CalibrationFailedError as exc:
-            fail(str(exc), FAILED)
-        except RigError as exc:
-            fail(f"calibration failed: {exc}", FAILED)
-        finally:
-            opened.rig.close()
+    try:
+        with _step_bar(count_calibration_steps(scene)) as progress:
+            opened = open_rig(scene, options, operator=_operator())
+            try:
+                cal = calibrate(opened.rig, scene.synthetic_part(), progress=progress)
+            finally:
+                opened.rig.close()
+    except CalibrationFailedError as exc:           # (after the progress bar's last line)
+        fail(str(exc), FAILED)
+    except RigError as exc:
+        fail(f"calibration failed: {exc}", FAILED)
     errors = write_calibration(out, cal, opened.truth) or {}
     table = Table(title=escape(f"calibration -> {out}"))
     table.add_column("quantity")

@@ -2,10 +2,11 @@
 
 The estimate is linear in the sizes a scene sets: pixels of the LF camera, the projector and the view camera,
 light field samples (lenslets x U x V), bounces, and whether the run calibrates. Its coefficients are peak
-resident sizes measured on this project's runs (``llvm_ad_rgb``, 2 CPU cores, November 2026: a tiny scene
-holds 265 MB; each view pixel adds about 700 bytes with its ground truth, each LF camera pixel 310 bytes and 500
-more when calibrating, each projector pixel 160 bytes, each light field sample 350 bytes), rounded up. A
-quarter-resolution Fig. 4 run with calibration was estimated at 0.49 GB and measured at 0.47 GB.
+resident sizes measured on this project's runs (``llvm_ad_rgb``, 2 CPU cores, November 2026, one size changed at
+a time from a tiny scene that peaks at 265 MB: each view pixel adds about 700 bytes with its ground truth, each
+LF camera pixel 310 bytes and 500 more when calibrating, each projector pixel 160 bytes, each light field sample
+350 bytes), rounded up. ``lft demo --quick`` (calibration, two bounces, both lighting models, ground truth) is
+estimated at 0.52 GB and peaked at 0.48 GB; the full Fig. 4 run is estimated at 3.7 GB.
 """
 
 from __future__ import annotations
