@@ -1,4 +1,5 @@
-"""Global pose: the view camera model, the checkerboard light field, the pose solve and its application."""
+"""Global pose: the view camera model, the fringe light fields and their decoding, the pose solve and its
+application."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import numpy as np
 import pytest
 
 from lftransfer.optics.geometry import backproject, view_camera
-from lftransfer.calibration.pose import (ArrayPose, apply_pose, board_pattern, checkerboard_lightfield,
-                                         solve_array_pose)
+from lftransfer.calibration.pose import (FRINGE_PERIOD_M, ArrayPose, apply_pose, board_pattern, decode_fringes,
+                                         fringe_lightfields, solve_array_pose)
 from lftransfer.rig.model import nominal_rig
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.scenes.frame import rotation_xy
@@ -44,26 +45,64 @@ def test_01_view_camera_matches_mitsuba(variant, scene):
     np.testing.assert_allclose((Y - [0.0, 0.0, 0.1]) @ normal, 0, atol=1e-12)
 
 
-def test_02_checkerboard_lightfield_draws_the_board(scene):
-    """Every lit sample's central ray meets the board plane on a square of the right colour; pattern and inverse
-    never overlap and together cover the pattern's area."""
+def test_02_fringe_lightfields_draw_the_board_coordinates(scene):
+    """With one ray per cell, each sample of shift j carries (1 + cos(2 pi s / T + 2 pi j / 4)) / 2 of the peak
+    radiance, with s the board coordinate where its central ray meets the plane; samples that miss the lit
+    rectangle are dark; with four shifts the mean over shifts is half the peak wherever the rays hit."""
     array = nominal_rig(scene.rig).array
     board = board_pattern(scene.view, 0.08)
-    pattern, inverse = checkerboard_lightfield(array, 24, 24, board, 2.0)
-    lit_p, lit_i = pattern.data[..., 0] > 0, inverse.data[..., 0] > 0
-    assert not np.any(lit_p & lit_i) and lit_p.sum() > 1000 and abs(lit_p.sum() - lit_i.sum()) < 0.2 * lit_p.sum()
-    k, j, i = np.nonzero(lit_p)
-    d = pattern.directions()[j, i]
-    c = array.centres3d[k]
+    extent = (0.15, 0.12)
+    fringes = fringe_lightfields(array, 16, 16, board, extent, 2.0, supersample=1)
+    assert len(fringes) == 8
+    d = fringes[0].directions()
+    c = array.centres3d[:, None, None, :]
     t = ((board.centre - c) @ board.normal) / (d @ board.normal)
-    x = c + t[:, None] * d - board.centre
-    a, b = x @ board.ex / board.square_m, x @ board.ey / board.square_m
-    cols, rows = board.squares
-    assert np.all(np.abs(a) <= cols / 2) and np.all(np.abs(b) <= rows / 2)
-    assert np.all((np.floor(a + cols / 2) + np.floor(b + rows / 2)) % 2 == 0)
+    rel = c + t[..., None] * d[None] - board.centre
+    a, b = rel @ board.ex, rel @ board.ey
+    hit = (t > 0) & (np.abs(a) < extent[0] / 2) & (np.abs(b) < extent[1] / 2) & fringes[0].mask()[None]
+    assert hit.sum() > 1000 and (~hit).sum() > 1000
+    for axis, coord in enumerate((a, b)):
+        for j in range(4):
+            want = np.where(hit, 1.0 + np.cos(2 * np.pi * coord / FRINGE_PERIOD_M + np.pi * j / 2), 0.0)
+            np.testing.assert_allclose(fringes[4 * axis + j].data[..., 1], want, atol=1e-5)
+    mean = np.mean([f.data[..., 0] for f in fringes[:4]], axis=0)
+    np.testing.assert_allclose(mean, np.where(hit, 1.0, 0.0), atol=1e-5)
 
 
-def test_03_pose_recovered_from_exact_correspondences(scene):
+def test_03_fringes_decode_to_board_coordinates(scene):
+    """Photographs of blurred, unevenly lit fringes on a board give every pixel the board coordinates drawn there,
+    with the period's index from a prediction a few millimetres off; a prediction off by more than half a period
+    picks the wrong period (negative control: the unwrapping does rely on it)."""
+    view = scene.view
+    w, h = view.resolution
+    board = board_pattern(view, 0.1)
+    extent = (0.2, 0.16)
+    ys, xs = np.mgrid[0:h, 0:w]
+    px = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
+    X = backproject(view, px, board.centre, board.normal) - board.centre
+    a, b = (X @ board.ex).reshape(h, w), (X @ board.ey).reshape(h, w)
+    albedo = 0.3 + 0.2 * (np.floor(a / 0.022) % 2) + 0.1 * b          # a printed chart, light fall-off
+    shots = []
+    for coord in (a, b):
+        for j in range(4):
+            wave = 0.5 + 0.5 * 0.6 * np.cos(2 * np.pi * coord / FRINGE_PERIOD_M + np.pi * j / 2)   # 60 % contrast
+            shots.append(np.repeat((albedo * wave)[..., None], 3, axis=2))
+
+    def shifted(offset):
+        return lambda P: P + offset
+
+    dec = decode_fringes(shots, board, extent, view, shifted(np.array([0.004, -0.003, 0.002])))
+    inside = (np.abs(a) < extent[0] / 2 - 0.0254) & (np.abs(b) < extent[1] / 2 - 0.0254)
+    assert dec.valid.sum() > 0.95 * inside.sum() and not np.any(dec.valid & ~inside)
+    np.testing.assert_allclose(dec.coords[dec.valid][:, 0], a[dec.valid], atol=1e-9)
+    np.testing.assert_allclose(dec.coords[dec.valid][:, 1], b[dec.valid], atol=1e-9)
+    np.testing.assert_allclose(dec.contrast[dec.valid], 0.6, atol=1e-6)
+    wrong = decode_fringes(shots, board, extent, view, shifted(0.04 * board.ex))
+    err = np.abs(wrong.coords[..., 0] - a)[wrong.valid & inside]
+    assert np.median(err) == pytest.approx(FRINGE_PERIOD_M, abs=1e-6)
+
+
+def test_04_pose_recovered_from_exact_correspondences(scene):
     """Model-frame corners carried by a known pose are mapped back to that pose (tilt, rotation, offset, scale)."""
     board = board_pattern(scene.view, 0.08)
     truth = ArrayPose(tilt=(np.radians(0.4), np.radians(-0.3)), rotation=np.radians(1.7), offset=(0.0021, -0.0013),
@@ -77,7 +116,7 @@ def test_03_pose_recovered_from_exact_correspondences(scene):
     assert ArrayPose.from_json(fit.to_json()).to_json() == fit.to_json()
 
 
-def test_04_apply_pose_keeps_every_pixels_ray(scene):
+def test_05_apply_pose_keeps_every_pixels_ray(scene):
     """A device pixel sees the same world ray whether its model-frame ray is carried by the pose, or the posed
     model is asked directly."""
     model = nominal_rig(scene.rig)
@@ -99,7 +138,7 @@ def test_04_apply_pose_keeps_every_pixels_ray(scene):
     np.testing.assert_allclose(world_dir1, world_dir0, atol=1e-9)
 
 
-def test_05_no_board_in_view_is_a_clear_error(scene):
+def test_06_no_board_in_view_is_a_clear_error(scene):
     """A rig whose board photographs are black: the pose step says what it could not find."""
     from lftransfer.calibration.pose import PoseError, calibrate_pose
 
@@ -111,7 +150,7 @@ def test_05_no_board_in_view_is_a_clear_error(scene):
     assert rig.setups[-1].chart is not None          # the operator was asked for the board with the chart
 
 
-def test_06_corners_land_where_their_rays_meet_the_board(scene):
+def test_07_corners_land_where_their_rays_meet_the_board(scene):
     """On the drawing plane a corner lands where it was drawn; on a board moved along the axis its rays' centroid
     moves along the axis too (the lenslets that draw a central corner lie symmetrically around it)."""
     from lftransfer.calibration.pose import corner_landing
@@ -126,7 +165,7 @@ def test_06_corners_land_where_their_rays_meet_the_board(scene):
     np.testing.assert_allclose(moved, [[0.0, 0.0, 0.083]], atol=2e-4)
 
 
-def test_07_pose_from_misplaced_boards(scene):
+def test_08_pose_from_misplaced_boards(scene):
     """Exact corner landings on two boards held off the asked-for planes recover a hidden pose, where fitting the
     corners as drawn does not (negative control)."""
     from lftransfer.calibration.pose import corner_landing

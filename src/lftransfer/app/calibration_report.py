@@ -11,7 +11,7 @@ the file is opened. Its sections follow the calibration's steps (:mod:`lftransfe
 3. lenslet distortion: histograms of the per-lenslet k1 and k2 and a map of k1 over the lenslets;
 4. projector mapping: the camera-to-projector homography;
 5. radiometry: the camera and projector responses, cross-talk, black level, vignetting, brightness;
-6. global pose: the view camera's photographs of the board, the projected corners and their reprojections.
+6. global pose: the view camera's photographs of the board, the decoded fringe points and their reprojections.
 
 A calibration read from a file (:func:`lftransfer.calibration.rig.load_calibration`) has no lattice fit, no
 distortion fit, no projector fit and no diagnostics: those parts say so, and whatever its model still holds
@@ -178,7 +178,7 @@ def _summary_section(cal, errors: dict | None) -> str:
     else:
         rows.append(("projector mapping", "Gray-code fit", NOT_AVAILABLE, ""))
     rows += [
-        ("global pose", "projected corners, reprojection RMS", _num(pose["rms_px"], ".3f"), "view px"),
+        ("global pose", "projected fringe points, reprojection RMS", _num(pose["rms_px"], ".3f"), "view px"),
         ("global pose", "printed chessboard (solvePnP), RMS", _num(pose["pnp_rms_px"], ".3f"), "view px"),
         ("global pose", "3-D residual of the pose fit, RMS", _num(pose["residual_mm"], ".3f"), "mm"),
         ("radiometry", "camera gamma (R, G, B)", _vec(rad["camera_gamma"], ".4f"), ""),
@@ -316,14 +316,15 @@ def _radiometry_section(cal, diag: dict) -> str:
 
 
 def _pose_section(cal, diag: dict) -> str:
-    """Board photographs with the projected corners and the pose's reprojections, and the residual table."""
+    """Board photographs with the decoded fringe points and the pose's reprojections, and the residual table."""
     pose = cal.pose
     text = ("A diffuse board with a chessboard printed on it is held in front of the array; the view camera "
             "photographs it flood-lit, and the printed chessboard gives the board's plane in the world "
-            "(solvePnP). The rig then projects a checkerboard light field that is sharp on that plane, and its "
-            "inverse; the saddles of their normalised difference (A - B) / (A + B) are the projected corners, "
-            "whose positions in the lenslets' model frame are known. Back-projected onto the board's plane they "
-            "give the array's tilt, rotation, offset and scale by least squares. "
+            "(solvePnP). The rig then projects light fields that draw phase-shifted sinusoidal fringes along the "
+            "board's two axes; their phase at each view camera pixel is the model-frame point drawn there, "
+            "whatever the lenslets' blur. Back-projected onto the board's plane, these points give the array's "
+            "tilt, rotation, offset and scale by least squares, over boards at two depths, in two rounds (the "
+            "second draws the fringes on each board where the first round says it stands). "
             f"Rotation {np.degrees(pose.rotation):.4f} deg, tilt {_vec(np.degrees(pose.tilt), '.4f')} deg, offset "
             f"{_vec(np.asarray(pose.offset) * 1e3, '.3f')} mm, scale {pose.scale:.6f}; reprojection RMS "
             f"{_num(pose.rms_px, '.3f')} px, 3-D residual {_num(pose.residual_mm, '.3f')} mm.")
@@ -345,12 +346,12 @@ def _pose_section(cal, diag: dict) -> str:
         r = reproj - corners
         rows = [(str(i), f"{c[0]:.3f}", f"{c[1]:.3f}", f"{p[0]:.3f}", f"{p[1]:.3f}", f"{d[0]:+.3f}", f"{d[1]:+.3f}",
                  f"{np.hypot(*d):.3f}") for i, (c, p, d) in enumerate(zip(corners, reproj, r))]
-        table = _table(("corner", "detected x", "detected y", "reprojected x", "reprojected y", "dx", "dy", "|r|"),
+        table = _table(("point", "detected x", "detected y", "reprojected x", "reprojected y", "dx", "dy", "|r|"),
                        rows, numeric=tuple(range(8)))
-        figs.append(_figure(table, f"Projected corners (view camera pixels): reprojection RMS "
+        figs.append(_figure(table, f"An even sample of the decoded points (view camera pixels): reprojection RMS over all "
                                    f"{_num(pose.rms_px, '.3f')} px."))
     else:
-        figs.append(f'<p class="note">Per-corner residuals {NOT_AVAILABLE}.</p>')
+        figs.append(f'<p class="note">Per-point residuals {NOT_AVAILABLE}.</p>')
     return _explain(text) + _figs(figs)
 
 
@@ -497,8 +498,8 @@ def _vignetting_figure(rad, rd: dict) -> str:
 
 
 def _pose_corners_figure(pose, pd: dict) -> str:
-    """Normalised difference image (false colour) with detected corners and the pose's reprojections, whole and
-    zoomed onto the corners."""
+    """Fringe phase image (false colour) with a sample of the decoded points and the pose's reprojections, whole
+    and zoomed."""
     norm = np.asarray(pd["normalised"], np.float32)
     lut = _diverging_lut()
     img = _false_colour(norm, -1.0, 1.0, lut)
@@ -508,8 +509,8 @@ def _pose_corners_figure(pose, pd: dict) -> str:
     disp = _resize(img, f)
     _draw_corners(disp, corners, reproj, f, max(4.0, 1.2 * f))
     found = np.asarray(pd.get("found") if pd.get("found") is not None else [], bool).ravel()
-    count = f"{int(found.sum())} of {len(found)} corners found; " if found.size else ""
-    pictures = [_png_img(disp, "normalised difference with corners")]
+    count = f"{int(found.sum())} pixels decoded; " if found.size else ""
+    pictures = [_png_img(disp, "fringe phase with sample points")]
     both = np.concatenate([corners, reproj]) if len(corners) else np.zeros((0, 2))
     zoom = ""
     if len(both):
@@ -525,11 +526,13 @@ def _pose_corners_figure(pose, pd: dict) -> str:
             _draw_corners(crop, corners - (x0, y0), reproj - (x0, y0), z, max(8.0, 1.5 * z))
             pictures.append(_png_img(crop, "corners, zoomed"))
             zoom = f" The second picture zooms onto the corners (pixels x {x0}..{x1 - 1}, y {y0}..{y1 - 1}, x{z})."
-    body = "".join(pictures) + _svg_colour_bar(-1.0, 1.0, lut, "(A - B) / (A + B)")
+    body = "".join(pictures) + _svg_colour_bar(-1.0, 1.0, lut, "cos(phase)")
     return _figure(f'<div class="figs">{body}</div>',
-                   f"Normalised difference of the projected checkerboard and its inverse (view camera, shown at "
-                   f"x{f:.3g}; 0 where unlit): detected corners as green crosses, the fitted pose's reprojections as "
-                   f"red circles ({count}reprojection RMS {_num(pose.rms_px, '.3f')} px).{zoom}")
+                   f"Phase of the fringes along the board's first axis as the view camera decodes it (cos of the "
+                   f"phase, shown at x{f:.3g}; 0 where unlit): an even sample of the decoded points as green "
+                   f"crosses, the fitted pose's reprojections as red circles ({count}reprojection RMS over all "
+                   f"points {_num(pose.rms_px, '.3f')} px: mostly the per-pixel noise of the phase, which the fit "
+                   f"averages).{zoom}")
 
 
 def _draw_corners(img: np.ndarray, corners: np.ndarray, reproj: np.ndarray, factor: float, size: float) -> None:

@@ -1,22 +1,19 @@
 """Global pose: where the lens array stands in the view camera's world (paper, section 4.2).
 
-The rig renders the light field of a checkerboard plane lying at a chosen depth in front of the array, in the
-frame its calibration so far defines (the *model frame*: the rig file's nominal array, whose pitch is the unit
-of length), and projects it. The rays of all lenslets meet on that plane, so a diffuse board held there shows a
-sharp checkerboard, which the view camera photographs. The pattern and its inverse are both projected: their
-normalised difference ``(A - B) / (A + B)`` no longer depends on how many lenslets light each point, and its
-saddle points are the corners.
+The rig renders light fields whose rays draw phase-shifted sinusoidal fringes on a plane at a chosen depth in
+front of the array, in the frame its calibration so far defines (the *model frame*: the rig file's nominal array,
+whose pitch is the unit of length), and projects them on a board held there; the view camera photographs them.
+The fringes' phase at each pixel is the board coordinate drawn there, whatever the lenslets' blur (structured
+light), so every pixel on the board pairs a model-frame point with a world point: the pixel's ray meets the
+board's plane, measured from the chessboard printed on it.
 
-The corners' model-frame positions and their pixels give the array's pose in the world:
+Those pairs give the array's pose in the world:
 
     X_world = R_tilt(a_x, a_y) (s R_z(theta) X_model + (o_x, o_y, 0))
 
 with ``R_tilt`` the array plane's out-of-plane tilt about the world origin, ``theta`` its in-plane rotation,
 ``o`` its in-plane offset and ``s`` the ratio of true to nominal pitch (the lenslet calibration fixes the rig
-only up to this similarity). ``cv2.solvePnP`` gives a first rigid pose at the nominal scale; a least-squares
-refinement of the six parameters above follows. A camera alone cannot tell a larger array further away from the
-nominal one (vision is up to scale); the constraint that the array's centre lies in its own plane through the
-world origin, where the rig is mounted, fixes the scale.
+only up to this similarity), by least squares over boards at two depths (their parallax fixes the tilt).
 """
 
 from __future__ import annotations
@@ -35,8 +32,9 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "PoseError", "apply_pose", "board_pattern", "calibrate_pose",
-           "checkerboard_lightfield", "corner_landing", "find_board_corners", "solve_array_pose", "view_camera"]
+__all__ = ["FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "FringeDecoding",
+           "PoseError", "apply_pose", "board_pattern", "calibrate_pose", "corner_landing", "decode_fringes",
+           "fringe_lightfields", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
@@ -45,7 +43,8 @@ class PoseError(ValueError):
 
 @dataclass(frozen=True)
 class BoardPattern:
-    """A checkerboard plane in front of the array, in the model frame.
+    """A drawing plane in front of the array, in the model frame, with a grid of reference points on it (the inner
+    corners of ``squares`` squares of ``square_m``).
 
     Attributes:
         centre: (3,) metres (z > 0: the real side).
@@ -77,8 +76,8 @@ class BoardPattern:
 def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.045) -> BoardPattern:
     """The board plane: centred on the array's axis at ``depth``, turned halfway towards the view camera.
 
-    Facing both the array (which lights it) and the view camera (which photographs it) keeps the corners
-    well lit and not too foreshortened.
+    Facing both the array (which lights it) and the view camera (which photographs it) keeps the board well lit
+    and not too foreshortened.
     """
     centre = np.array([0.0, 0.0, float(depth)])
     to_cam = np.asarray(view.origin, np.float64) - centre
@@ -87,65 +86,112 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
 
 
-def checkerboard_lightfield(array: LensArray, U: int, V: int, board: BoardPattern,
-                            radiance: float) -> tuple[LightField, LightField]:
-    """The light field whose rays draw the checkerboard on the board plane, and its inverse.
-
-    Each sample (k, d) is the ray leaving lenslet k's centre along +d into the real side; where it meets the
-    board plane inside the pattern, it carries ``radiance`` on white squares (pattern) or black ones
-    (inverse), else nothing.
-
-    Returns:
-        pattern, inverse: LightField (K, V, U, 3) float32 radiance.
-    """
-    lf = LightField.zeros(array, U, V)
-    d = lf.directions()                                                   # (V, U, 3)
-    c = array.centres3d[:, None, None, :]                                 # (K, 1, 1, 3)
-    denom = d @ board.normal                                              # (V, U)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((board.centre - c) @ board.normal) / denom                   # (K, V, U)
-    x = c + t[..., None] * d[None]
-    rel = x - board.centre
-    a, b = rel @ board.ex / board.square_m, rel @ board.ey / board.square_m
-    cols, rows = board.squares
-    inside = (t > 0) & (np.abs(a) < cols / 2) & (np.abs(b) < rows / 2) & lf.mask()[None]
-    white = (np.floor(a + cols / 2).astype(int) + np.floor(b + rows / 2).astype(int)) % 2 == 0
-    pattern, inverse = lf, LightField.zeros(array, U, V)
-    pattern.data[...] = (radiance * (inside & white))[..., None]
-    inverse.data[...] = (radiance * (inside & ~white))[..., None]
-    return pattern, inverse
+FRINGE_PERIOD_M = 0.06    # metres on the board: blurred by a 25 mm aperture, a 60 mm sinusoid keeps ~3/4 of its contrast
+FRINGE_SHIFTS = 4         # phase steps per direction
 
 
-def find_board_corners(pattern_img: np.ndarray, inverse_img: np.ndarray, board: BoardPattern, view,
-                       plane_to_world: Callable[[np.ndarray], np.ndarray] | None = None
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pixels of the projected checkerboard's inner corners, by aligning the whole pattern at once.
+def fringe_lightfields(array: LensArray, U: int, V: int, board: BoardPattern, extent: tuple[float, float],
+                       radiance: float, period_m: float = FRINGE_PERIOD_M, shifts: int = FRINGE_SHIFTS,
+                       supersample: int = 4) -> list[LightField]:
+    """Light fields whose rays draw phase-shifted sinusoidal fringes on the board plane (structured light).
 
-    The lenslets' apertures blur the projected pattern by about their pitch, nearly a square: its normalised
-    difference ``N = (A - B) / (A + B)`` is then close to ``sin(pi a) sin(pi b)`` in the board's square
-    coordinates (a, b), whose zeros are the square edges and whose saddles are the corners. A template of that
-    function, drawn where the corners are predicted, is aligned to N by a homography (``cv2.findTransformECC``,
-    which is blind to contrast); the corners are the predicted ones carried by that homography. The blur is
-    symmetric about every corner, so it moves none.
+    Sample (k, d) stands for the rays leaving lenslet k's centre within its angular cell around +d; where they meet
+    the plane inside the ``extent`` rectangle it carries ``radiance (1 + cos(2 pi s / T + 2 pi j / shifts)) / 2``
+    averaged over ``supersample`` x ``supersample`` rays across the cell, with s the board coordinate (metres from
+    ``board.centre`` along ``board.ex``, then along ``board.ey``) and T the period. A sinusoid blurred by any
+    point-symmetric kernel (a lenslet aperture seen obliquely, a cell's spread of directions) keeps its phase and
+    loses only contrast, so the phase that the view camera sees at a point of the board is the board coordinate
+    drawn there, whatever the blur; the board's albedo and the light's fall-off cancel in the phase.
 
     Args:
-        pattern_img, inverse_img: (H, W, 3) view camera images (linear radiance) with the pattern and with its
-            inverse projected.
-        board: the projected pattern.
-        view: ``ViewConfig``.
-        plane_to_world: where the board plane is predicted (model frame -> world); identity if None.
+        array: the lens array (model frame).
+        U, V: angular samples.
+        board: the drawing plane and its axes.
+        extent: (width, height) metres of the lit rectangle centred on ``board.centre``.
+        radiance: peak radiance.
+        period_m: fringe period T, metres.
+        shifts: phase steps per direction.
+        supersample: rays per cell and axis.
 
     Returns:
-        corners (N, 2) float64 pixels of ``board.corners()``, found (N,) bool, and the normalised difference
-        image N (H, W) float32 (for the report).
+        ``2 * shifts`` LightFields (K, V, U, 3) float32: the fringes along ``ex`` at each phase step, then along
+        ``ey``.
     """
-    a_img, b_img = pattern_img.mean(axis=2), inverse_img.mean(axis=2)
-    total = a_img + b_img
-    lit = total > 0.05 * np.percentile(total, 99.5)
-    norm = np.where(lit, (a_img - b_img) / np.where(lit, total, 1.0), 0.0).astype(np.float32)
-    h, w = norm.shape
+    lf = LightField.zeros(array, U, V)
+    uu, vv = np.meshgrid(lf.u, lf.v)
+    du, dv = 2.0 * array.half_width / U, 2.0 * array.half_width / V
+    c = array.centres3d[:, None, None, :]                                 # (K, 1, 1, 3)
+    phases = 2 * np.pi * np.arange(shifts) / shifts
+    acc = np.zeros((2, shifts, array.K, V, U))
+    steps = (np.arange(supersample) + 0.5) / supersample - 0.5
+    for sv in steps:
+        for su in steps:
+            d = np.stack([uu + su * du, vv + sv * dv, np.ones_like(uu)], axis=-1)
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((board.centre - c) @ board.normal) / (d @ board.normal)
+            rel = c + t[..., None] * d[None] - board.centre
+            a, b = rel @ board.ex, rel @ board.ey                          # (K, V, U) metres
+            hit = (t > 0) & (np.abs(a) < extent[0] / 2) & (np.abs(b) < extent[1] / 2)
+            for axis, coord in enumerate((a, b)):
+                wave = 2 * np.pi * np.where(hit, coord, 0.0)[None] / period_m + phases[:, None, None, None]
+                acc[axis] += hit * 0.5 * (1.0 + np.cos(wave))
+    acc *= radiance * lf.mask()[None, None, None] / supersample ** 2
+    out = []
+    for axis in range(2):
+        for j in range(shifts):
+            f = LightField.zeros(array, U, V)
+            f.data[...] = acc[axis, j][..., None]
+            out.append(f)
+    return out
+
+
+@dataclass(frozen=True)
+class FringeDecoding:
+    """What the view camera saw of the fringes: each pixel's board coordinates on the drawing plane.
+
+    Attributes:
+        coords: (H, W, 2) float64 board coordinates (metres along ``ex``, ``ey``), unwrapped; NaN where invalid.
+        contrast: (H, W, 2) float32 fringe modulation over mean (1: full contrast).
+        valid: (H, W) bool, pixels whose two phases are trusted.
+        wrapped: (H, W) float32 cos of the phase along ``ex`` (for the report).
+    """
+
+    coords: np.ndarray
+    contrast: np.ndarray
+    valid: np.ndarray
+    wrapped: np.ndarray
+
+
+def decode_fringes(images: list[np.ndarray], board: BoardPattern, extent: tuple[float, float], view,
+                   plane_to_world: Callable[[np.ndarray], np.ndarray] | None = None, *,
+                   period_m: float = FRINGE_PERIOD_M, margin_m: float = 0.0254,
+                   min_contrast: float = 0.25) -> FringeDecoding:
+    """Board coordinates of every view camera pixel from the phase-shifted fringes (see :func:`fringe_lightfields`).
+
+    The phase of each direction is ``atan2(-sum I_j sin phi_j, sum I_j cos phi_j)``; the period's index comes from
+    the coordinates predicted on the expected board plane (good to well under half a period, 30 mm). Pixels within
+    ``margin_m`` of the lit rectangle's edge (where the blur mixes in the unlit border and bends the phase), dark
+    pixels and pixels of low contrast are invalid.
+
+    Args:
+        images: ``2 * shifts`` (H, W, 3) view camera images (linear radiance), in the order of
+            :func:`fringe_lightfields`.
+        board, extent: the drawing plane and the lit rectangle.
+        view: ``ViewConfig``.
+        plane_to_world: where the drawing plane is predicted (model frame -> world); identity if None.
+        period_m: fringe period, metres.
+        margin_m: excluded border, metres (about a lenslet pitch: the blur's reach).
+        min_contrast: smallest modulation / mean that is trusted.
+
+    Returns:
+        FringeDecoding.
+    """
+    shifts = len(images) // 2
+    phases = 2 * np.pi * np.arange(shifts) / shifts
+    grey = np.stack([np.asarray(im, np.float64).mean(axis=2) for im in images])   # (2 shifts, H, W)
+    h, w = grey.shape[1:]
     to_world = plane_to_world or (lambda X: X)
-    # predicted board plane in the world, and each pixel's square coordinates on it
     origin = to_world(board.centre[None])[0]
     ex = to_world((board.centre + board.ex)[None])[0] - origin
     ey = to_world((board.centre + board.ey)[None])[0] - origin
@@ -153,30 +199,29 @@ def find_board_corners(pattern_img: np.ndarray, inverse_img: np.ndarray, board: 
     ys, xs = np.mgrid[0:h, 0:w]
     px = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
     X = backproject(view, px, origin, normal / np.linalg.norm(normal))
-    cols, rows = board.squares
-    a = ((X - origin) @ ex) / (ex @ ex) / board.square_m + cols / 2
-    b = ((X - origin) @ ey) / (ey @ ey) / board.square_m + rows / 2
-    template = (np.sin(np.pi * a) * np.sin(np.pi * b)).reshape(h, w).astype(np.float32)
-    inner = ((a > 0.5) & (a < cols - 0.5) & (b > 0.5) & (b < rows - 0.5)).reshape(h, w) & lit
-    corners_pred = project(view, to_world(board.corners()))
-    if inner.sum() < 100:
-        return corners_pred, np.zeros(len(corners_pred), bool), norm
-    if np.mean(template[inner] * norm[inner]) < 0:      # the pattern's phase: white squares where a + b is even
-        template = -template
-    warp = np.eye(3, dtype=np.float32)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 200, 1e-7)
-    try:
-        _, warp = cv2.findTransformECC(template, norm, warp, cv2.MOTION_HOMOGRAPHY, crit, inner.astype(np.uint8), 1)
-    except cv2.error as exc:
-        raise PoseError(f"the projected checkerboard could not be aligned in the view camera image: {exc}") from None
-    p = np.concatenate([corners_pred, np.ones((len(corners_pred), 1))], 1) @ warp.astype(np.float64).T
-    corners = p[:, :2] / p[:, 2:3]
-    found = np.all(np.isfinite(corners), axis=1) & (corners[:, 0] >= 0) & (corners[:, 0] <= w - 1) \
-        & (corners[:, 1] >= 0) & (corners[:, 1] <= h - 1)
-    ix = np.clip(np.round(corners[:, 0]).astype(int), 0, w - 1)
-    iy = np.clip(np.round(corners[:, 1]).astype(int), 0, h - 1)
-    found &= lit[iy, ix]
-    return corners, found, norm
+    predicted = [((X - origin) @ e / (e @ e)).reshape(h, w) for e in (ex, ey)]
+    coords, contrast = np.full((h, w, 2), np.nan), np.zeros((h, w, 2), np.float32)
+    mean_all = grey.mean(axis=0)
+    lit = mean_all > 0.05 * np.percentile(mean_all, 99.5)
+    valid = lit.copy()
+    wrapped = np.zeros((h, w), np.float32)
+    for axis in range(2):
+        stack = grey[axis * shifts:(axis + 1) * shifts]
+        cs = np.tensordot(np.cos(phases), stack, 1)
+        sn = np.tensordot(np.sin(phases), stack, 1)
+        mean = stack.mean(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            contrast[..., axis] = (2.0 / shifts) * np.hypot(cs, sn) / mean
+        phase = np.arctan2(-sn, cs)
+        s = phase * period_m / (2 * np.pi)
+        coords[..., axis] = s + np.round((predicted[axis] - s) / period_m) * period_m
+        half = extent[axis] / 2 - margin_m
+        valid &= np.nan_to_num(contrast[..., axis]) >= min_contrast
+        valid &= np.abs(np.nan_to_num(coords[..., axis], nan=np.inf)) < half
+        if axis == 0:
+            wrapped = np.where(lit, np.cos(phase), 0.0).astype(np.float32)
+    coords[~valid] = np.nan
+    return FringeDecoding(coords, contrast, valid, wrapped)
 
 
 @dataclass
@@ -188,10 +233,11 @@ class ArrayPose:
         rotation: in-plane rotation, radians.
         offset: (2,) in-plane offset, metres.
         scale: true pitch / nominal pitch.
-        rms_px: reprojection RMS of the corners, view camera pixels.
-        corners_px: (N, 2) detected corners; reprojected (N, 2) their reprojection.
+        rms_px: reprojection RMS of the measured points (projected corners or fringe points), view camera pixels.
+        corners_px: (N, 2) measured points (a sample of them, for the report); reprojected (N, 2) their
+            reprojection.
         pnp_rms_px: reprojection RMS of the printed chessboard's pose (``cv2.solvePnP``), pixels.
-        residual_mm: RMS distance between the measured corners and the fitted pose's, millimetres.
+        residual_mm: RMS distance between the measured points and the fitted pose's, millimetres.
     """
 
     tilt: tuple[float, float]
@@ -368,23 +414,25 @@ def _drawn_on(board: BoardPattern, point: np.ndarray, normal: np.ndarray) -> Boa
 
 
 def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, rounds: int = POSE_ROUNDS,
-                   squares=(5, 4), square_m: float = 0.028, chart=(7, 5, 0.022), spp: int = 16,
+                   chart=(7, 5, 0.022), spp: int = 16,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
-    """Ask for a board at each depth, find its plane, project the checkerboard light field and its inverse on it,
-    solve the pose from all boards at once; then again, with the pattern drawn on each board where it stands.
+    """Ask for a board at each depth, find its plane, project phase-shifted fringes on it, solve the pose from all
+    boards at once; then again, with the fringes drawn on each board where it stands.
 
-    The board is asked for where the checkerboard is drawn (``depth`` in front of the array, turned towards the
-    view camera); the operator puts it there only roughly. Its plane is measured in the world from the printed
-    chessboard. A corner drawn by light lands where its rays meet the real board (:func:`corner_landing`), which
-    depends on the pose: the fit solves the pose with each corner where it lands for the candidate pose, so the
-    board's placement errors go into the fit, not into the pose. Seen on one board, rays along the array's axis
-    hide how the array is tilted (a tilt and an offset move every corner alike); boards at two depths see the
-    rays' parallax and fix the tilt.
+    The board is asked for where the fringes are drawn (``depth`` in front of the array, turned towards the view
+    camera); the operator puts it there only roughly. Its plane is measured in the world from the printed
+    chessboard. Fringes along the board's two axes (:func:`fringe_lightfields`) give every view camera pixel on it
+    the model-frame point drawn there (:func:`decode_fringes`): thousands of correspondences per board, each
+    immune to the lenslets' blur. A point drawn by light lands where its rays meet the real board
+    (:func:`corner_landing`), which depends on the pose: the fit solves the pose with each point where it lands for
+    the candidate pose, so the board's placement errors go into the fit, not into the pose. Seen on one board,
+    rays along the array's axis hide how the array is tilted (a tilt and an offset move every point alike); boards
+    at two depths see the rays' parallax and fix the tilt.
 
-    A board a few millimetres off the drawing plane sees each corner as the overlap of several lenslets' slightly
-    different images (out of focus), which biases its detection. From the second round on, the boards are asked
-    for again, and each checkerboard is drawn on the board's measured plane carried into the model frame by the
-    previous round's pose: in focus up to that pose's error. The last round's corners give the pose.
+    A board a few millimetres off the drawing plane sees each point as the overlap of several lenslets' slightly
+    different images (out of focus), which the landing model describes only on average. From the second round on,
+    the boards are asked for again, and the fringes are drawn on each board's measured plane carried into the
+    model frame by the previous round's pose: in focus up to that pose's error. The last round gives the pose.
 
     Args:
         rig: the rig; it is asked for a :class:`~lftransfer.rig.requests.Board` with a printed chessboard at each
@@ -392,15 +440,17 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
         model: the calibrated rig in the model frame (lenslets, projector mapping, distortion).
         scene: the scene (view camera, angular samples).
         depths: distances of the boards' centres from the array, metres (model frame).
-        rounds: rounds of boards (1: the pattern drawn where the board was asked for, only).
-        squares, square_m: layout of the projected checkerboard.
-        chart: (columns, rows, square size in metres) of the printed chessboard.
+        rounds: rounds of boards (1: the fringes drawn where the board was asked for, only).
+        chart: (columns, rows, square size in metres) of the printed chessboard; the board is two squares larger
+            each way, and the fringes light all of it.
         spp: view camera quality (samples per pixel of a simulated camera) of the calibration photographs.
         progress: called with a message per capture.
 
     Returns:
-        (ArrayPose, diagnostics: per board of the last round the view images, the corners and its placement error
-        as measured, for the report; the first board's also at the top level; ``rounds``: the pose after each).
+        (ArrayPose, diagnostics: per board of the last round the view images, the decoded pixels and its placement
+        error as measured, for the report; the first board's also at the top level; ``rounds``: the pose after
+        each). ``pose.corners_px`` and ``pose.reprojected`` keep an even sample of the points for the report;
+        ``pose.rms_px`` is over all of them.
     """
     if rounds < 1:
         raise ValueError(f"rounds: expected at least 1, got {rounds}")
@@ -415,7 +465,7 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
     for r in range(rounds):
         boards = []
         for depth in depths:
-            asked = board_pattern(scene.view, depth, squares, square_m)
+            asked = board_pattern(scene.view, depth)
             rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart)))
             tag = f"pose round {r + 1}: board at {100 * depth:.0f} cm" if rounds > 1 else \
                 f"pose: board at {100 * depth:.0f} cm"
@@ -427,22 +477,25 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
             point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
             board = asked if pose is None else _drawn_on(asked, pose.world_to_model(point[None])[0],
                                                         pose.direction_to_model(normal[None])[0])
-            pattern, inverse = checkerboard_lightfield(model.array, n, n, board, level)
-            for name, lf in (("pattern", pattern), ("inverse", inverse)):
+            fringes = fringe_lightfields(model.array, n, n, board, size, level)
+            shots = []
+            for j, lf in enumerate(fringes):
                 if progress:
-                    progress(f"{tag} photographed with the {name} light field")
+                    progress(f"{tag} photographed with fringes {j + 1} of {len(fringes)}")
                 rig.project(encoder(lf))
-                images[name] = rig.capture_view(ViewCapture(quality=spp)).radiance
+                shots.append(rig.capture_view(ViewCapture(quality=spp)).radiance)
             rig.project(rig.info.black())
-            px, found, norm = find_board_corners(images["pattern"], images["inverse"], board, scene.view,
-                                                 None if pose is None else pose.model_to_world)
-            if found.sum() < 4:
-                raise PoseError(f"board at {100 * depth:.0f} cm: found {int(found.sum())} of {len(found)} "
-                                "projected corners in the view camera image; is the board in view and lit?")
+            images["fringes"] = shots[0]
+            dec = decode_fringes(shots, board, size, scene.view, None if pose is None else pose.model_to_world)
+            px, coords = _sample_valid(dec)
+            if len(px) < 50:
+                raise PoseError(f"board at {100 * depth:.0f} cm: only {len(px)} view camera pixels saw the "
+                                "projected fringes clearly; is the board in view and lit?")
+            found, norm = dec.valid, dec.wrapped                  # (H, W) bool, (H, W) cos(phase) for the report
+            drawn = board.centre + coords[:, :1] * board.ex + coords[:, 1:] * board.ey
             boards.append({"asked": asked, "board": board, "point": point, "normal": normal, "chart_rms": chart_rms,
-                           "px": px[found], "found": found, "images": images, "normalised": norm,
-                           "world": backproject(scene.view, px[found], point, normal),
-                           "drawn": board.corners()[found]})
+                           "px": px, "found": found, "images": images, "normalised": norm,
+                           "world": backproject(scene.view, px, point, normal), "drawn": drawn})
         pose = _solve_boards(model.array, boards, scene.view, start=pose)
         history.append(pose.to_json())
 
@@ -454,11 +507,23 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
         placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["asked"].centre) @ n_m),
                      "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["asked"].normal, -1.0, 1.0))))}
         per_board.append({"images": b["images"], "normalised": b["normalised"], "found": b["found"],
-                          "predicted": project(scene.view, pose.model_to_world(b["board"].corners())),
                           "board_placement": placement, "depth_m": float(b["asked"].centre[2])})
+    shown = np.concatenate([np.linspace(0, len(b["px"]) - 1, 24).round().astype(int) + sum(len(c["px"]) for c in
+                                                                                          boards[:i])
+                            for i, b in enumerate(boards)])
+    pose.corners_px, pose.reprojected = pose.corners_px[shown], pose.reprojected[shown]
     first = per_board[0]
     worst = max(per_board, key=lambda d: abs(d["board_placement"]["depth_mm"]))["board_placement"]
     return pose, {**first, "board_placement": worst, "boards": per_board, "rounds": history}
+
+
+def _sample_valid(dec: FringeDecoding, most: int = 3000) -> tuple[np.ndarray, np.ndarray]:
+    """Valid pixels on a regular grid, at most about ``most``: (N, 2) pixels and (N, 2) board coordinates."""
+    ys, xs = np.nonzero(dec.valid)
+    stride = max(1, int(np.ceil(np.sqrt(len(ys) / most))))
+    keep = (ys % stride == 0) & (xs % stride == 0)
+    ys, xs = ys[keep], xs[keep]
+    return np.stack([xs, ys], 1).astype(np.float64), dec.coords[ys, xs]
 
 
 def _solve_boards(array: LensArray, boards: list[dict], view, start: ArrayPose | None) -> ArrayPose:

@@ -7,7 +7,7 @@
 3. projector-to-camera mapping: Gray codes on a focal-plane diffuser (:mod:`.projector`); the projector's
    homography is that mapping after the camera's;
 4. radiometry: responses, vignetting, cross-talk, black level, brightness and exposure (:mod:`.radiometric`);
-5. global pose: the projected checkerboard on a board the view camera sees (:mod:`.pose`), which carries the
+5. global pose: projected fringes on boards the view camera sees (:mod:`.pose`), which carry the
    model frame into the world (array rotation, offset, pitch and tilt).
 
 The result is a :class:`Calibration`, whose :attr:`Calibration.model` is the rig model the pipeline uses, and
@@ -27,7 +27,7 @@ from lftransfer.calibration.calibration_file import FORMAT, CalibrationFileError
 from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
 from lftransfer.calibration.images import to_grey
 from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
-from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS, ArrayPose, apply_pose, calibrate_pose
+from lftransfer.calibration.pose import FRINGE_SHIFTS, POSE_DEPTHS, POSE_ROUNDS, ArrayPose, apply_pose, calibrate_pose
 from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
                                               gray_code_patterns)
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
@@ -270,7 +270,7 @@ def _as_projector_image(pattern: np.ndarray, rig: Rig) -> np.ndarray:
 
 SWEEP_STEPS = 5                   # collimator tilts per axis
 _RADIOMETRY_MESSAGES = 5          # progress messages of calibrate_radiometry
-_POSE_MESSAGES = 3 * len(POSE_DEPTHS) * POSE_ROUNDS     # progress messages of calibrate_pose
+_POSE_MESSAGES = (1 + 2 * FRINGE_SHIFTS) * len(POSE_DEPTHS) * POSE_ROUNDS    # progress messages of calibrate_pose
 
 
 def _gray_groups(scene) -> int:
