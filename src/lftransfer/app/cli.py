@@ -23,22 +23,22 @@ from typer.core import TyperCommand
 from lftransfer.app.terminal import FAILED, INTERRUPTED, LftGroup, console, fail, warn
 
 
-class _Command(TyperCommand):
+class _PlainHelp:
+    """Help that shows flags without a ``<bool>`` type (mixed into the command and the group)."""
+
+    def get_help_option(self, ctx):  # noqa: ANN001, ANN201
+        option = super().get_help_option(ctx)
+        if option is not None:
+            option.metavar = ""
+        return option
+
+
+class _Command(_PlainHelp, TyperCommand):
     """A command whose help shows flags without a ``<bool>`` type."""
 
-    def get_help_option(self, ctx):  # noqa: ANN001, ANN201
-        option = super().get_help_option(ctx)
-        if option is not None:
-            option.metavar = ""
-        return option
 
-
-class _Group(LftGroup):
-    def get_help_option(self, ctx):  # noqa: ANN001, ANN201
-        option = super().get_help_option(ctx)
-        if option is not None:
-            option.metavar = ""
-        return option
+class _Group(_PlainHelp, LftGroup):
+    """The ``lft`` group, with the same help."""
 
 
 app = typer.Typer(cls=_Group, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
