@@ -20,7 +20,11 @@ def small_fig4():
 
 @pytest.mark.slow
 def test_01_fig4_small_rig(variant, tmp_path):
-    """The rig file is exact here (no hidden deviations): transfer and verification alone."""
+    """The rig file is exact here (no hidden deviations): transfer and verification alone.
+
+    Measured (llvm_ad_rgb, 128 ground-truth samples per pixel): cross-transfer error 0.279 with the area model,
+    0.309 with the point model; other ground-truth seed pairs give 0.279 to 0.284, so the bounds are these plus
+    0.05. (Most of the error is the ground truth's own noise at 128 samples: 0.215 at 512.)"""
     report = run_scene(small_fig4(), tmp_path, RunOptions(bounces=2, compare_models=("point",), capture_spp=2,
                                                           truth_seed=None, rig_model="nominal"))
     for name in ("composite.png", "composite.exr", "ground_truth.png", "bounces.png", "captured_lf.png",
@@ -28,8 +32,8 @@ def test_01_fig4_small_rig(variant, tmp_path):
         assert (tmp_path / name).stat().st_size > 0, name
     assert json.loads((tmp_path / "report.json").read_text())["psnr_db"] == pytest.approx(report["psnr_db"])
     # Light field transfer adds the cross terms that the direct-only composite lacks.
-    assert report["cross_transfer_rel_error"] < 0.45
-    assert report["by_lighting_model"]["point"]["cross_transfer_rel_error"] < 0.6
+    assert report["cross_transfer_rel_error"] < 0.33
+    assert report["by_lighting_model"]["point"]["cross_transfer_rel_error"] < 0.36
     assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
     energies = [(b["real_energy"], b["synthetic_energy"]) for b in report["bounces"]]
     assert all(np.all(np.diff(np.array(energies)[:, s]) < 0) for s in (0, 1)), energies
@@ -39,19 +43,35 @@ def test_01_fig4_small_rig(variant, tmp_path):
 @pytest.mark.slow
 def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     """The default run: the simulated rig hides its truth, the pipeline calibrates it from images, then transfers
-    with the calibrated values only; the calibration files are written and the transfer still works."""
+    with the calibrated values only; the calibration files are written and the transfer still works.
+
+    The negative control (the same transfer with the rig file's nominal values on the same perturbed rig, against
+    the same ground truth) fails the bound that the calibrated run passes, so the metric is not blind to
+    calibration. Measured (llvm_ad_rgb, 512 ground-truth samples per pixel, truth seed 4): cross-transfer error
+    0.242 calibrated, 0.356 nominal; psnr_objects_db 36.75 and 36.63 dB (the objects' PSNR is dominated by the
+    direct light, which the rig model does not touch). The bound sits between them: 0.30, 0.06 from each."""
     from lftransfer.app.pipeline import quick_scene
 
     scene = quick_scene(load_scene(builtin_scene("fig4")))
-    scene = with_overrides(scene, render={"gt_spp": 128})
-    report = run_scene(scene, tmp_path, RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=4))
+    scene = with_overrides(scene, render={"gt_spp": 512})
+    report = run_scene(scene, tmp_path, RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=4,
+                                                   negative_control=True))
     assert report["rig_model"] == "calibrated"
     for name in ("calibration.json", "calibration_errors.json", "calibration_report.html"):
         assert (tmp_path / name).stat().st_size > 0, name
     errors = json.loads((tmp_path / "calibration_errors.json").read_text())
     assert errors["lenslet_centre_rms_px"] < 0.1 and errors["projector_mapping_rms_px"] < 0.5
-    assert report["cross_transfer_rel_error"] < 0.45
+    bound = 0.30
+    assert report["cross_transfer_rel_error"] < bound
     assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
+    assert report["psnr_objects_db"] > report["psnr_objects_db_direct_only"] + 0.5
+    assert report["psnr_objects_db"] < report["psnr_db"] - 5          # the black background flatters psnr_db
+    control = report["negative_control"]
+    assert control["rig_model"] == "nominal (rig file)"
+    assert control["cross_transfer_rel_error"] > bound                 # the uncalibrated model fails the bound
+    assert control["measurably_worse"], control
+    assert control["psnr_objects_margin_db"] > 0 and control["cross_error_margin"] > 0.06
+    assert not [w for w in report["warnings"] if "negative control" in w]
     # the calibration file runs the pipeline again without calibrating
     again = run_scene(scene, tmp_path / "again", RunOptions(bounces=1, compare_models=(), capture_spp=2,
                                                            truth_seed=4, calibration=tmp_path / "calibration.json"))

@@ -107,3 +107,44 @@ def test_04_degenerate_scenes_write_images_and_null_metrics(tmp_path, kind, unde
         assert (out / name).stat().st_size > 0, name
     shown = " ".join(result.stdout.split())
     assert all(f"{key} is undefined" in shown for key in undefined)
+
+
+def test_05_demo_reports_its_negative_control(tmp_path, monkeypatch):
+    """``lft demo`` runs the negative control (the rig file's nominal values on the same perturbed rig, the same
+    ground truth) and reports it in report.json and one line of the summary. The Fig. 4 scene is swapped for the
+    tiny rig here, and the oracle model stands in for calibration (seconds instead of minutes)."""
+    scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24), gt_spp=4))
+    monkeypatch.setattr("lftransfer.app.cli._load", lambda path, quick: scene)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["demo", "--rig-model", "oracle", "--bounces", "1", "--out", str(out)],
+                           env={"COLUMNS": "250"})
+    assert result.exit_code == 0, (result.output, result.exception)
+    report = _strict_report(out)
+    shown = " ".join(result.stdout.split())
+    for key in ("psnr_objects_db", "psnr_objects_db_direct_only"):
+        assert isinstance(report[key], float) and key in shown
+    control = report["negative_control"]
+    assert control["rig_model"] == "nominal (rig file)" and "negative_control" not in report["undefined_metrics"]
+    assert control["cross_error_margin"] == pytest.approx(control["cross_transfer_rel_error"]
+                                                          - report["cross_transfer_rel_error"])
+    assert report["timings_s"]["negative_control"] > 0
+    (line,) = [ln for ln in result.stdout.splitlines() if "negative control: nominal (rig file)" in ln]
+    assert f"cross error {control['cross_transfer_rel_error']:.3g}" in line
+    assert ("NOT measurably worse" in line) == (not control["measurably_worse"])
+    assert any("negative control" in w for w in report["warnings"]) == (not control["measurably_worse"])
+
+
+def test_06_negative_control_is_skipped_with_a_reason_where_it_cannot_tell_anything():
+    from pathlib import Path
+
+    from lftransfer.app.pipeline import RigSpec, RunOptions, negative_control_skipped
+
+    assert negative_control_skipped(RunOptions(negative_control=True)) is None
+    assert negative_control_skipped(RunOptions(negative_control=True, rig_model="oracle")) is None
+    assert negative_control_skipped(RunOptions(rig_model="nominal", calibration=Path("c.json"))) is None
+    for options, words in ((RunOptions(rig_model="nominal"), "itself uses the nominal"),
+                           (RunOptions(truth_seed=None), "--exact-rig"),
+                           (RunOptions(bounces=0), "0 bounces"),
+                           (RunOptions(verify=False), "not verified"),
+                           (RunOptions(rig=RigSpec("replay", Path("session"))), "simulated rig only")):
+        assert words in negative_control_skipped(options), options

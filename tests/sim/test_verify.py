@@ -7,9 +7,11 @@ import json
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from lftransfer.imageio_utils import strict_json
-from lftransfer.sim.verify import (IDENTICAL, NO_CROSS, NO_LIGHT, GroundTruth, evaluate, gt_noise_verdict)
+from lftransfer.sim.verify import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, GroundTruth, evaluate,
+                                   gt_noise_verdict, negative_control, object_mask)
 
 H, W = 12, 16
 
@@ -34,10 +36,11 @@ def _strict(metrics: dict) -> dict:
 def test_01_black_scene_every_metric_is_null_with_a_reason():
     zero, ones = np.zeros((H, W, 3), np.float32), np.ones((H, W), np.float32)
     m = evaluate(_result(zero, zero, ones), _gt(zero, zero, zero, ones, ones))
-    for key in ("psnr_db", "psnr_db_direct_only", "gt_noise_psnr_db", "cross_transfer_rel_error",
-                "cross_gt_noise_rel", "cross_term_rel_size"):
+    for key in ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
+                "gt_noise_psnr_db", "cross_transfer_rel_error", "cross_gt_noise_rel", "cross_term_rel_size"):
         assert m[key] is None and m["undefined"][key], key
     assert m["undefined"]["psnr_db"] == NO_LIGHT and m["undefined"]["cross_transfer_rel_error"] == NO_CROSS
+    assert m["undefined"]["psnr_objects_db"] == NO_LIGHT
     assert _strict(m)["psnr_db"] is None
 
 
@@ -62,3 +65,72 @@ def test_03_noise_verdict_names_the_samples_that_would_resolve_it():
     assert gt_noise_verdict({"cross_gt_noise_rel": None, "cross_transfer_rel_error": 0.26}, 128) is None
     big = gt_noise_verdict({"cross_gt_noise_rel": 0.2, "cross_transfer_rel_error": 0.39}, 64)
     assert big is not None and big.spp_needed >= 128                # always more than the run had
+
+
+def test_04_psnr_over_the_objects_sees_what_the_black_background_hides():
+    """The same error on the objects' pixels: the full-frame PSNR is raised by the background's pixels that
+    match exactly, the PSNR over the objects is not; both use the ground truth's peak and the cross error's mask."""
+    zero = np.zeros((H, W, 3), np.float32)
+    alpha = np.zeros((H, W), np.float32)
+    alpha[4:8, 6:10] = 1.0                                        # 16 of 192 pixels show the object
+    on_object = np.repeat(alpha[..., None], 3, axis=-1)
+    truth = (0.5 * on_object).astype(np.float32)
+    truth[5, 7] = 1.0                                             # the peak
+    image = (truth + 0.01 * on_object).astype(np.float32)        # off by 0.01 on the object only
+    m = evaluate(_result(zero, image, alpha), _gt(truth, zero, truth, np.zeros((H, W), np.float32), alpha))
+    assert m["psnr_objects_db"] == pytest.approx(40.0)            # 10 log10(1 / 0.01^2)
+    assert m["psnr_objects_db_direct_only"] == pytest.approx(40.0)
+    assert m["psnr_db"] == pytest.approx(40.0 + 10 * np.log10(H * W / 16))      # 50.8 dB: flattered by 10.8 dB
+    assert m["metric_pixels"] == 16 and object_mask(_gt(truth, zero, truth, alpha, alpha), 1).sum() == 16
+    # half the object's coverage in a 2 x 2 block still counts the block as the object's
+    half = np.zeros((H, W), np.float32)
+    half[4, 6] = 0.5
+    assert object_mask(_gt(truth, zero, truth, half, np.zeros((H, W), np.float32)), 2).sum() == 1
+
+
+def test_05_no_object_in_view_psnr_over_objects_is_null_with_a_reason():
+    rng = np.random.default_rng(1)
+    background = rng.random((H, W, 3)).astype(np.float32)
+    zero, none = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32)
+    m = evaluate(_result(background + 0.01, zero, none), _gt(background, background, zero, none, none))
+    assert np.isfinite(m["psnr_db"])
+    for key in ("psnr_objects_db", "psnr_objects_db_direct_only"):
+        assert m[key] is None and m["undefined"][key] == NO_PIXELS, key
+    assert _strict(m)["psnr_objects_db"] is None
+
+
+def test_06_negative_control_margins_and_verdict():
+    """A control that misses more of the cross term is measurably worse (against the ground truth and each of its
+    seeds); one that misses as much is not, and says so."""
+    rng = np.random.default_rng(2)
+    none = np.zeros((H, W), np.float32)
+    a_real, a_syn = none.copy(), none.copy()
+    a_real[2:6, 2:8], a_syn[6:10, 8:14] = 1.0, 1.0
+    real = (0.4 * np.repeat(a_real[..., None], 3, -1)).astype(np.float32)
+    syn = (0.3 * np.repeat(a_syn[..., None], 3, -1)).astype(np.float32)
+    cross = (0.05 * rng.random((H, W, 3)) * a_real[..., None]).astype(np.float32)    # the cube's light on the block
+    seeds = [real + syn + cross + 0.002 * rng.standard_normal((H, W, 3)).astype(np.float32) for _ in range(2)]
+    gt = GroundTruth(union=np.stack(seeds), real=np.stack([real, real]), synthetic=np.stack([syn, syn]),
+                     alpha_real=a_real, alpha_synthetic=a_syn)
+
+    def run(k: float):
+        """A transfer that recovers k times the cross term."""
+        view = SimpleNamespace(rgb=syn, alpha=a_syn)
+        return SimpleNamespace(real_view=real + k * cross, real_view_direct=real, synthetic_view=view,
+                               bounces=[SimpleNamespace(synthetic_view=view)])
+
+    worse = negative_control(run(0.9), run(0.4), gt, "nominal (rig file)")
+    assert worse.measurably_worse
+    assert worse.cross_error_margin == pytest.approx(0.5, abs=0.05)
+    assert worse.psnr_objects_margin_db > 3 and all(m > 3 for m in worse.psnr_objects_margin_db_per_gt)
+    assert worse.cross_transfer_rel_error == pytest.approx(evaluate(run(0.4), gt)["cross_transfer_rel_error"])
+    entry = json.loads(json.dumps(worse.to_json(), allow_nan=False))
+    assert entry["rig_model"] == "nominal (rig file)" and len(entry["cross_error_margin_per_gt"]) == 2
+    # as far off as the run, on the other side: not measurably worse, and the message says so
+    blind = negative_control(run(0.9), run(1.1), gt, "nominal (rig file)")
+    assert not blind.measurably_worse and "not measurably worse" in blind.message()
+    # no object in view: the margins are undefined and the control is not called worse
+    empty = GroundTruth(union=gt.union, real=gt.real, synthetic=gt.synthetic, alpha_real=none, alpha_synthetic=none)
+    undefined = negative_control(run(0.9), run(0.4), empty, "nominal (rig file)")
+    assert not undefined.measurably_worse and undefined.psnr_objects_margin_db is None
+    assert "undefined" in undefined.message()

@@ -118,3 +118,65 @@ def test_03_projector_gain_fills_range():
     lf.data[1, 2, 3] = [0.1, 0.4, 0.2]
     assert projector_gain(lf, max_radiance=2.0, fill=0.5) == pytest.approx(2.5)
     assert projector_gain(LightField.zeros(array, 4, 4), max_radiance=2.0) == 1.0
+
+
+def test_04_final_projection_sums_all_but_the_last_bounce():
+    """The final frame projects Ls_0 + ... + Ls_{N-1}: the empty sum for N = 0, Ls_0 alone for N = 1."""
+    from types import SimpleNamespace
+
+    from lftransfer.transfer.bounce import final_projection
+
+    array = LensArray(lattice="rect", rows=2, cols=2, pitch=0.02, focal_length=0.02)
+
+    def lf(value: float) -> LightField:
+        out = LightField.zeros(array, 4, 4)
+        out.data[...] = value
+        return out
+
+    bounces = [SimpleNamespace(synthetic_lf=lf(v)) for v in (1.0, 2.0, 4.0)]
+    assert final_projection(bounces[:1]).data.shape == (4, 4, 4, 3)
+    assert not final_projection(bounces[:1]).data.any()                  # N = 0: nothing
+    np.testing.assert_array_equal(final_projection(bounces[:2]).data, 1.0)
+    np.testing.assert_array_equal(final_projection(bounces).data, 3.0)   # Ls_2 lights no further bounce
+
+
+class _SpyRig:
+    """A dark rig (tests/fakes.py) that keeps every image it was asked to project."""
+
+    def __init__(self, scene):
+        from tests.fakes import DarkRig
+
+        self._rig = DarkRig(lf_camera=scene.rig.lf_camera, projector=scene.rig.projector, view=scene.view.resolution)
+        self.info = self._rig.info
+        self.projected: list[np.ndarray] = []
+
+    def project(self, image) -> None:
+        self._rig.project(image)
+        self.projected.append(np.array(image))
+
+    def __getattr__(self, name):
+        return getattr(self._rig, name)
+
+
+@pytest.mark.parametrize("bounces", [0, 1])
+def test_05_zero_bounces_project_nothing(variant, tmp_path, bounces):
+    """``--bounces 0``: the projector never shows anything but black, and the final real view is the direct one;
+    with one bounce Ls_0 (lit by the virtual point light) is projected in the final frame."""
+    from lftransfer.rig.model import nominal_rig
+    from lftransfer.scenes import load_scene
+    from lftransfer.transfer.bounce import TransferSettings, run_transfer
+    from tests.app.small import write_tiny_scene
+
+    scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24)))
+    rig = _SpyRig(scene)
+    result = run_transfer(rig, nominal_rig(scene.rig), scene.synthetic_part(),
+                          TransferSettings(bounces=bounces, angular_samples=8, lf_spp=1, view_spp=1))
+    assert result.bounces[0].synthetic_lf.data.max() > 0          # there is something that could be projected
+    if bounces == 0:
+        assert not any(image.any() for image in rig.projected), "a pattern was projected with --bounces 0"
+        assert not result.projected_lf.data.any() and not result.projected_image.any()
+        assert result.clipped_fraction == 0.0
+        np.testing.assert_array_equal(result.real_view, result.real_view_direct)
+    else:
+        np.testing.assert_array_equal(result.projected_lf.data, result.bounces[0].synthetic_lf.data)
+        assert result.projected_image.any() and any(image.any() for image in rig.projected)

@@ -230,6 +230,17 @@ def _row(table: Table, *cells: object) -> None:
     table.add_row(*(escape(str(c)) for c in cells))
 
 
+def _control_line(control: dict) -> str:
+    """The negative control in one line: its psnr_objects_db and cross error, and the run's margins over it."""
+    def num(key: str, spec: str) -> str:
+        return "undefined" if control.get(key) is None else format(control[key], spec)
+
+    verdict = "measurably worse" if control["measurably_worse"] else "NOT measurably worse"
+    return (f"psnr_objects_db {num('psnr_objects_db', '.4g')} dB, "
+            f"cross error {num('cross_transfer_rel_error', '.3g')}; the run better by {num('psnr_objects_margin_db', '+.3g')} dB and {num('cross_error_margin', '+.3g')}: "
+            f"{verdict}")
+
+
 def _summary(report: dict, out: Path) -> None:
     table = Table(title=escape(f"light field transfer -> {out}"))
     table.add_column("metric")
@@ -237,8 +248,8 @@ def _summary(report: dict, out: Path) -> None:
     _row(table, "rig", report["rig"])
     _row(table, "verification", report["verification"])
     undefined = report.get("undefined_metrics") or {}
-    for key in ("psnr_db", "psnr_db_direct_only", "cross_transfer_rel_error", "gt_noise_psnr_db",
-                "cross_gt_noise_rel"):
+    for key in ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
+                "cross_transfer_rel_error", "gt_noise_psnr_db", "cross_gt_noise_rel"):
         if report.get(key) is not None:
             _row(table, key, f"{report[key]:.4g}")
         elif key in undefined:
@@ -246,6 +257,9 @@ def _summary(report: dict, out: Path) -> None:
     for name, m in report["by_lighting_model"].items():
         if m.get("cross_transfer_rel_error") is not None:
             _row(table, f"cross error, {name} model", f"{m['cross_transfer_rel_error']:.4g}")
+    control = report.get("negative_control")
+    if control is not None:
+        _row(table, f"negative control: {control['rig_model']}", _control_line(control))
     for b in report["bounces"]:
         _row(table, f"bounce {b['index']} energy real / synthetic", f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
     _row(table, "rig model", report["rig_model"])
@@ -274,14 +288,15 @@ def demo(out: Path = typer.Option(Path("out/demo"), metavar="DIR", help="Output 
          rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
          max_memory: Optional[str] = _memory_option()) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-    transfer, check against ground truth (both lighting models)."""
+    transfer, check against ground truth (both lighting models) and against a negative control (the rig file's
+    nominal values, uncalibrated)."""
     from lftransfer.app.pipeline import RunOptions
 
     _check_renderer(renderer)
     scene = _load(None, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, compare_models=("area", "point"), use_cache=not no_cache,
-                         renderer=renderer, **rig_opts)
+                         renderer=renderer, negative_control=True, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",
                        max_memory=max_memory)

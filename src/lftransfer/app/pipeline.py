@@ -14,7 +14,7 @@ import time
 import traceback
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.composite import composite
@@ -23,6 +23,9 @@ from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, writ
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
+
+if TYPE_CHECKING:
+    from lftransfer.sim.verify import NegativeControl
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
 Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
@@ -89,6 +92,9 @@ class RunOptions:
         record: a folder to record every rig request and answer into (:class:`lftransfer.rig.replay.RecordingRig`).
         verify: compare with the path-traced ground truth where the truth is known (simulated rig, or a replay
             of one).
+        negative_control: also run the transfer with the rig file's nominal values on the same rig (no
+            calibration, the same ground truth) and report how much worse it scores (the report's
+            ``negative_control``; :func:`negative_control_skipped` says when it cannot run). ``lft demo`` sets it.
     """
 
     bounces: int = 2
@@ -104,6 +110,7 @@ class RunOptions:
     rig: RigSpec = RigSpec()
     record: Path | None = None
     verify: bool = True
+    negative_control: bool = False
 
     def __post_init__(self) -> None:
         problems = []
@@ -225,15 +232,41 @@ def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None)
             f"no --quick, a calibration file, or --rig-model nominal)") from exc
 
 
+NOMINAL = "nominal (rig file)"     # the report's rig_model for the rig file's values
+
+
+def negative_control_skipped(options: RunOptions) -> str | None:
+    """Why the negative control of a run that asks for it (``options.negative_control``) cannot tell anything,
+    or None when it runs: it needs the simulated rig with a hidden truth, verification, a run that knows more
+    than the nominal model, and at least one bounce."""
+    if options.rig.kind != "sim":
+        return (f"the negative control runs on the simulated rig only (this run's rig: {options.rig.kind}), where "
+                f"the ground truth is known")
+    if not options.verify:
+        return "the run is not verified against ground truth"
+    if options.truth_seed is None:
+        return ("the simulated rig is built exactly as its file says (--exact-rig), so the nominal model is its "
+                "truth, not an uncalibrated model")
+    if options.calibration is None and options.rig_model == "nominal":
+        return "the run itself uses the nominal rig model (--rig-model nominal)"
+    if options.bounces == 0:
+        return "with 0 bounces no light field crosses the array, so the rig model changes nothing the metrics see"
+    return None
+
+
+def _runs_control(options: RunOptions) -> bool:
+    return options.negative_control and negative_control_skipped(options) is None
+
+
 def count_run_steps(scene, options: RunOptions) -> int:
     """Progress steps of :func:`run_scene` (set-up, calibration, transfer, 6 ground-truth renders unless cached,
-    reruns with the other lighting models, writing), for a progress bar."""
+    reruns with the other lighting models and the negative control, writing), for a progress bar."""
     primary = count_steps(TransferSettings(bounces=options.bounces))
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
-    return 1 + calibration + primary + (6 if _verifies(options) else 0) \
-        + len(_other_models(scene, options)) * other + 1
+    reruns = len(_other_models(scene, options)) + (1 if _runs_control(options) else 0)
+    return 1 + calibration + primary + (6 if _verifies(options) else 0) + reruns * other + 1
 
 
 def _other_models(scene, options: RunOptions) -> list[str]:
@@ -381,6 +414,35 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     return report
 
 
+BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model in the report
+
+
+@dataclass(frozen=True)
+class ControlRun:
+    """A negative control that ran.
+
+    Attributes:
+        result: its metrics set against the run's (:class:`lftransfer.sim.verify.NegativeControl`).
+        seconds: wall time of the control's transfer and evaluation, s.
+    """
+
+    result: NegativeControl
+    seconds: float
+
+
+def _negative_control(rig: Rig, scene, pipeline_scene, settings: TransferSettings, result, gt,
+                      step: Callable[[str], None]) -> ControlRun:
+    """The run again with the rig file's nominal values (no calibration) on the same rig, set against the run's
+    ``result`` on the same ground truth ``gt`` (:func:`lftransfer.sim.verify.negative_control`)."""
+    from lftransfer.sim.verify import negative_control
+
+    t = time.perf_counter()
+    alt = run_transfer(rig, nominal_rig(scene.rig), pipeline_scene, replace(settings, bounce_views=False),
+                       progress=lambda msg: step(f"negative control: {msg}"))
+    compared = negative_control(result, alt, gt, NOMINAL)
+    return ControlRun(result=compared, seconds=time.perf_counter() - t)
+
+
 def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Progress | None,
          warn: Warn | None) -> dict:
     done = [0]
@@ -418,7 +480,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     elif options.rig_model == "oracle":
         model, rig_model = opened.truth, "true (oracle)"
     else:
-        model, rig_model = nominal_rig(scene.rig), "nominal (rig file)"
+        model, rig_model = nominal_rig(scene.rig), NOMINAL
     if calibration is not None:
         step("calibration report")
         calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth,
@@ -444,7 +506,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                                  warn=warning)
         timings["ground_truth"] = time.perf_counter() - t
         metrics = evaluate(result, gt)
-        by_model[primary] = {k: metrics[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+        by_model[primary] = {k: metrics[k] for k in BY_MODEL_KEYS}
         noisy = gt_noise_verdict(metrics, gt_spp)
         if noisy is not None:
             warning(noisy.message())
@@ -455,22 +517,35 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                            progress=step)
         if verified:
             m = evaluate(alt, gt)
-            by_model[other] = {k: m[k] for k in ("cross_transfer_rel_error", "psnr_db")}
+            by_model[other] = {k: m[k] for k in BY_MODEL_KEYS}
         timings[f"transfer_{other}_model"] = time.perf_counter() - t
+    undefined = dict(metrics.get("undefined", {}))
+    control = None
+    if options.negative_control:
+        why = negative_control_skipped(options) or (None if verified else "the run is not verified against "
+                                                                          "ground truth")
+        if why is None:
+            control = _negative_control(rig, scene, pipeline_scene, settings, result, gt, step)
+            timings["negative_control"] = control.seconds
+            if not control.result.measurably_worse:
+                warning(control.result.message())
+        else:
+            undefined["negative_control"] = why
 
     comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
     timings["total"] = time.perf_counter() - t0
     from lftransfer.backend import variant
 
-    metric_keys = ("psnr_db", "psnr_db_direct_only", "cross_transfer_rel_error", "gt_noise_psnr_db",
-                   "cross_gt_noise_rel")
+    metric_keys = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
+                   "cross_transfer_rel_error", "gt_noise_psnr_db", "cross_gt_noise_rel")
     report = {
         **{k: metrics.get(k) for k in metric_keys},
         "verification": "against path-traced ground truth" if verified else
         f"none: the {options.rig.kind} rig's real scene is not known to lftransfer",
         "lighting_model": primary,
         "by_lighting_model": by_model,
-        "undefined_metrics": metrics.get("undefined", {}),
+        "negative_control": control.result.to_json() if control is not None else None,
+        "undefined_metrics": undefined,
         "warnings": warnings,
         "gt_spp_needed": gt_spp_needed,
         "cross_term_rel_size": metrics.get("cross_term_rel_size"),

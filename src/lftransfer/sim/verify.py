@@ -26,8 +26,9 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["GroundTruth", "NoiseVerdict", "cache_dir", "calibration_errors", "downsample", "evaluate",
-           "gt_noise_verdict", "metric_factor", "psnr", "render_ground_truth"]
+__all__ = ["GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "downsample",
+           "evaluate", "gt_noise_verdict", "metric_factor", "negative_control", "object_mask", "psnr",
+           "render_ground_truth", "single_seed"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -143,23 +144,42 @@ def downsample(image: np.ndarray, factor: int) -> np.ndarray:
     return x.reshape(h // factor, factor, w // factor, factor, *x.shape[2:]).mean(axis=(1, 3))
 
 
-def psnr(image: np.ndarray, reference: np.ndarray, peak: float | None = None) -> float:
+def psnr(image: np.ndarray, reference: np.ndarray, peak: float | None = None,
+         mask: np.ndarray | None = None) -> float:
     """Peak signal-to-noise ratio in dB; ``peak`` defaults to the reference's maximum.
 
+    Args:
+        image, reference: (H, W, 3) linear radiance.
+        peak: the peak value (radiance); None: the reference's maximum.
+        mask: (H, W) bool, the pixels whose squared errors are averaged; None: every pixel.
+
     Returns:
-        dB; ``inf`` for identical images, ``nan`` for a peak of 0 (both undefined: :func:`evaluate` reports them
-        as None with a reason).
+        dB; ``inf`` for identical images, ``nan`` for a peak of 0 or an empty mask (all undefined:
+        :func:`evaluate` reports them as None with a reason).
     """
     peak = float(np.max(reference)) if peak is None else peak
-    mse = float(np.mean((np.asarray(image, np.float64) - reference) ** 2))
-    if not peak > 0:
+    err2 = (np.asarray(image, np.float64) - reference) ** 2
+    if mask is not None:
+        err2 = err2[np.asarray(mask, bool)]
+    if not peak > 0 or err2.size == 0:
         return float("nan")
+    mse = float(np.mean(err2))
     return float("inf") if mse == 0 else 10.0 * math.log10(peak * peak / mse)
 
 
 def metric_factor(width: int, target_width: int = 256) -> int:
     """Integer box-downsampling factor that brings ``width`` to about ``target_width``."""
     return max(1, int(round(width / target_width)))
+
+
+def object_mask(gt: GroundTruth, factor: int) -> np.ndarray:
+    """The pixels the objects cover, at the metrics' resolution: (H // factor, W // factor) bool, True where any
+    real or synthetic object covers part of the pixel's ``factor`` x ``factor`` block.
+
+    The one mask of every metric "over the pixels the objects cover" (the cross-transfer error and its noise,
+    ``psnr_objects_db``).
+    """
+    return (downsample(gt.alpha_real, factor) > 0) | (downsample(gt.alpha_synthetic, factor) > 0)
 
 
 NO_LIGHT = "the ground truth is black: no light reaches anything the view camera sees (light intensity 0, or " \
@@ -182,8 +202,11 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
         target_width: metrics are computed on images box-downsampled to about this width.
 
     Returns:
-        dict with psnr_db, psnr_db_direct_only, cross_transfer_rel_error, gt_noise_psnr_db, cross_gt_noise_rel,
-        cross_term_rel_size, metric_resolution, metric_pixels and undefined (metric -> reason).
+        dict with psnr_db, psnr_db_direct_only (dB, every pixel), psnr_objects_db, psnr_objects_db_direct_only
+        (dB, the same over the pixels the objects cover, :func:`object_mask`; the peak stays the ground truth's
+        maximum), cross_transfer_rel_error, gt_noise_psnr_db, cross_gt_noise_rel, cross_term_rel_size,
+        metric_resolution ([width, height] of the metrics' images), metric_pixels (pixels the objects cover)
+        and undefined (metric -> reason).
     """
     f = metric_factor(result.real_view.shape[1], target_width)
     alpha = result.synthetic_view.alpha
@@ -197,7 +220,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     c_gt_pair = [ds(gt.union[i] - composite(gt.synthetic[i], gt.alpha_synthetic, gt.real[i])) for i in range(2)]
     c_gt = 0.5 * (c_gt_pair[0] + c_gt_pair[1])
     c_lft = ds(comp_n - comp_0)
-    mask = (ds(gt.alpha_real) > 0) | (ds(gt.alpha_synthetic) > 0)
+    mask = object_mask(gt, f)
     norm = lambda x: float(np.sqrt(np.sum(x[mask] ** 2)))  # noqa: E731
     c_norm, u_norm = norm(c_gt), norm(union)
     undefined: dict[str, str] = {}
@@ -208,8 +231,9 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
         undefined[key] = reason
         return None
 
-    def psnr_of(key: str, image: np.ndarray, reference: np.ndarray) -> float | None:
-        return defined(key, psnr(image, reference, peak), NO_LIGHT if not peak > 0 else IDENTICAL)
+    def psnr_of(key: str, image: np.ndarray, reference: np.ndarray, where: np.ndarray | None = None) -> float | None:
+        reason = NO_LIGHT if not peak > 0 else NO_PIXELS if where is not None and not where.any() else IDENTICAL
+        return defined(key, psnr(image, reference, peak, mask=where), reason)
 
     def ratio(key: str, num: float, den: float, reason: str) -> float | None:
         if not mask.any():
@@ -219,6 +243,8 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     return {
         "psnr_db": psnr_of("psnr_db", ds(comp_n), union),
         "psnr_db_direct_only": psnr_of("psnr_db_direct_only", ds(comp_0), union),
+        "psnr_objects_db": psnr_of("psnr_objects_db", ds(comp_n), union, mask),
+        "psnr_objects_db_direct_only": psnr_of("psnr_objects_db_direct_only", ds(comp_0), union, mask),
         "cross_transfer_rel_error": ratio("cross_transfer_rel_error", norm(c_lft - c_gt), c_norm, NO_CROSS),
         "gt_noise_psnr_db": psnr_of("gt_noise_psnr_db", ds(gt.union[0]), ds(gt.union[1])),
         "cross_gt_noise_rel": ratio("cross_gt_noise_rel", norm(c_gt_pair[0] - c_gt_pair[1]), c_norm, NO_CROSS),
@@ -271,6 +297,94 @@ def gt_noise_verdict(metrics: dict, spp: int, *, threshold: float = 0.5, target:
     needed = spp * factor
     spp_needed = int(2 ** math.ceil(math.log2(needed))) if math.isfinite(needed) and needed >= 1 else 2 ** 20
     return NoiseVerdict(noise=float(noise), error=float(error), spp=int(spp), spp_needed=max(spp_needed, 2 * spp))
+
+
+@dataclass(frozen=True)
+class NegativeControl:
+    """The same run with a rig model that knows less (the rig file's nominal values on a rig built otherwise),
+    set against the run: a metric that cannot tell them apart is blind.
+
+    Attributes:
+        rig_model: what the control knew of the rig (e.g. "nominal (rig file)").
+        psnr_objects_db: the control's PSNR over the pixels the objects cover, dB (None: undefined).
+        psnr_db: the control's full-frame PSNR, dB (None: undefined).
+        cross_transfer_rel_error: the control's cross-transfer error, a fraction of norm(C_gt) (None: undefined).
+        psnr_objects_margin_db: the run's ``psnr_objects_db`` minus the control's, dB: > 0 when the run is better.
+        cross_error_margin: the control's cross-transfer error minus the run's: > 0 when the run is better.
+        psnr_objects_margin_db_per_gt, cross_error_margin_per_gt: the same two margins against each of the two
+            independently seeded ground truths alone (None where undefined): how much the ground truth's own
+            noise moves them.
+        measurably_worse: the control scores worse than the run by both measures (higher cross-transfer error,
+            lower ``psnr_objects_db``) against the ground truth and against each of its two seeds alone.
+    """
+
+    rig_model: str
+    psnr_objects_db: float | None
+    psnr_db: float | None
+    cross_transfer_rel_error: float | None
+    psnr_objects_margin_db: float | None
+    cross_error_margin: float | None
+    psnr_objects_margin_db_per_gt: tuple[float | None, float | None]
+    cross_error_margin_per_gt: tuple[float | None, float | None]
+    measurably_worse: bool
+
+    def to_json(self) -> dict:
+        """The report's ``negative_control`` entry (plain floats and lists, None for undefined values)."""
+        return {"rig_model": self.rig_model, "psnr_objects_db": self.psnr_objects_db, "psnr_db": self.psnr_db,
+                "cross_transfer_rel_error": self.cross_transfer_rel_error,
+                "psnr_objects_margin_db": self.psnr_objects_margin_db, "cross_error_margin": self.cross_error_margin,
+                "psnr_objects_margin_db_per_gt": list(self.psnr_objects_margin_db_per_gt),
+                "cross_error_margin_per_gt": list(self.cross_error_margin_per_gt),
+                "measurably_worse": self.measurably_worse}
+
+    def message(self) -> str:
+        """One line for the terminal and the report when the control is not measurably worse."""
+        def fmt(values) -> str:
+            return ", ".join("undefined" if v is None else f"{v:.3g}" for v in values)
+
+        return (f"the negative control ({self.rig_model} rig model) is not measurably worse than the run: "
+                f"psnr_objects_db margin {fmt([self.psnr_objects_margin_db])} dB "
+                f"({fmt(self.psnr_objects_margin_db_per_gt)} against each ground-truth seed), cross-error margin {fmt([self.cross_error_margin])} "
+                f"({fmt(self.cross_error_margin_per_gt)}); the metrics cannot tell this rig model from the run's")
+
+
+def single_seed(gt: GroundTruth, i: int) -> GroundTruth:
+    """The ground truth of seed ``i`` (0 or 1) alone, in both slots (its own noise then reads as 0)."""
+    pick = lambda x: np.stack([x[i], x[i]])  # noqa: E731
+    return GroundTruth(union=pick(gt.union), real=pick(gt.real), synthetic=pick(gt.synthetic),
+                       alpha_real=gt.alpha_real, alpha_synthetic=gt.alpha_synthetic)
+
+
+def _margins(run: dict, control: dict) -> tuple[float | None, float | None]:
+    """(run's psnr_objects_db - control's, control's cross error - run's); None where either is undefined."""
+    def diff(a: float | None, b: float | None) -> float | None:
+        return None if a is None or b is None else float(a - b)
+
+    return (diff(run["psnr_objects_db"], control["psnr_objects_db"]),
+            diff(control["cross_transfer_rel_error"], run["cross_transfer_rel_error"]))
+
+
+def negative_control(result, control, gt: GroundTruth, rig_model: str, *, target_width: int = 256) -> NegativeControl:
+    """Set a run against its negative control, both evaluated (:func:`evaluate`) against the same ground truth
+    and against each of its two seeds alone.
+
+    Args:
+        result: the run's ``TransferResult``.
+        control: the control's ``TransferResult`` (same scene, same rig, a rig model that knows less).
+        gt: the ground truth both are measured against.
+        rig_model: what the control knew of the rig.
+        target_width: as in :func:`evaluate`.
+    """
+    run_m, ctl_m = evaluate(result, gt, target_width=target_width), evaluate(control, gt, target_width=target_width)
+    psnr_margin, cross_margin = _margins(run_m, ctl_m)
+    per_gt = [_margins(evaluate(result, g, target_width=target_width), evaluate(control, g, target_width=target_width))
+              for g in (single_seed(gt, 0), single_seed(gt, 1))]
+    worse = all(m is not None and m > 0 for pair in [(psnr_margin, cross_margin), *per_gt] for m in pair)
+    return NegativeControl(rig_model=rig_model, psnr_objects_db=ctl_m["psnr_objects_db"], psnr_db=ctl_m["psnr_db"],
+                           cross_transfer_rel_error=ctl_m["cross_transfer_rel_error"],
+                           psnr_objects_margin_db=psnr_margin, cross_error_margin=cross_margin,
+                           psnr_objects_margin_db_per_gt=(per_gt[0][0], per_gt[1][0]),
+                           cross_error_margin_per_gt=(per_gt[0][1], per_gt[1][1]), measurably_worse=bool(worse))
 
 
 # ---- calibration against the hidden truth -----------------------------------------------------------------------

@@ -101,11 +101,12 @@ class TransferResult:
 
     Attributes:
         bounces: direct light and each bounce, index 0..N.
-        real_view: final real view, (H, W, 3) float32, projector showing encode(sum of Ls_0..Ls_{N-1}).
+        real_view: final real view, (H, W, 3) float32, projector showing encode(sum of Ls_0..Ls_{N-1}); for
+            N = 0 the direct view (projector black).
         real_view_direct: real view with the projector black (for the 0-bounce composite).
         synthetic_view: sum of S_0..S_N (rgb) with the coverage alpha of S_0.
-        projected_image: the final projector image (device integers).
-        projected_lf: sum of Ls_0..Ls_{N-1}.
+        projected_image: the final projector image (device integers; black for N = 0).
+        projected_lf: sum of Ls_0..Ls_{N-1} (:func:`final_projection`; all zero for N = 0).
         clipped_fraction: fraction of lit light field samples above the projector's range in the final frame.
         captured_raw: the LF camera image of the direct frame (device integers).
         timings_s: seconds per stage.
@@ -186,6 +187,20 @@ def real_response(rig: Rig, decoder, encoder, incident: LightField, direct: Ligh
         raw = rig.capture_lf().codes
     with time_it("decode"):
         return (decoder(raw) - direct) / gain
+
+
+def final_projection(bounces: list[Bounce]) -> LightField:
+    """What the projector shows in the final frame: Ls_0 + ... + Ls_{N-1} for bounces 0..N, radiance
+    (K, V, U, 3) float32.
+
+    The last bounce's Ls_N would only light the real side for a bounce N + 1 that is not run, so it is left out;
+    for N = 0 the sum is empty (an all-zero light field): nothing from the synthetic side reaches the real one.
+    """
+    first = bounces[0].synthetic_lf
+    total = LightField.zeros(first.array, first.data.shape[2], first.data.shape[1])
+    for b in bounces[:-1]:
+        total = total + b.synthetic_lf
+    return total
 
 
 def count_steps(settings: TransferSettings) -> int:
@@ -270,19 +285,21 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
         step(f"bounce {n} done")
 
-    # Final frame.
+    # Final frame: the projector shows Ls_0 + ... + Ls_{N-1}, an empty sum for N = 0.
     step("final frame: project the sum of the synthetic light fields")
-    projected = bounces[0].synthetic_lf.copy()
-    for b in bounces[1:-1]:
-        projected = projected + b.synthetic_lf
-    with timer("encode"):
-        pattern = encoder(projected)
-    lit = projected.data[projected.data > 0]
-    clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
-    rig.project(pattern)
-    with timer("capture_view"):
-        real_view = rig.capture_view().radiance
-    rig.project(black)
+    projected = final_projection(bounces)
+    if settings.bounces == 0:
+        # Nothing crosses to the real side: the final frame is the direct frame, projector black.
+        pattern, real_view, clipped = black, real_view_direct, 0.0
+    else:
+        with timer("encode"):
+            pattern = encoder(projected)
+        lit = projected.data[projected.data > 0]
+        clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
+        rig.project(pattern)
+        with timer("capture_view"):
+            real_view = rig.capture_view().radiance
+        rig.project(black)
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
