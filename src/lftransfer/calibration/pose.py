@@ -32,9 +32,9 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "FringeDecoding",
-           "PoseError", "apply_pose", "board_pattern", "calibrate_pose", "corner_landing", "decode_fringes",
-           "fringe_lightfields", "solve_array_pose", "view_camera"]
+__all__ = ["CHART", "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern",
+           "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose",
+           "corner_landing", "decode_fringes", "fringe_lightfields", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
@@ -278,16 +278,21 @@ class ArrayPose:
                    residual_mm=float(data.get("residual_mm", "nan")))
 
 
-def board_plane(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[np.ndarray, np.ndarray, float]:
-    """The board's plane in the world from the chessboard printed on it (``cv2.solvePnP``, metric).
+CHART = (7, 5, 0.022)     # the chessboard printed on the calibration boards: columns, rows of squares, square metres
+
+
+def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[np.ndarray, float]:
+    """Where a board stands in the world, from the chessboard printed on it (``cv2.solvePnP``, metric).
 
     Args:
-        image: (H, W, 3) view camera image (linear radiance) of the flood-lit board.
+        image: (H, W, 3) view camera image (linear radiance) of the lit board.
         chart: (columns, rows, square size in metres) of the printed chessboard's squares.
         view: ``ViewConfig``.
 
     Returns:
-        point (3,) and unit normal (3,) of the plane in the world, and the chart's reprojection RMS in pixels.
+        (4, 4) the chart's frame in the world (columns: unit axes along its columns and rows, its normal, and its
+        centre), and the chart's reprojection RMS in pixels. An odd-by-odd chart looks the same turned half-way or
+        mirrored, so the axes' signs are those of OpenCV's corner order.
     """
     cols, rows, square = chart
     grey = image.mean(axis=2)
@@ -301,16 +306,27 @@ def board_plane(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple
     corners = cv2.cornerSubPix(grey8.astype(np.float32), corners.astype(np.float32), (5, 5), (-1, -1),
                                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)).reshape(-1, 2)
     i, j = np.meshgrid(np.arange(pattern[0]), np.arange(pattern[1]))
-    obj = np.stack([i.ravel(), j.ravel(), np.zeros(i.size)], 1) * square
+    obj = np.stack([i.ravel() - (pattern[0] - 1) / 2, j.ravel() - (pattern[1] - 1) / 2, np.zeros(i.size)], 1) * square
     K, R, t = view_camera(view)
     ok, rvec, tvec = cv2.solvePnP(obj, corners.astype(np.float64), K, None)
     if not ok:
         raise PoseError("solvePnP failed on the printed chessboard")
     proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - corners) ** 2, axis=1))))
-    rb = cv2.Rodrigues(rvec)[0]
-    normal_cam, point_cam = rb[:, 2], tvec.ravel()
-    return R.T @ (point_cam - t), R.T @ normal_cam, rms
+    m = np.eye(4)
+    m[:3, :3] = R.T @ cv2.Rodrigues(rvec)[0]
+    m[:3, 3] = R.T @ (tvec.ravel() - t)
+    return m, rms
+
+
+def board_plane(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[np.ndarray, np.ndarray, float]:
+    """The board's plane in the world from the chessboard printed on it (:func:`chart_pose`).
+
+    Returns:
+        point (3,) and unit normal (3,) of the plane in the world, and the chart's reprojection RMS in pixels.
+    """
+    m, rms = chart_pose(image, chart, view)
+    return m[:3, 3], m[:3, 2], rms
 
 
 def solve_array_pose(corners_model: np.ndarray, corners_world: np.ndarray, *,
@@ -414,7 +430,7 @@ def _drawn_on(board: BoardPattern, point: np.ndarray, normal: np.ndarray) -> Boa
 
 
 def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, rounds: int = POSE_ROUNDS,
-                   chart=(7, 5, 0.022), spp: int = 16,
+                   chart=CHART, spp: int = 16,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
     """Ask for a board at each depth, find its plane, project phase-shifted fringes on it, solve the pose from all
     boards at once; then again, with the fringes drawn on each board where it stands.

@@ -65,7 +65,7 @@ import cv2
 import numpy as np
 
 from lftransfer.lightfield import ResponseCurve
-from lftransfer.optics.geometry import project, rectangle_to_world
+from lftransfer.optics.geometry import project
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.base import Rig
 from lftransfer.rig.requests import Board, FocalPlaneDiffuser, LFCapture, ViewCapture
@@ -78,6 +78,7 @@ Progress = Callable[[str], None]
 BOARD_DISTANCES = (0.2, 0.15, 0.12, 0.1)    # metres in front of the array centre, the first the view sees well
 BOARD_SIZE = (0.2, 0.2)
 BOARD_ALBEDO = 0.8
+BOARD_CHART = (7, 5, 0.022)        # its printed chessboard, which tells where the operator really holds it
 
 _DARK, _BRIGHT = 0.04, 0.95         # usable normalised camera codes for the response fit
 _SATURATED = 0.97
@@ -384,9 +385,27 @@ def _window_rays(sensor, width: int, height: int, xs: np.ndarray, ys: np.ndarray
     return np.ascontiguousarray(np.broadcast_to(centre, (n * spp, 3))), d
 
 
-def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, pixels: tuple[np.ndarray, np.ndarray],
-                   *, angular_samples: int, spp: int, aperture_samples: int, seed: int = 0):
-    """Our own render of the board's radiance at view pixels, lit by ``projector`` showing ``image``."""
+def _held_board(image: np.ndarray, view, asked_normal) -> np.ndarray:
+    """(4, 4) ``to_world`` of the board rectangle where the view camera sees it stand (its printed chart's pose),
+    facing the side it was asked to face."""
+    from lftransfer.calibration.pose import PoseError, chart_pose
+
+    try:
+        m, _ = chart_pose(image, BOARD_CHART, view)
+    except PoseError as exc:
+        raise RadiometryError(f"brightness: {exc}") from None
+    if m[:3, 2] @ np.asarray(asked_normal, np.float64) < 0:       # keep a right-handed frame facing the array
+        m[:3, 1:3] *= -1
+    m[:3, 0] *= BOARD_SIZE[0] / 2
+    m[:3, 1] *= BOARD_SIZE[1] / 2
+    return m
+
+
+def _predict_board(model, scene, projector, image: np.ndarray, to_world: np.ndarray,
+                   pixels: tuple[np.ndarray, np.ndarray], *, angular_samples: int, spp: int, aperture_samples: int,
+                   seed: int = 0):
+    """Our own render of the board (``to_world``: its rectangle, printed chart included) at view pixels, lit by
+    ``projector`` showing ``image``."""
     from lftransfer.backend import mitsuba
     from lftransfer.lightfield import LightFieldEncoder
     from lftransfer.render.camera import sensor_dict
@@ -397,7 +416,7 @@ def _predict_board(model, scene, projector, image: np.ndarray, centre, normal, p
     mi = mitsuba()
     array = model.array
     view = scene_in_frame(scene, model.world_to_array()).view
-    shapes = board_shapes(rectangle_to_world(centre, normal, BOARD_SIZE), BOARD_ALBEDO)
+    shapes = board_shapes(to_world, BOARD_ALBEDO, BOARD_CHART)
     renderer = HalfSpaceRenderer([], extra_shapes={**shapes, "lens_array_absorber": lens_array_absorber(array)},
                                  max_depth=1)
     encoder = LightFieldEncoder(array, projector, angular_samples, angular_samples)
@@ -547,10 +566,13 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
     # d. absolute scale ---------------------------------------------------------------------------------------
     t = time.perf_counter()
     say("projector brightness: board in front of the array (view camera)")
-    centre, normal, view, (cx, cy) = _board_pose(scene, model)
-    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO))
+    centre, normal, view, _ = _board_pose(scene, model)
+    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART))
     rig.project(white)
     measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
+    # where the board really stands (held by hand): from the chessboard printed on it
+    held = _held_board(measured, scene.view, normal)
+    cx, cy = (int(round(v)) for v in project(view, held[:3, 3][None])[0])
     projector = replace(model.projector, response=ResponseCurve(tuple(projector_gamma)), max_radiance=1.0,
                         cross_talk=cross_talk, black_level=tuple(black_level.tolist()))
     vw, vh = view.resolution
@@ -561,7 +583,7 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
         xs, ys = xs.ravel(), ys.ravel()
         if len(xs) == 0:
             raise RadiometryError(f"brightness: the board centre projects outside the view camera ({cx}, {cy})")
-        predicted, hit, _ = _predict_board(model, scene, projector, white, centre, normal, (xs, ys),
+        predicted, hit, _ = _predict_board(model, scene, projector, white, held, (xs, ys),
                                            angular_samples=angular_samples, spp=predict_spp,
                                            aperture_samples=8, seed=seed)
         if hit.all() or half <= 3:
@@ -590,7 +612,7 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
         "black_signal": black.tolist(),
         "channel_signals": samples.tolist(),
         "board_pixels": int(use.sum()),
-        "board_centre_m": list(centre),
+        "board_centre_m": held[:3, 3].tolist(),
         "board_centre_pixel": [int(cx), int(cy)],
         "board_ratio_per_channel": per_channel.tolist(),
         "board_measured_mean": (meas.mean(0)).tolist(),
