@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from lftransfer.calibration.rig import CalibrationFileError, load_calibration
 from lftransfer.scenes import load_scene
 from tests.app.small import nominal_calibration, write_tiny_scene
+from tests.mutations import mutated as mutated_file
 
 
 @pytest.fixture(scope="module")
@@ -101,40 +102,6 @@ _json_value = st.recursive(_json_leaf, lambda inner: st.one_of(st.lists(inner, m
                            max_leaves=8)
 
 
-def _paths(data, prefix=()):
-    """Every (path, container) position in nested dicts/lists."""
-    yield prefix
-    if isinstance(data, dict):
-        for k, v in data.items():
-            yield from _paths(v, prefix + (k,))
-    elif isinstance(data, list):
-        for i, v in enumerate(data[:3]):
-            yield from _paths(v, prefix + (i,))
-
-
-@st.composite
-def _mutated(draw, base):
-    data = copy.deepcopy(base)
-    for _ in range(draw(st.integers(1, 3))):
-        paths = [p for p in _paths(data) if p]
-        if not paths:
-            break
-        path = draw(st.sampled_from(paths))
-        parent = data
-        for key in path[:-1]:
-            parent = parent[key]
-        action = draw(st.sampled_from(["replace", "delete", "add"]))
-        if action == "replace":
-            parent[path[-1]] = draw(_json_value)
-        elif action == "delete":
-            del parent[path[-1]]
-        elif isinstance(parent, dict):
-            parent[draw(st.text(min_size=1, max_size=6))] = draw(_json_value)
-        else:
-            parent.append(draw(_json_value))
-    return data
-
-
 _FILE_LEVEL = ("<json>", "<encoding>", "<calibration>", "format", "lens_array", "pose", "lf_camera", "projector",
                "radiometry", "lenslet_centres", "distortion", "projector_mapping")
 
@@ -156,7 +123,7 @@ def test_05_mutated_files_never_escape_the_loader(setup, tmp_path, data):
     """Mutated calibration files (values replaced by random JSON, keys deleted or added) either load or raise the
     project's error naming the file and a field: never a traceback of another kind."""
     scene, base = setup
-    mutated = data.draw(_mutated(base))
+    mutated = data.draw(mutated_file(st.just(base), _json_value))
     path = tmp_path / "cal[x].json"
     path.write_text(json.dumps(mutated), encoding="utf-8")
     try:

@@ -3,7 +3,6 @@ the field where there is one), never in another exception."""
 
 from __future__ import annotations
 
-import copy
 import os
 import tomllib
 
@@ -14,6 +13,7 @@ from hypothesis import strategies as st
 
 from lftransfer.scenes import SceneConfig, SceneError, builtin_scene, load_scene
 from tests.app.small import tiny_scene_text
+from tests.mutations import mutated
 
 EXAMPLES = int(os.environ.get("LFT_HYPOTHESIS_EXAMPLES", 60))
 
@@ -57,39 +57,6 @@ _BASES = [tomllib.loads(tiny_scene_text()), tomllib.loads(builtin_scene("fig4").
 _SCENE_KEYS = ("<toml>", "<encoding>", "<scene>", "source", "[") + tuple(SceneConfig.model_fields)
 
 
-def _positions(data, prefix=()):
-    yield prefix
-    if isinstance(data, dict):
-        for k, v in data.items():
-            yield from _positions(v, prefix + (k,))
-    elif isinstance(data, list):
-        for i, v in enumerate(data[:3]):
-            yield from _positions(v, prefix + (i,))
-
-
-@st.composite
-def _mutated(draw):
-    data = copy.deepcopy(draw(st.sampled_from(_BASES)))
-    for _ in range(draw(st.integers(1, 3))):
-        paths = [p for p in _positions(data) if p]
-        if not paths:
-            break
-        path = draw(st.sampled_from(paths))
-        parent = data
-        for key in path[:-1]:
-            parent = parent[key]
-        action = draw(st.sampled_from(["replace", "delete", "add"]))
-        if action == "replace":
-            parent[path[-1]] = draw(_value)
-        elif action == "delete":
-            del parent[path[-1]]
-        elif isinstance(parent, dict):
-            parent[draw(st.text(min_size=1, max_size=6))] = draw(_value)
-        else:
-            parent.append(draw(_value))
-    return data
-
-
 def _check(message: str, path, data=None) -> None:
     """The project's wording: the file, then a field (or <toml>/<encoding>/<scene>), on one line."""
     name = str(path)
@@ -102,7 +69,7 @@ def _check(message: str, path, data=None) -> None:
 
 @settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                        HealthCheck.too_slow])
-@given(data=_mutated())
+@given(data=mutated(st.sampled_from(_BASES), _value))
 def test_05_mutated_scenes_never_escape_the_loader(tmp_path, data):
     """Scene files with values replaced by random TOML values, tables and keys deleted or added."""
     path = tmp_path / "take[v2].toml"
