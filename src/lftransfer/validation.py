@@ -7,14 +7,15 @@ expected (``scene.toml: <encoding>: not UTF-8 text: byte 0xe9 on line 3 ...``)."
 from __future__ import annotations
 
 import json
+import numbers
 import re
 import tomllib
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, BeforeValidator, ValidationError
 
-__all__ = ["field_path", "read_json", "read_text", "read_toml", "validation_message"]
+__all__ = ["STRICT_NUMBER", "field_path", "read_json", "read_text", "read_toml", "strict_number", "validation_message"]
 
 # pydantic loc entries that name a validator or a union member, not a field of the file
 _NOT_FIELDS = ("function-", "list[", "union[")
@@ -142,3 +143,17 @@ def read_json(path: str | Path, what: str, error: type[Exception]) -> object:
         raise error(f"{path}: <json>: malformed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
     except RecursionError:
         raise error(f"{path}: <json>: malformed JSON: nested too deeply") from None
+
+
+def strict_number(value: Any) -> Any:
+    """Reject strings and booleans where a number is expected (pydantic's lax mode would convert them)."""
+    if isinstance(value, (str, bool)):
+        raise ValueError(f"expected a number, found {type(value).__name__} {value!r}")
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        return float(value)
+    return value
+
+
+STRICT_NUMBER = BeforeValidator(strict_number)     # for ``Annotated[float, STRICT_NUMBER, ...]`` fields

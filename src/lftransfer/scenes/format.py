@@ -23,7 +23,6 @@ import numpy as np
 from pydantic import (
     AfterValidator,
     BaseModel,
-    BeforeValidator,
     ConfigDict,
     Discriminator,
     Field,
@@ -33,7 +32,7 @@ from pydantic import (
     field_validator,
 )
 
-from lftransfer.validation import read_toml, validation_message
+from lftransfer.validation import STRICT_NUMBER, read_toml, validation_message
 
 __all__ = [
     "SceneError",
@@ -66,18 +65,7 @@ class SceneError(ValueError):
 # --------------------------------------------------------------------------------------------------------------
 # Field types
 
-def _number(value: Any) -> Any:
-    """Reject strings and booleans where a number is expected (pydantic's lax mode would convert them)."""
-    if isinstance(value, (str, bool)):
-        raise ValueError(f"expected a number, found {type(value).__name__} {value!r}")
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        return float(value)
-    return value
-
-
-_Num = BeforeValidator(_number)
+_Num = STRICT_NUMBER
 Float = Annotated[float, _Num, Field(allow_inf_nan=False)]
 PosFloat = Annotated[float, _Num, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, _Num, Field(ge=0, allow_inf_nan=False)]

@@ -42,7 +42,7 @@ from pydantic import (
 
 from lftransfer.imageio_utils import write_text
 from lftransfer.rig.requests import RigInfo
-from lftransfer.validation import read_toml, validation_message
+from lftransfer.validation import STRICT_NUMBER, read_toml, validation_message
 
 __all__ = ["CameraConfig", "HardwareRigConfig", "ProjectorConfig", "RigFileError", "ViewCameraConfig",
            "load_rig_file", "parse_rig_file", "write_rig_value"]
@@ -59,18 +59,7 @@ class RigFileError(ValueError):
 
 # -- field types -----------------------------------------------------------------------------------------------
 
-def _number(value: Any) -> Any:
-    """Reject strings and booleans where a number is expected (pydantic's lax mode would convert them)."""
-    if isinstance(value, (str, bool)):
-        raise ValueError(f"expected a number, found {type(value).__name__} {value!r}")
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        return float(value)
-    return value
-
-
-_Num = BeforeValidator(_number)
+_Num = STRICT_NUMBER
 PosFloat = Annotated[float, _Num, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, _Num, Field(ge=0, allow_inf_nan=False)]
 PosInt = Annotated[int, _Num, Field(gt=0)]
