@@ -64,6 +64,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from lftransfer.calibration.pose import CHART, PoseError, chart_pose
 from lftransfer.lightfield import ResponseCurve
 from lftransfer.optics.geometry import project
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
@@ -78,7 +79,7 @@ Progress = Callable[[str], None]
 BOARD_DISTANCES = (0.2, 0.15, 0.12, 0.1)    # metres in front of the array centre, the first the view sees well
 BOARD_SIZE = (0.2, 0.2)
 BOARD_ALBEDO = 0.8
-BOARD_CHART = (7, 5, 0.022)        # its printed chessboard, which tells where the operator really holds it
+BOARD_CHART = CHART               # its printed chessboard (the pose boards' own), which tells where it really stands
 
 _DARK, _BRIGHT = 0.04, 0.95         # usable normalised camera codes for the response fit
 _SATURATED = 0.97
@@ -388,8 +389,6 @@ def _window_rays(sensor, width: int, height: int, xs: np.ndarray, ys: np.ndarray
 def _held_board(image: np.ndarray, view, asked_normal) -> np.ndarray:
     """(4, 4) ``to_world`` of the board rectangle where the view camera sees it stand (its printed chart's pose),
     facing the side it was asked to face."""
-    from lftransfer.calibration.pose import PoseError, chart_pose
-
     try:
         m, _ = chart_pose(image, BOARD_CHART, view)
     except PoseError as exc:
