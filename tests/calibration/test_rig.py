@@ -32,21 +32,22 @@ def test_01_recovers_the_hidden_rig(calibrated):
     """The issue's targets for lenslet centres (<= 0.1 px), projector mapping (<= 0.5 px) and responses (within
     1 % of full scale). The pose rests on the view camera, here 256 x 192 pixels (the printed chessboard's plane
     is measured to about half a millimetre), and on boards held by hand a few millimetres and about a degree off
-    where they were asked for: at a quarter of the paper's resolution it reaches about 0.6 mm and 0.3 degree
-    (bounds 1 mm, 0.5 degree), where at full resolution `lft calibrate seeds` measures the issue's targets of
-    1 mm and 0.2 degree (docs/calibration.md)."""
+    where they were asked for: at a quarter of the paper's resolution, three rounds reach 0.34 mm and 0.20 degree
+    (bounds 0.7 mm, 0.35 degree), where at full resolution `lft calibrate seeds` measures the issue's targets of
+    1 mm and 0.2 degree (docs/calibration.md). The exposure, averaged over a disc wider than a lenslet in both
+    cameras, is 0.05 % off (bound 0.5 %)."""
     scene, rig, cal, messages = calibrated
     e = calibration_errors(cal, rig.truth)
     assert e["lenslets_found"] == 120
     assert e["lenslet_centre_rms_px"] <= 0.1
     assert e["projector_mapping_rms_px"] <= 0.5
-    assert e["pose_position_rms_mm"] <= 1.0 and e["pose_rotation_deg"] <= 0.5
+    assert e["pose_position_rms_mm"] <= 0.7 and e["pose_rotation_deg"] <= 0.35
     assert abs(e["pitch_rel_error"]) < 0.005
     assert isinstance(rig._setup, RealScene)             # calibration leaves the rig in the real scene
     assert len(rig.boards_held) == 2 + POSE_ROUNDS * len(POSE_DEPTHS)  # brightness, exposure, pose boards
     assert e["camera_response_error"] <= 0.01 and e["projector_response_error"] <= 0.01
     assert e["ray_direction_rms_deg"] < 0.5 and e["lenslet_assignment_agreement"] > 0.999
-    assert abs(e["exposure_rel_error"]) < 0.02 and e["projector_mixing_rel_error"] < 0.01
+    assert abs(e["exposure_rel_error"]) < 0.005 and e["projector_mixing_rel_error"] < 0.01
     assert len(messages) == count_calibration_steps(scene)
 
 

@@ -415,7 +415,8 @@ def corner_landing(array: LensArray, corners: np.ndarray, point: np.ndarray, nor
 
 
 POSE_DEPTHS = (0.07, 0.12)      # metres: the boards' distances from the array (two, for parallax)
-POSE_ROUNDS = 2                 # the second round draws each checkerboard on the board where it really stands
+POSE_ROUNDS = 3                 # later rounds draw the fringes on each board where the previous round measured
+                                # it (on seed 5: 1.81 mm / 0.67 deg after one round, 0.71 / 0.30 after two, 0.27 / 0.11)
 
 
 def _drawn_on(board: BoardPattern, point: np.ndarray, normal: np.ndarray) -> BoardPattern:

@@ -33,7 +33,7 @@ from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_co
 from lftransfer.calibration.radiometric import Radiometry, calibrate_radiometry
 from lftransfer.imageio_utils import write_json
 from lftransfer.optics import LensArray, LensletDevice
-from lftransfer.optics.geometry import apply_homography, project
+from lftransfer.optics.geometry import apply_homography, backproject
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.rig.requests import Board, Collimator, FocalPlaneDiffuser, RealScene
@@ -205,14 +205,18 @@ def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
                                    f"camera is {scene.rig.lf_camera[1]} x {scene.rig.lf_camera[0]} ([height, width])")
 
 
-def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.01,
+def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.03,
                        albedo: float = 0.8) -> tuple[float, dict]:
     """The LF camera's absolute exposure, against the view camera (the radiometric reference).
 
     A grey diffuse board in front of the array, lit by the projector, has one radiance in every
-    direction; the view camera measures it around the board's centre, and the LF camera, decoded with the
-    model's exposure, measures it along the rays that meet the board within ``radius`` of its centre. The
-    ratio corrects the exposure.
+    direction; the view camera and the LF camera (decoded with the model's exposure) both average it over the
+    disc of ``radius`` around the board's centre. The ratio corrects the exposure.
+
+    The projector lights the board through the lenslets, so its irradiance ripples with the lens pitch and the
+    ripple's phase depends on the board's depth, which the operator's hand gets wrong by a few millimetres. An
+    LF camera pixel averages over a whole lenslet aperture, a view pixel does not: the disc is wider than a
+    lenslet (``radius`` > pitch) so that both average over the ripple, and the lit lenslets reach past it.
 
     Returns:
         (exposure, diagnostics with both measurements).
@@ -225,7 +229,7 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     # the measurement needs one uniformly lit spot, and dark lenslets cost the simulated capture nothing
     n = scene.rig.angular_samples
     lf = LightField.zeros(model.array, n, n)
-    reach = depth * 1.2 * model.array.half_width + model.array.pitch
+    reach = depth * 1.2 * model.array.half_width + model.array.pitch + radius
     near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
     lf.data[near_axis] = 0.9 * model.projector.max_radiance
     white = model.encoder(n, n)(lf)
@@ -234,8 +238,12 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     view_img = rig.capture_view().radiance
     raw = rig.capture_lf().codes
     rig.project(rig.info.black())
-    x, y = (int(round(v)) for v in project(scene.view, board.centre[None])[0])
-    view_radiance = np.median(view_img[y - 3:y + 4, x - 3:x + 4].reshape(-1, 3), axis=0)
+    vh, vw = view_img.shape[:2]
+    vy, vx = np.mgrid[0:vh, 0:vw]
+    vpx = np.stack([vx.ravel(), vy.ravel()], 1).astype(np.float64)
+    on_board = np.linalg.norm(backproject(scene.view, vpx, board.centre, board.normal) - board.centre, axis=1)
+    seen = on_board < radius
+    view_radiance = view_img.reshape(-1, 3)[seen].astype(np.float64).mean(0)
     radiance = model.decoder(4, 4).radiance_image(raw)                   # per pixel, with the model's exposure
     cam = model.camera.device
     step = max(1, int(np.sqrt(cam.width * cam.height / 400_000)))
@@ -248,13 +256,14 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     lam = ((board.centre - origin) @ board.normal) / np.where(dn != 0, dn, np.nan)
     hit = origin + lam[:, None] * d[ok]
     near = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
-    if near.sum() < 20 or not np.all(view_radiance > 0):
+    if near.sum() < 20 or seen.sum() < 20 or not np.all(view_radiance > 0):
         raise ValueError("camera exposure: the board's centre is not seen by both cameras")
     sel = px[ok][near].astype(int)
-    lf_radiance = np.median(radiance[sel[:, 1], sel[:, 0]], axis=0)
+    lf_radiance = radiance[sel[:, 1], sel[:, 0]].astype(np.float64).mean(0)
     ratio = float(np.mean(lf_radiance / view_radiance))
     return model.camera.exposure * ratio, {"view_radiance": view_radiance.tolist(),
-                                           "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum())}
+                                           "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum()),
+                                           "view_pixels": int(seen.sum())}
 
 
 def _as_projector_image(pattern: np.ndarray, rig: Rig) -> np.ndarray:
