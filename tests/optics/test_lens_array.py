@@ -153,3 +153,33 @@ def test_13_hashable_and_equal():
     assert _arr("hex") == _arr("hex", offset=[0, 0])
     assert hash(_arr("hex")) == hash(_arr("hex"))
     assert _arr("hex") != _arr("rect")
+
+
+@pytest.mark.parametrize("lattice", ["hex", "rect"])
+def test_14_interpolation_is_linear_and_keeps_each_lenslets_flux(lattice):
+    """Across-lenslet interpolation: each centre reads itself, a linear function is rebuilt exactly inside the
+    lattice, every interior lenslet's hat integrates to its cell area, points outside every cell read nothing."""
+    a = _arr(lattice, rows=8, cols=9, rotation=0.2, offset=(0.003, -0.002))
+    idx, w = a.interpolation(a.centres)
+    np.testing.assert_allclose((w * (idx == np.arange(a.K)[:, None])).sum(1), 1.0, atol=1e-9)
+    # a linear function of position, sampled at the centres, read anywhere inside the hull of the centres
+    f = a.centres @ np.array([3.0, -2.0]) + 0.5
+    rng = np.random.default_rng(1)
+    inside = a.centres[rng.integers(0, a.K, 4000)] * 0.7               # well inside the lattice
+    idx, w = a.interpolation(inside)
+    np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-12)
+    assert (w >= 0).all() and (idx >= 0).all()
+    np.testing.assert_allclose((w * f[idx]).sum(1), inside @ np.array([3.0, -2.0]) + 0.5, atol=1e-12)
+    # hat integrals, by a midpoint rule on a fine grid over the whole array
+    xmin, xmax, ymin, ymax = a.extent()
+    n = 1500
+    gx = xmin + (np.arange(n) + 0.5) * (xmax - xmin) / n
+    gy = ymin + (np.arange(n) + 0.5) * (ymax - ymin) / n
+    pts = np.stack(np.meshgrid(gx, gy), -1).reshape(-1, 2)
+    idx, w = a.interpolation(pts)
+    hat = np.bincount(idx[idx >= 0], w[idx >= 0], minlength=a.K) * (xmax - xmin) * (ymax - ymin) / n**2
+    rows, cols = np.divmod(np.arange(a.K), a.cols)
+    interior = (rows > 0) & (rows < a.rows - 1) & (cols > 0) & (cols < a.cols - 1)
+    np.testing.assert_allclose(hat[interior] / a.cell_area, 1.0, atol=2e-3)
+    far = a.interpolation(np.array([[1.0, 1.0]]))
+    assert (far[0] == -1).all() and (far[1] == 0).all()

@@ -187,6 +187,13 @@ def _check_renderer(renderer: str) -> None:
         fail(f"--renderer: expected one of auto, fast, exact, got {renderer!r}")
 
 
+def _check_reconstruction(reconstruction: Optional[str]) -> None:
+    from lftransfer.render.lights import RECONSTRUCTIONS
+
+    if reconstruction is not None and reconstruction not in RECONSTRUCTIONS:
+        fail(f"--reconstruction: expected one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
+
+
 def _check_lighting_model(lighting_model: Optional[str]) -> None:
     from lftransfer.render.lights import LIGHTING_MODELS
 
@@ -257,6 +264,10 @@ def _summary(report: dict, out: Path) -> None:
     for name, m in report["by_lighting_model"].items():
         if m.get("cross_transfer_rel_error") is not None:
             _row(table, f"cross error, {name} model", f"{m['cross_transfer_rel_error']:.4g}")
+    by_reconstruction = report.get("by_reconstruction") or {}
+    for name, m in by_reconstruction.items():
+        if len(by_reconstruction) > 1 and m.get("cross_transfer_rel_error") is not None:
+            _row(table, f"cross error, {name} reconstruction", f"{m['cross_transfer_rel_error']:.4g}")
     control = report.get("negative_control")
     if control is not None:
         _row(table, f"negative control: {control['rig_model']}", _control_line(control))
@@ -288,15 +299,15 @@ def demo(out: Path = typer.Option(Path("out/demo"), metavar="DIR", help="Output 
          rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
          max_memory: Optional[str] = _memory_option()) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-    transfer, check against ground truth (both lighting models) and against a negative control (the rig file's
-    nominal values, uncalibrated)."""
+    transfer, check against ground truth (both lighting models, both reconstructions) and against a negative
+    control (the rig file's nominal values, uncalibrated)."""
     from lftransfer.app.pipeline import RunOptions
 
     _check_renderer(renderer)
     scene = _load(None, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
-    options = RunOptions(bounces=bounces, compare_models=("area", "point"), use_cache=not no_cache,
-                         renderer=renderer, negative_control=True, **rig_opts)
+    options = RunOptions(bounces=bounces, compare_models=("area", "point"), compare_reconstructions=("box", "linear"),
+                         use_cache=not no_cache, renderer=renderer, negative_control=True, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",
                        max_memory=max_memory)
@@ -309,7 +320,10 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene
         out: Path = typer.Option(Path("out/run"), metavar="DIR", help="Output folder (made if missing)."),
         lighting_model: Optional[str] = typer.Option(None, metavar="area|point|prefiltered",
                                                      help="Lighting model (default: the scene's)."),
-        compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point)."),
+        reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
+            "Area model: how the captured light field is read between lenslets (default: the scene's).")),
+        compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point) and the "
+                                                  "other reconstruction (linear or box)."),
         gt_spp: Optional[int] = typer.Option(None, min=1, metavar="N", help=_GT_SPP_HELP),
         quick: bool = _flag("--quick", _QUICK_HELP),
         no_cache: bool = _flag("--no-cache", "Render the ground truth again (do not read or write the cache)."),
@@ -324,11 +338,13 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene
     from lftransfer.app.pipeline import RunOptions
 
     _check_lighting_model(lighting_model)
+    _check_reconstruction(reconstruction)
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
-    options = RunOptions(bounces=bounces, lighting_model=lighting_model,
-                         compare_models=("area", "point") if compare else (), gt_spp=gt_spp,
+    options = RunOptions(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
+                         compare_models=("area", "point") if compare else (),
+                         compare_reconstructions=("box", "linear") if compare else (), gt_spp=gt_spp,
                          use_cache=not no_cache, renderer=renderer, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",

@@ -20,6 +20,7 @@ from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, l
 from lftransfer.composite import composite
 from lftransfer.app.report import write_json, write_outputs
 from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, write_status
+from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
@@ -74,6 +75,9 @@ class RunOptions:
         bounces: number of bounces N.
         lighting_model: the model used for the outputs ("area", "point" or "prefiltered").
         compare_models: further lighting models whose cross-transfer error is also measured (full reruns).
+        reconstruction: how the captured light field is read between lenslets ("box" or "linear"; None: the
+            scene's ``render.reconstruction``), for the area lighting model.
+        compare_reconstructions: further reconstructions measured beside it (full reruns, area model only).
         gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
@@ -100,6 +104,8 @@ class RunOptions:
     bounces: int = 2
     lighting_model: str | None = None
     compare_models: tuple[str, ...] = ("point",)
+    reconstruction: str | None = None
+    compare_reconstructions: tuple[str, ...] = ()
     gt_spp: int | None = None
     capture_spp: int = 4
     use_cache: bool = True
@@ -126,6 +132,9 @@ class RunOptions:
             problems.append(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
         if self.renderer not in ("auto", "fast", "exact"):
             problems.append(f"renderer must be auto, fast or exact, got {self.renderer!r}")
+        for r in (self.reconstruction, *self.compare_reconstructions):
+            if r is not None and r not in RECONSTRUCTIONS:
+                problems.append(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {r!r}")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -265,13 +274,28 @@ def count_run_steps(scene, options: RunOptions) -> int:
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
-    reruns = len(_other_models(scene, options)) + (1 if _runs_control(options) else 0)
+    reruns = len(_other_models(scene, options)) + len(_other_reconstructions(scene, options)) \
+        + (1 if _runs_control(options) else 0)
     return 1 + calibration + primary + (6 if _verifies(options) else 0) + reruns * other + 1
 
 
 def _other_models(scene, options: RunOptions) -> list[str]:
     primary = options.lighting_model or scene.render.lighting_model
     return [m for m in options.compare_models if m != primary]
+
+
+def _reconstruction(scene, options: RunOptions) -> str:
+    """The run's reconstruction across lenslets: the option, else the scene's; "box" unless the area model."""
+    if (options.lighting_model or scene.render.lighting_model) != "area":
+        return "box"
+    return options.reconstruction or scene.render.reconstruction
+
+
+def _other_reconstructions(scene, options: RunOptions) -> list[str]:
+    if (options.lighting_model or scene.render.lighting_model) != "area":
+        return []
+    primary = _reconstruction(scene, options)
+    return [r for r in options.compare_reconstructions if r != primary]
 
 
 def write_calibration(path: Path, calibration, truth=None, source: Path | None = None) -> dict | None:
@@ -414,7 +438,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     return report
 
 
-BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model in the report
+BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model and reconstruction
 
 
 @dataclass(frozen=True)
@@ -489,6 +513,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
                                 lighting_model=primary, aperture_samples=render.aperture_samples,
+                                reconstruction=_reconstruction(scene, options),
                                 lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
@@ -498,6 +523,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     gt_spp = options.gt_spp if options.gt_spp is not None else render.gt_spp
     gt, metrics, gt_spp_needed = None, {}, None
     by_model = {primary: {}}
+    by_reconstruction = {settings.reconstruction: {}}
     if verified:
         from lftransfer.sim.verify import evaluate, gt_noise_verdict, render_ground_truth
 
@@ -507,6 +533,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         timings["ground_truth"] = time.perf_counter() - t
         metrics = evaluate(result, gt)
         by_model[primary] = {k: metrics[k] for k in BY_MODEL_KEYS}
+        by_reconstruction[settings.reconstruction] = by_model[primary]
         noisy = gt_noise_verdict(metrics, gt_spp)
         if noisy is not None:
             warning(noisy.message())
@@ -519,6 +546,14 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
             m = evaluate(alt, gt)
             by_model[other] = {k: m[k] for k in BY_MODEL_KEYS}
         timings[f"transfer_{other}_model"] = time.perf_counter() - t
+    for other in _other_reconstructions(scene, options):
+        t = time.perf_counter()
+        alt = run_transfer(rig, model, pipeline_scene, replace(settings, reconstruction=other, bounce_views=False),
+                           progress=step)
+        if verified:
+            m = evaluate(alt, gt)
+            by_reconstruction[other] = {k: m[k] for k in BY_MODEL_KEYS}
+        timings[f"transfer_{other}_reconstruction"] = time.perf_counter() - t
     undefined = dict(metrics.get("undefined", {}))
     control = None
     if options.negative_control:
@@ -544,6 +579,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         f"none: the {options.rig.kind} rig's real scene is not known to lftransfer",
         "lighting_model": primary,
         "by_lighting_model": by_model,
+        "reconstruction": settings.reconstruction,
+        "by_reconstruction": by_reconstruction,
         "negative_control": control.result.to_json() if control is not None else None,
         "undefined_metrics": undefined,
         "warnings": warnings,

@@ -12,7 +12,7 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import Delaunay, cKDTree
 
 __all__ = ["LensArray"]
 
@@ -208,6 +208,60 @@ class LensArray:
             inside = self.in_cell(flat[finite] - self.centres[idx])
             k[finite] = np.where(inside, idx, -1)
         return k.reshape(points.shape[:-1])
+
+    @cached_property
+    def _shear(self) -> np.ndarray:
+        """(2, 2) affine map under which the lattice's Delaunay triangles are unique and alike: the identity on a
+        hex lattice (equilateral triangles), a slight shear on a rect one (whose squares have two diagonals)."""
+        if self.lattice == "hex":
+            return np.eye(2)
+        return self._rot @ np.array([[1.0, 0.1], [0.0, 1.0]]) @ self._rot.T
+
+    @cached_property
+    def _triangulation(self) -> Delaunay:
+        return Delaunay(self.centres @ self._shear.T)
+
+    def interpolation(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Weights of a continuous (piecewise-linear) reconstruction across lenslets at a point of the plane.
+
+        A quantity sampled once per lenslet (at its centre) is read at a point as the barycentric blend of the
+        three lenslets at the corners of the lattice triangle that contains it (equilateral triangles on a hex lattice,
+        squares cut along the same diagonal on a rect one; barycentric weights are affine-invariant, so they are
+        found in a slightly sheared copy of the plane where this triangulation is the unique Delaunay one). Each lenslet's
+        weight is a hat function that is 1 at its centre and integrates to its cell area, so the reconstruction
+        keeps every lenslet's flux. Points outside the triangulated hull (the outer half cell) read their own
+        lenslet alone (weight 1), as the box reconstruction does.
+
+        Args:
+            points: ``(..., 2)`` points (x, y) in the array plane, metres.
+
+        Returns:
+            ``(..., 3) int64`` lenslet indices and ``(..., 3) float64`` weights summing to 1 (-1 and 0 for points
+            outside every cell).
+
+        Example:
+            >>> idx, w = array.interpolation(array.centres)   # each centre reads itself with weight 1
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim < 1 or points.shape[-1] != 2:
+            raise ValueError(f"points must have shape (..., 2), got {points.shape}")
+        flat = points.reshape(-1, 2) @ self._shear.T
+        idx = np.full((len(flat), 3), -1, dtype=np.int64)
+        w = np.zeros((len(flat), 3))
+        tri = self._triangulation
+        finite = np.all(np.isfinite(flat), axis=1)
+        simplex = np.full(len(flat), -1, dtype=np.int64)
+        simplex[finite] = tri.find_simplex(flat[finite])
+        inside = simplex >= 0
+        t = tri.transform[simplex[inside]]                                  # (n, 3, 2): barycentric maps
+        b = np.einsum("nij,nj->ni", t[:, :2], flat[inside] - t[:, 2])
+        idx[inside] = tri.simplices[simplex[inside]]
+        w[inside] = np.clip(np.concatenate([b, 1.0 - b.sum(1, keepdims=True)], axis=1), 0.0, 1.0)
+        w[inside] /= w[inside].sum(1, keepdims=True)
+        own = self.lenslet_at(points.reshape(-1, 2)[~inside])
+        idx[~inside, 0] = own
+        w[~inside, 0] = (own >= 0).astype(np.float64)
+        return idx.reshape(points.shape[:-1] + (3,)), w.reshape(points.shape[:-1] + (3,))
 
     def sample_aperture(self, n: int, seed: int = 0) -> np.ndarray:
         """Well-stratified offsets uniformly covering one lenslet aperture.

@@ -12,6 +12,15 @@ emitter whose radiance depends on direction only (DESIGN.md section 3). Three li
   that the aperture subtends from x (a box filter of half-width sqrt(A) / (2 |x_z|) in (u, v)), with
   one shadow ray to the centre.
 
+How the light field is read between lenslet centres (the area model's ``reconstruction``):
+
+- ``"box"``: every point of lenslet k's aperture sends L_k(w), one spatial sample per lenslet (what the
+  projector's lenslets physically do).
+- ``"linear"``: the aperture point p sends sum_j b_j(p) L_j(w), the barycentric blend of the three lenslets of
+  the lattice triangle around p at the same direction (:meth:`LensArray.interpolation`): continuous in
+  position, the same flux per lenslet. A captured sample L_k(w) is the average of the true light field over
+  aperture k, so this is the piecewise-linear reading of those averages.
+
 All lenslets are summed at every shading point (not one picked at random), inside one Dr.Jit loop over the
 lenslets that carry light. Shapes of inputs are written as (N,) for N shading points.
 """
@@ -28,6 +37,8 @@ from lftransfer.lightfield import LightField
 
 LightingModel = Literal["point", "area", "prefiltered"]
 LIGHTING_MODELS: tuple[str, ...] = ("point", "area", "prefiltered")
+Reconstruction = Literal["box", "linear"]
+RECONSTRUCTIONS: tuple[str, ...] = ("box", "linear")
 
 
 @dataclass
@@ -84,6 +95,7 @@ class LightFieldLight:
         jitter: area model only: each shading point and lenslet takes its M points at a random place in a
             long stratified sequence over the aperture (an unbiased Monte Carlo estimate whose error averages
             out over pixels and samples), instead of the same M points everywhere (a fixed quadrature).
+        reconstruction: area model only: ``"box"`` or ``"linear"`` (module docstring).
 
     Example:
         >>> light = LightFieldLight(captured, side="synthetic", model="area")  # doctest: +SKIP
@@ -98,11 +110,17 @@ class LightFieldLight:
         aperture_samples: int = 4,
         seed: int = 0,
         jitter: bool = True,
+        reconstruction: Reconstruction = "box",
     ) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
         if model not in LIGHTING_MODELS:
             raise ValueError(f"lighting model must be one of {LIGHTING_MODELS}, got {model!r}")
+        if reconstruction not in RECONSTRUCTIONS:
+            raise ValueError(f"reconstruction must be one of {RECONSTRUCTIONS}, got {reconstruction!r}")
+        if reconstruction != "box" and model != "area":
+            raise ValueError(f"reconstruction {reconstruction!r} needs the area lighting model (the {model!r} "
+                             "model reads each lenslet at its centre)")
         if aperture_samples < 1:
             raise ValueError(f"aperture_samples must be >= 1, got {aperture_samples}")
         mi = mitsuba()
@@ -114,9 +132,10 @@ class LightFieldLight:
         self.K, self.V, self.U = data.shape[:3]
         self.a = float(array.half_width)
         self.area = float(array.aperture_area)
+        self.reconstruction = reconstruction
         # Only lenslets that carry light are visited (the background is dark).
         peak = np.abs(data).reshape(self.K, -1).max(axis=1)
-        self.active_lenslets = np.flatnonzero(peak > 0).astype(np.uint32)
+        carries = peak > 0
         if model == "prefiltered":
             # Summed-area table (V+1, U+1) per lenslet and channel: box-filtered lookups in O(1).
             sat = np.zeros((self.K, self.V + 1, self.U + 1, 3), np.float64)
@@ -127,7 +146,6 @@ class LightFieldLight:
         centres = array.centres.astype(np.float32)
         self._cx = mi.Float(centres[:, 0])
         self._cy = mi.Float(centres[:, 1])
-        self._active = mi.UInt32(self.active_lenslets)
         self.M = 1 if model != "area" else aperture_samples
         self.seed = int(seed)
         self.pool = 1024 if (model == "area" and jitter) else self.M
@@ -137,6 +155,16 @@ class LightFieldLight:
             offsets = np.zeros((1, 2), np.float32)
         self._ox = mi.Float(offsets[:, 0])
         self._oy = mi.Float(offsets[:, 1])
+        if reconstruction == "linear":
+            # (K, pool, 3) lenslets and weights read at every aperture point of every lenslet; a dark lenslet
+            # next to a lit one sends light too
+            idx, w = array.interpolation(array.centres[:, None, :] + offsets[None].astype(np.float64))
+            idx = np.where(w > 0, idx, np.arange(self.K)[:, None, None])
+            carries = carries | carries[idx].any(axis=(1, 2))
+            self._blend_idx = mi.UInt32(idx.astype(np.uint32).ravel())
+            self._blend_w = mi.Float(w.astype(np.float32).ravel())
+        self.active_lenslets = np.flatnonzero(carries).astype(np.uint32)
+        self._active = mi.UInt32(self.active_lenslets)
 
     def may_light(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Which surface points can receive any light through the array at all (a cheap conservative test).
@@ -267,6 +295,12 @@ class LightFieldLight:
                 # u = (x - p)_x / x_z, so an aperture of width sqrt(A) spans sqrt(A) / |x_z| in u (and v).
                 half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(si.p.z), 1e-6)
                 radiance = self._box(k, u, v, half, active)
+            elif self.reconstruction == "linear":
+                base = (k * pool + m) * 3
+                radiance = mi.Color3f(0.0)
+                for t in range(3):
+                    j = dr.gather(mi.UInt32, self._blend_idx, base + t)
+                    radiance += dr.gather(mi.Float, self._blend_w, base + t) * self._bilinear(j, u, v, active)
             else:
                 radiance = self._bilinear(k, u, v, active)
             lit = active & dr.any(radiance != 0.0)

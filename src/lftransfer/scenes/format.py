@@ -193,6 +193,9 @@ class RenderConfig(_Model):
         lighting_model: how the incident light field lights the synthetic scene: ``"area"`` (lenslet apertures
             sampled), ``"point"`` (the paper's projective point lights) or ``"prefiltered"``.
         aperture_samples: area model: samples per lenslet aperture.
+        reconstruction: area model: how the captured light field is read between lenslet centres, ``"linear"``
+            (blended across the three lenslets around each aperture point, continuous in position) or ``"box"``
+            (one sample per lenslet over its whole aperture).
         spp: samples per pixel of view renders and per light field sample.
         max_depth: path depth (surface interactions) inside each half-space.
         gt_spp: samples per pixel of the path-traced ground truth.
@@ -200,6 +203,7 @@ class RenderConfig(_Model):
 
     lighting_model: Literal["area", "point", "prefiltered"] = "area"
     aperture_samples: PosInt = 4
+    reconstruction: Literal["box", "linear"] = "linear"
     spp: PosInt = 4
     max_depth: PosInt = 3
     gt_spp: PosInt = 2048

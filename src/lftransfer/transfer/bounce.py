@@ -42,6 +42,8 @@ class TransferSettings:
         angular_samples: U = V of the light field grid.
         lighting_model: how the captured light field lights the synthetic scene ("area", "point", "prefiltered").
         aperture_samples: lenslet aperture points per shading point (area model).
+        reconstruction: how the captured light field is read between lenslet centres when it lights the
+            synthetic scene: "box" or "linear" (area model; :mod:`lftransfer.render.lights`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -56,6 +58,7 @@ class TransferSettings:
     angular_samples: int = 48
     lighting_model: str = "area"
     aperture_samples: int = 4
+    reconstruction: str = "box"
     lf_spp: int = 4
     view_spp: int = 4
     projector_fill: float = 0.95
@@ -280,7 +283,9 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         # Synthetic side: lit by R_{n-1} only.
         step(f"bounce {n}: render synthetic lit by R_{n - 1}")
         incident = LightFieldLight(prev.real_lf, side="synthetic", model=settings.lighting_model,
-                                   aperture_samples=settings.aperture_samples, seed=settings.seed + n)
+                                   aperture_samples=settings.aperture_samples, seed=settings.seed + n,
+                                   reconstruction=settings.reconstruction if settings.lighting_model == "area"
+                                   else "box")
         lsn, sn = render_synthetic([incident], settings.seed + 1000 * n)
         bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
         step(f"bounce {n} done")
