@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import json
 from dataclasses import dataclass, field
 from typing import Union
@@ -42,9 +43,21 @@ class RealScene:
     """The real scene as the run uses it: real objects in place, the point light on, the room dark.
 
     This is the state a rig starts in and the one the transfer needs.
+
+    Attributes:
+        time_s: the moment of an animated scene, seconds from its start. The simulated rig poses its real objects
+            at this time (their keyframes); on a physical rig the real objects move by themselves and it only
+            labels the frame.
     """
 
+    time_s: float = 0.0
     kind: str = field(default="real_scene", init=False)
+
+    def __post_init__(self) -> None:
+        t = self.time_s
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise ValueError(f"RealScene.time_s must be a finite number of seconds >= 0, got {t!r}")
+        object.__setattr__(self, "time_s", float(t))
 
     def prompt(self) -> str:
         return "Put the real objects in place and switch the point light on; take every calibration target away."

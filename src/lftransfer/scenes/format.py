@@ -30,7 +30,10 @@ from pydantic import (
     Tag,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
+
+from lftransfer.scenes.animation import Interpolation, frame_times, interpolate
 
 from lftransfer.validation import STRICT_NUMBER, read_toml, validation_message
 
@@ -45,6 +48,8 @@ __all__ = [
     "MetalMaterial",
     "Material",
     "ObjectConfig",
+    "Keyframe",
+    "AnimationConfig",
     "SceneConfig",
     "load_scene",
     "builtin_scene",
@@ -313,6 +318,59 @@ def _rotation(rotate_deg) -> np.ndarray:
     return rz @ ry @ rx
 
 
+def _positive_scale(value: Any) -> float | list[float]:
+    """A uniform scale factor or three, each a positive finite number."""
+    def positive(x: Any) -> float:
+        if isinstance(x, (str, bool)) or not isinstance(x, numbers.Real):
+            raise ValueError(f"scale must be a number or 3 numbers, found {type(x).__name__} {x!r}")
+        if not math.isfinite(float(x)) or float(x) <= 0:
+            raise ValueError(f"scale must be positive, found {x!r}")
+        return float(x)
+
+    if isinstance(value, (list, tuple, np.ndarray)):
+        if len(value) != 3:
+            raise ValueError(f"scale needs 1 or 3 components, found {len(value)}: {list(value)}")
+        return [positive(x) for x in value]
+    return positive(value)
+
+
+class Keyframe(_Model):
+    """An object's pose at one moment of an animated scene; a field left out is the object's own value there.
+
+    Attributes:
+        time_s: seconds from the start of the sequence, in [0, animation.duration_s].
+        translate: metres.
+        rotate_deg: Euler angles about x, then y, then z (world axes), degrees.
+        scale: uniform factor or [sx, sy, sz].
+    """
+
+    time_s: NonNegFloat
+    translate: Vec3 | None = None
+    rotate_deg: Vec3 | None = None
+    scale: Union[float, list[float], None] = None
+
+    @field_validator("scale", mode="plain")
+    @classmethod
+    def _scale(cls, value: Any) -> float | list[float] | None:
+        return None if value is None else _positive_scale(value)
+
+
+class AnimationConfig(_Model):
+    """The time line of an animated scene (``[animation]``).
+
+    Attributes:
+        duration_s: length of the sequence, seconds.
+        fps: frames per second of rendered sequences.
+    """
+
+    duration_s: PosFloat
+    fps: PosFloat = 24.0
+
+    def frame_times(self) -> np.ndarray:
+        """(F,) float64 times of the frames, seconds: ``i / fps`` below ``duration_s``."""
+        return frame_times(self.duration_s, self.fps)
+
+
 class ObjectConfig(_Model):
     """One object of a half-space: a primitive or a mesh, a transform and a material.
 
@@ -331,6 +389,10 @@ class ObjectConfig(_Model):
         rotate_deg: Euler angles about x, then y, then z (world axes), degrees.
         scale: uniform factor or [sx, sy, sz], applied first.
         material: diffuse, glossy or metal (chosen by its ``type``).
+        keyframes: poses at increasing times of the scene's ``[animation]`` (``[[real.keyframes]]``,
+            ``[[synthetic.keyframes]]``); empty: the object stands still.
+        interpolation: how the pose goes from key to key, ``"linear"`` or ``"smooth"``
+            (:mod:`lftransfer.scenes.animation`).
     """
 
     name: Annotated[str, Field(min_length=1)]
@@ -343,6 +405,8 @@ class ObjectConfig(_Model):
     rotate_deg: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
     scale: Union[float, list[float]] = 1.0
     material: Material = Field(default_factory=DiffuseMaterial)
+    keyframes: list[Keyframe] = Field(default_factory=list)
+    interpolation: Interpolation = "linear"
 
     # --- validation -------------------------------------------------------------------------------------------
     @staticmethod
@@ -395,18 +459,40 @@ class ObjectConfig(_Model):
     @field_validator("scale", mode="plain")
     @classmethod
     def _scale(cls, value: Any) -> float | list[float]:
-        def positive(x: Any) -> float:
-            if isinstance(x, (str, bool)) or not isinstance(x, numbers.Real):
-                raise ValueError(f"scale must be a number or 3 numbers, found {type(x).__name__} {x!r}")
-            if not math.isfinite(float(x)) or float(x) <= 0:
-                raise ValueError(f"scale must be positive, found {x!r}")
-            return float(x)
+        return _positive_scale(value)
 
-        if isinstance(value, (list, tuple, np.ndarray)):
-            if len(value) != 3:
-                raise ValueError(f"scale needs 1 or 3 components, found {len(value)}: {list(value)}")
-            return [positive(x) for x in value]
-        return positive(value)
+    @field_validator("keyframes")
+    @classmethod
+    def _keys_in_order(cls, value: list[Keyframe]) -> list[Keyframe]:
+        times = [k.time_s for k in value]
+        if any(b <= a for a, b in zip(times, times[1:])):
+            raise ValueError(f"keyframe times must increase strictly, found {times}")
+        return value
+
+    # --- animation --------------------------------------------------------------------------------------------
+    @property
+    def moves(self) -> bool:
+        """Whether the object has keyframes (it may still hold one pose)."""
+        return bool(self.keyframes)
+
+    def at(self, t: float) -> "ObjectConfig":
+        """The object posed at time ``t`` (seconds), without keyframes; itself when it has none.
+
+        Each of ``translate``, ``rotate_deg`` and ``scale`` is interpolated over the keys; a key that leaves a
+        field out has the object's own value there.
+        """
+        if not self.keyframes:
+            return self
+        pose = {}
+        times = np.array([k.time_s for k in self.keyframes])
+        for name in ("translate", "rotate_deg", "scale"):
+            if all(getattr(k, name) is None for k in self.keyframes):
+                continue
+            values = np.array([np.broadcast_to(np.asarray(getattr(self, name) if getattr(k, name) is None
+                                                          else getattr(k, name), np.float64), (3,))
+                               for k in self.keyframes])
+            pose[name] = interpolate(times, values, float(t), self.interpolation).tolist()
+        return self.model_copy(update={**pose, "keyframes": []})
 
     # --- geometry ---------------------------------------------------------------------------------------------
     @property
@@ -492,16 +578,16 @@ RealObject = Annotated[ObjectConfig, _in_half_space("real")]
 SyntheticObject = Annotated[ObjectConfig, _in_half_space("synthetic")]
 
 
-class SyntheticScene(_Model):
-    """What the pipeline may know of a scene: the rig file's nominal values, the view camera, the point light as
-    measured by hand, the render settings and the synthetic objects; never the real objects.
+class _SceneBase(_Model):
+    """What every scene has: the rig file's nominal values, the view camera, the point light, the render
+    settings and the time line; the subclasses add the objects.
 
     Attributes:
-        rig: light field interface hardware (nominal values).
+        rig: light field interface hardware (nominal values; defaults: the paper's rig).
         view: the view camera.
-        light: the point light.
+        light: the point light (its position as measured by hand).
         render: render settings.
-        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        animation: the time line of keyframed objects (``[animation]``), or None for a still scene.
         source: the TOML file it was loaded from, or None.
     """
 
@@ -509,30 +595,77 @@ class SyntheticScene(_Model):
     view: ViewConfig = Field(default_factory=ViewConfig)
     light: LightConfig
     render: RenderConfig = Field(default_factory=RenderConfig)
-    synthetic: list[SyntheticObject] = Field(default_factory=list)
+    animation: AnimationConfig | None = None
     source: Path | None = None
 
+    def _sides(self) -> dict[str, list[ObjectConfig]]:
+        return {side: getattr(self, side) for side in ("real", "synthetic") if side in type(self).model_fields}
 
-class SceneConfig(_Model):
+    @property
+    def moving(self) -> bool:
+        """Whether any object has keyframes."""
+        return any(o.moves for objs in self._sides().values() for o in objs)
+
+    def frame_times(self) -> np.ndarray:
+        """(F,) float64 frame times of the ``[animation]``, seconds; ``[0.0]`` for a still scene."""
+        return self.animation.frame_times() if self.animation is not None else np.zeros(1)
+
+    def at(self, t: float):
+        """The scene at time ``t`` (seconds): every keyframed object posed (:meth:`ObjectConfig.at`)."""
+        if not self.moving:
+            return self
+        return self.model_copy(update={side: [o.at(t) for o in objs] for side, objs in self._sides().items()})
+
+    @model_validator(mode="after")
+    def _animation_fits(self):
+        sides = self._sides()
+        keyed = [(side, i, o) for side, objs in sides.items() for i, o in enumerate(objs) if o.moves]
+        if not keyed:
+            return self
+        if self.animation is None:
+            side, i, o = keyed[0]
+            raise ValueError(f"{side}[{i}] ({o.name!r}) has keyframes, but the scene has no [animation] table "
+                             "(duration_s, fps)")
+        for side, i, o in keyed:
+            late = [k.time_s for k in o.keyframes if k.time_s > self.animation.duration_s]
+            if late:
+                raise ValueError(f"{side}[{i}] ({o.name!r}).keyframes: time_s {late[0]} is after the end of the "
+                                 f"animation (duration_s = {self.animation.duration_s})")
+            times = np.union1d(self.animation.frame_times(), [k.time_s for k in o.keyframes])
+            for t in times:
+                posed = o.at(float(t))
+                if np.min(posed.scale3) <= 0:
+                    raise ValueError(f"{side}[{i}] ({o.name!r}): its interpolated scale is not positive at "
+                                     f"t = {t:.4g} s ({posed.scale3.tolist()})")
+                lo, hi = posed.bounds()
+                if (side == "real" and lo[2] <= 0) or (side == "synthetic" and hi[2] >= 0):
+                    half = "z > 0" if side == "real" else "z < 0"
+                    raise ValueError(f"{side}[{i}] ({o.name!r}) leaves its half-space ({half}) at t = {t:.4g} s: "
+                                     f"it spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
+        return self
+
+
+class SyntheticScene(_SceneBase):
+    """What the pipeline may know of a scene: the rig file's nominal values, the view camera, the point light as
+    measured by hand, the render settings, the time line and the synthetic objects; never the real objects.
+
+    Attributes:
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+    """
+
+    synthetic: list[SyntheticObject] = Field(default_factory=list)
+
+
+class SceneConfig(_SceneBase):
     """A whole scene file, real objects included (for the simulated rig and its ground truth).
 
     Attributes:
-        rig: light field interface hardware (defaults: the paper's rig).
-        view: the view camera.
-        light: the point light (required).
-        render: render settings.
         real: objects of the real half-space (bounding boxes in z > 0).
         synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
-        source: the TOML file it was loaded from, or None.
     """
 
-    rig: RigConfig = Field(default_factory=RigConfig)
-    view: ViewConfig = Field(default_factory=ViewConfig)
-    light: LightConfig
-    render: RenderConfig = Field(default_factory=RenderConfig)
     real: list[RealObject] = Field(default_factory=list)
     synthetic: list[SyntheticObject] = Field(default_factory=list, validate_default=True)
-    source: Path | None = None
 
     @field_validator("synthetic")
     @classmethod

@@ -24,7 +24,10 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
 
     Returns:
         A new scene of the same type: objects, point light and view camera moved by ``matrix``; the rig and the render
-        settings unchanged. The identity returns ``scene`` itself.
+        settings unchanged. The identity returns ``scene`` itself. Keyframes move too, exactly at the keys;
+        between keys a moved object's Euler angles are interpolated in the new frame, which differs from the
+        world frame's interpolation by about the frame's tilt: pose a moving scene first
+        (``scene_in_frame(scene.at(t), matrix)``) where that matters.
     """
     m = np.asarray(matrix, dtype=np.float64)
     if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
@@ -39,10 +42,16 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
     def vector(v):
         return (rot @ np.asarray(v, float)).tolist()
 
+    def turn(rotate_deg):
+        return Rotation.from_matrix(rot @ Rotation.from_euler("xyz", rotate_deg, degrees=True).as_matrix()) \
+            .as_euler("xyz", degrees=True).tolist()
+
     def move(obj):
-        r = Rotation.from_matrix(rot @ obj.rotation())
-        return obj.model_copy(update={"translate": point(obj.translate),
-                                      "rotate_deg": r.as_euler("xyz", degrees=True).tolist()})
+        keys = [k.model_copy(update={"translate": None if k.translate is None else point(k.translate),
+                                     "rotate_deg": None if k.rotate_deg is None else turn(k.rotate_deg)})
+                for k in obj.keyframes]
+        return obj.model_copy(update={"translate": point(obj.translate), "rotate_deg": turn(obj.rotate_deg),
+                                      "keyframes": keys})
 
     view = scene.view
     objects = {"real": [move(o) for o in scene.real]} if isinstance(scene, SceneConfig) else {}

@@ -79,8 +79,11 @@ class SimRig:
         mi = mitsuba()
         self._truth = truth or nominal_rig(scene.rig)
         self._world_to_array = self._truth.world_to_array()
-        # The real world seen from the true lens array's own frame (interface plane z = 0).
-        scene = scene_in_frame(scene, self._world_to_array)
+        # The real world seen from the true lens array's own frame (interface plane z = 0); a moving scene is
+        # posed at the time each RealScene request names (scene_in_frame of the posed world scene, exact).
+        self._world_scene = scene
+        self._time_s = 0.0
+        scene = scene_in_frame(scene.at(0.0), self._world_to_array)
         self._scene = scene
         self._seed = int(scene.rig.seed if seed is None else seed)
         self._operator_seed = self._seed if operator_seed is None else int(operator_seed)
@@ -129,15 +132,25 @@ class SimRig:
         return self._info.projector_shape
 
     def setup(self, request: Setup) -> None:
-        """Arrange the simulated world: the real scene, a collimator, a white diffuser, the focal-plane diffuser
+        """Arrange the simulated world: the real scene (its objects posed at the request's time), a collimator, a white diffuser, the focal-plane diffuser
         or a board held by the (simulated) operator, who misplaces it by a hidden error."""
         if isinstance(request, Board):
             self._world = self._board_renderer(request)
+        elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
+            self._real = self._real_renderer(request.time_s)
+            self._world = self._real
         elif isinstance(request, (RealScene, Collimator, WhiteField, FocalPlaneDiffuser)):
             self._world = self._real if isinstance(request, RealScene) else None
         else:
             raise TypeError(f"SimRig.setup: not a set-up request: {request!r}")
         self._setup = request
+
+    def _real_renderer(self, t: float) -> HalfSpaceRenderer:
+        """The real objects posed at time ``t`` (seconds), seen from the true array's frame."""
+        posed = scene_in_frame(self._world_scene.at(t), self._world_to_array)
+        self._time_s = float(t)
+        return HalfSpaceRenderer(posed.real, extra_shapes={"lens_array_absorber": self._absorber},
+                                 max_depth=posed.render.max_depth)
 
     def project(self, image: np.ndarray) -> None:
         """Show a projector image ((H, W, 3) unsigned integers of the projector's bit depth)."""

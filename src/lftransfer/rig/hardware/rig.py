@@ -125,7 +125,8 @@ class HardwareRig:
         if not isinstance(request, tuple(SETUPS.values())):
             raise TypeError(f"setup needs one of {sorted(SETUPS)}, got {type(request).__name__}")
         self._check_open(f"setup {request.kind}")
-        if request == self._setup:
+        if request == self._setup or (isinstance(request, RealScene) and isinstance(self._setup, RealScene)):
+            self._setup = request            # a later moment of the real scene: its objects move by themselves
             return
         _log.info("set-up: %s", request.kind)
         self._operator(request.prompt())
