@@ -92,10 +92,57 @@ def test_04_only_diffuse(variant):
     with pytest.raises(ValueError, match="diffuse"):
         CachedRenderer(glossy)
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-    from lftransfer.transfer.bounce import synthetic_renderer
+    from lftransfer.transfer.synthetic_side import synthetic_renderer
 
     scene = load_scene(builtin_scene("fig4"))
     assert isinstance(synthetic_renderer(scene), CachedRenderer)
     shiny = with_overrides(scene, synthetic=[{**scene.synthetic[0].model_dump(mode="json"),
                                               "material": {"type": "glossy", "roughness": 0.3}}])
     assert type(synthetic_renderer(shiny)) is HalfSpaceRenderer
+
+
+def test_05_moved_objects_equal_a_fresh_cache(variant):
+    """Moving objects updates the cache in place: the result equals a cache built at the new poses, the exact
+    renderer's update agrees, and nothing is rebuilt when nothing moved."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    sensor = mi.load_dict(sensor_dict([0.3, 0.1, 0.0], [0.0, 0.0, -0.07], [0, 1, 0], 30.0, 48, 36))
+    light = PointLight(np.array([0.3, 0.1, -0.02]), np.array([1.0, 1.0, 1.0]))
+    moved = [o.model_copy(update={"translate": [o.translate[0] + 0.01, o.translate[1] - 0.005, o.translate[2]],
+                                  "rotate_deg": [0, 45, 10]}) for o in _objects()]
+    cache, exact = CachedRenderer(_objects()), HalfSpaceRenderer(_objects(), max_depth=1)
+    before = cache.render_view(sensor, 48, 36, [light], spp=2).rgb
+    assert not cache.update(_objects()) and not exact.update(_objects())
+    assert cache.update(moved) and exact.update(moved)
+    after = cache.render_view(sensor, 48, 36, [light], spp=2).rgb
+    fresh = CachedRenderer(moved).render_view(sensor, 48, 36, [light], spp=2).rgb
+    np.testing.assert_array_equal(after, fresh)
+    assert np.abs(after - before).max() > 0.1 * after.max()
+    reference = exact.render_view(sensor, 48, 36, [light], spp=2).rgb
+    assert psnr(after, reference) > 30
+
+
+def test_06_irradiance_is_kept_per_light(variant, monkeypatch):
+    """A light that lit the cache before is not computed again while nothing moves; a moved object relights
+    every light."""
+    cache = CachedRenderer(_objects())
+    point = PointLight(np.array([0.3, 0.1, -0.02]), np.array([1.0, 1.0, 1.0]))
+    computed = []
+    original = CachedRenderer._irradiance_of
+
+    def counting(self, light, seed):
+        computed.append(light)
+        return original(self, light, seed)
+
+    monkeypatch.setattr(CachedRenderer, "_irradiance_of", counting)
+    o, d = np.array([[0.3, 0.0, -0.08]], np.float32), np.array([[-1.0, 0.0, 0.0]], np.float32)
+    first = LightFieldLight(_incident(), side="synthetic", model="area")
+    both = cache.render_rays(o, d, [point, first])[0]
+    second = LightFieldLight(_incident(), side="synthetic", model="area")
+    again = cache.render_rays(o, d, [point, second])[0]
+    assert computed == [point, first, second]
+    np.testing.assert_allclose(again, both, rtol=1e-5)
+    cache.update([_objects()[0], _objects()[1].model_copy(update={"translate": [0.05, 0.03, -0.06]})])
+    cache.render_rays(o, d, [point, second])
+    assert computed[3:] == [point, second]

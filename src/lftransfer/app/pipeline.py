@@ -23,7 +23,8 @@ from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, writ
 from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
-from lftransfer.transfer.bounce import TransferSettings, count_steps, resolve_renderer, run_transfer
+from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
+from lftransfer.transfer.synthetic_side import resolve_renderer
 
 if TYPE_CHECKING:
     from lftransfer.sim.verify import NegativeControl

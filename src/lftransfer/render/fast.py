@@ -8,6 +8,12 @@ with the same lights as the exact path (area, point or prefiltered model, shadow
 or a view image is then one ray cast per ray and a barycentric interpolation of the three vertex irradiances,
 times albedo / pi.
 
+When objects move (an animation frame, :meth:`CachedRenderer.update`), the moved objects' cache vertices are
+re-tessellated in place (the acceleration structure is rebuilt over the new vertex positions) and every light's
+irradiance is computed again (a moved object can shadow any other); while nothing moves, the irradiance of each
+light is kept per light object, so a live loop that keeps its point light and swaps the captured light field
+each frame relights only for the new light field.
+
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`):
 only diffuse materials (for glossy or metal objects use the exact path), one reflection inside the half-space
 (interreflections between synthetic objects are dropped), and irradiance varies linearly across triangles of
@@ -91,13 +97,18 @@ class CachedRenderer(HalfSpaceRenderer):
     """
 
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE) -> None:
+        if not supports(objects):
+            raise ValueError("the fast path renders diffuse materials only; use HalfSpaceRenderer")
+        self.max_edge = float(max_edge)
+        self.max_depth = 1
+        self._build(list(objects))
+
+    def _build(self, objects: list) -> None:
         mi = mitsuba()
         import drjit as dr
 
-        if not supports(objects):
-            raise ValueError("the fast path renders diffuse materials only; use HalfSpaceRenderer")
-        self.objects = list(objects)
-        self.max_depth = 1
+        max_edge = self.max_edge
+        self.objects = objects
         shapes, verts, norms, albedo = {}, [], [], []
         base = 0
         bases = []
@@ -131,8 +142,52 @@ class CachedRenderer(HalfSpaceRenderer):
             table_albedo[sid] = a / np.pi
         self._base = mi.UInt32(table_base)
         self._albedo = mi.Float(table_albedo.ravel())
+        self._keys = keys
+        self._bases = bases
         self._irradiance = None
         self._lit_by: tuple | None = None
+        self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
+
+    def update(self, objects: Sequence) -> bool:
+        """Move to new poses of the same objects (an animation frame).
+
+        Objects whose pose changed are re-tessellated; when their vertex count is unchanged (a rigid motion) the
+        vertex positions are written into the loaded meshes and the acceleration structure is rebuilt over them,
+        otherwise the whole cache is built again. Every light's irradiance is then stale.
+
+        Args:
+            objects: the objects, posed (``ObjectConfig.at(t)``), in the same order as before.
+
+        Returns:
+            Whether anything moved.
+        """
+        mi = mitsuba()
+
+        objects = list(objects)
+        if not supports(objects):
+            raise ValueError("the fast path renders diffuse materials only; use HalfSpaceRenderer")
+        if len(objects) != len(self.objects) or any(a.shape != b.shape or a.material != b.material
+                                                    for a, b in zip(objects, self.objects)):
+            self._build(objects)
+            return True
+        moved = [i for i, (a, b) in enumerate(zip(objects, self.objects)) if a.model_dump() != b.model_dump()]
+        if not moved:
+            return False
+        params = mi.traverse(self.scene)
+        for i in moved:
+            v, n = tessellate(objects[i], self.max_edge)
+            end = self._bases[i + 1] if i + 1 < len(self._bases) else len(self.vertices)
+            if len(v) != end - self._bases[i]:
+                self._build(objects)
+                return True
+            params[f"{self._keys[i]}.vertex_positions"] = mi.Float(v.ravel())
+            self.vertices[self._bases[i]:end] = v
+            self.normals[self._bases[i]:end] = n
+        params.update()
+        self.objects = objects
+        self._per_light.clear()
+        self._lit_by = None
+        return True
 
     @property
     def cache_size(self) -> int:
@@ -140,30 +195,46 @@ class CachedRenderer(HalfSpaceRenderer):
         return len(self.vertices)
 
     def relight(self, lights: Sequence[Light], seed: int = 0) -> None:
-        """Compute the irradiance at every cache vertex from ``lights`` (with shadow rays)."""
+        """Compute the irradiance at every cache vertex from ``lights`` (with shadow rays); a light object that
+        lit the cache before, with nothing moved since, is not computed again."""
+        mi = mitsuba()
+
+        m = len(self.vertices)
+        total = [np.zeros(m, np.float32) for _ in range(3)]
+        kept = {}
+        for light in lights:
+            cached = self._per_light.get(id(light))
+            e = cached[1] if cached is not None and cached[0] is light else self._irradiance_of(light, seed)
+            kept[id(light)] = (light, e)
+            for c in range(3):
+                total[c] += e[c]
+        self._per_light = kept
+        self._irradiance = [mi.Float(t) for t in total]
+        self._lit_by = tuple(lights)
+
+    def _irradiance_of(self, light: Light, seed: int) -> list[np.ndarray]:
+        """(3,) arrays (M,) of one light's irradiance at the cache vertices."""
         mi = mitsuba()
         import drjit as dr
 
         m = len(self.vertices)
         total = [np.zeros(m, np.float32) for _ in range(3)]
-        for light in lights:
-            # Shade only the vertices this light can reach (a light field through the array reaches those
-            # facing it on its side of the plane).
-            idx = np.flatnonzero(light.may_light(self.vertices, self.normals)) if hasattr(light, "may_light") \
-                else np.arange(m)
-            if len(idx) == 0:
-                continue
-            v, n = self.vertices[idx], self.normals[idx]
-            si = dr.zeros(mi.SurfaceInteraction3f, len(idx))
-            si.p = mi.Point3f(v[:, 0], v[:, 1], v[:, 2])
-            si.n = mi.Normal3f(n[:, 0], n[:, 1], n[:, 2])
-            si.sh_frame = mi.Frame3f(si.n)
-            si.wi = mi.Vector3f(0, 0, 1)
-            e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=True), np.float32)
-            for c in range(3):
-                total[c][idx] += e[c]
-        self._irradiance = [mi.Float(t) for t in total]
-        self._lit_by = tuple(lights)
+        # Shade only the vertices this light can reach (a light field through the array reaches those facing it
+        # on its side of the plane).
+        idx = np.flatnonzero(light.may_light(self.vertices, self.normals)) if hasattr(light, "may_light") \
+            else np.arange(m)
+        if len(idx) == 0:
+            return total
+        v, n = self.vertices[idx], self.normals[idx]
+        si = dr.zeros(mi.SurfaceInteraction3f, len(idx))
+        si.p = mi.Point3f(v[:, 0], v[:, 1], v[:, 2])
+        si.n = mi.Normal3f(n[:, 0], n[:, 1], n[:, 2])
+        si.sh_frame = mi.Frame3f(si.n)
+        si.wi = mi.Vector3f(0, 0, 1)
+        e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=True), np.float32)
+        for c in range(3):
+            total[c][idx] = e[c]
+        return total
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -73,7 +73,27 @@ class HalfSpaceRenderer:
         mi = mitsuba()
         self.objects = list(objects)
         self.max_depth = int(max_depth)
+        self._extra_shapes = extra_shapes
         self.scene = mi.load_dict(scene_dict(self.objects, extra=extra_shapes), parallel=False, optimize=False)
+
+    def update(self, objects: Sequence) -> bool:
+        """Move to new poses of the same objects (an animation frame); the scene is rebuilt only when some
+        object's pose or geometry changed.
+
+        Args:
+            objects: the objects, posed (``ObjectConfig.at(t)``), in the same order as before.
+
+        Returns:
+            Whether anything changed.
+        """
+        objects = list(objects)
+        if [o.model_dump() for o in objects] == [o.model_dump() for o in self.objects]:
+            return False
+        mi = mitsuba()
+        extra = getattr(self, "_extra_shapes", None)
+        self.objects = objects
+        self.scene = mi.load_dict(scene_dict(self.objects, extra=extra), parallel=False, optimize=False)
+        return True
 
     def _rays(self, key: tuple, make):
         """Primary rays are the same from frame to frame: build them once per key (a small memo)."""

@@ -12,23 +12,20 @@ response to the real point light by differencing two captures, and each bounce c
 
 from __future__ import annotations
 
-import time
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from lftransfer.lightfield import LightField
-from lftransfer.render import fast
-from lftransfer.render.camera import sensor_dict
-from lftransfer.render.lights import LightFieldLight, PointLight
-from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
+from lftransfer.render.renderer import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
-from lftransfer.scenes import SyntheticScene, check_synthetic
-from lftransfer.scenes.frame import scene_in_frame
+from lftransfer.scenes import SyntheticScene
+from lftransfer.transfer.synthetic_side import SyntheticSide
+from lftransfer.transfer.timer import StageTimer
 
 Progress = Callable[[str], None]
 
@@ -126,35 +123,6 @@ class TransferResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-class _Timer:
-    def __init__(self) -> None:
-        self.totals: dict[str, float] = {}
-
-    @contextmanager
-    def __call__(self, stage: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.totals[stage] = self.totals.get(stage, 0.0) + time.perf_counter() - t0
-
-
-def resolve_renderer(scene, kind: str = "auto") -> str:
-    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene."""
-    if kind not in ("auto", "fast", "exact"):
-        raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
-    if kind == "auto":
-        return "fast" if fast.supports(scene.synthetic) else "exact"
-    return kind
-
-
-def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
-    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see :class:`TransferSettings`)."""
-    if resolve_renderer(scene, kind) == "fast":
-        return fast.CachedRenderer(scene.synthetic)
-    return HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
-
-
 def projector_gain(lf: LightField, max_radiance: float, fill: float = 0.95) -> float:
     """Gain g that brings the brightest sample of ``lf`` to ``fill`` of the projector's full radiance."""
     peak = float(np.max(lf.data))
@@ -213,7 +181,7 @@ def count_steps(settings: TransferSettings) -> int:
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
-                 progress: Progress | None = None) -> TransferResult:
+                 progress: Progress | None = None, time_s: float = 0.0) -> TransferResult:
     """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
 
     Args:
@@ -224,38 +192,24 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
             ``model.world_to_array()``).
         settings: see :class:`TransferSettings`.
         progress: called with a short description at the start of each step.
+        time_s: the moment of an animated scene: the synthetic objects and (through
+            :class:`~lftransfer.rig.requests.RealScene`) the simulated rig's real objects are posed there.
 
     Returns:
         TransferResult with every bounce kept.
     """
-    from lftransfer.backend import mitsuba
-
-    mi = mitsuba()
     step = progress or (lambda _msg: None)
-    timer = _Timer()
-    # The renderer works in the lens array's frame (interface plane z = 0): a tilted array moves the rest.
-    scene = scene_in_frame(check_synthetic(scene), model.world_to_array())
-    U = V = settings.angular_samples
-    decoder = model.decoder(U, V)
-    encoder = model.encoder(U, V)
-    synthetic = synthetic_renderer(scene, settings.renderer)
-    point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
-    view = scene.view
-    width, height = view.resolution
-    sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, width, height))
+    timer = StageTimer()
+    side = SyntheticSide(model, scene, settings, time_s=time_s)
+    decoder, encoder, point_light = side.decoder, side.encoder, side.point_light
     black = rig.info.black()
 
     def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
-        with timer("render_lightfield"):
-            ls = synthetic.render_lightfield(model.array, lights, U, V, model="area" if settings.lighting_model == "area" else "point",
-                                             spp=settings.lf_spp, seed=seed)
-        with timer("render_view"):
-            s = synthetic.render_view(sensor, width, height, lights, spp=settings.view_spp, seed=seed)
-        return ls, s
+        return side.render(lights, seed, timer)
 
     # Direct light.
     step("capture direct (projector black)")
-    rig.setup(RealScene())
+    rig.setup(RealScene(time_s=time_s))
     rig.project(black)
     with timer("capture"):
         raw0 = rig.capture_lf().codes
@@ -282,10 +236,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
                 real_view_n = (rig.capture_view().radiance - real_view_direct) / gain
         # Synthetic side: lit by R_{n-1} only.
         step(f"bounce {n}: render synthetic lit by R_{n - 1}")
-        incident = LightFieldLight(prev.real_lf, side="synthetic", model=settings.lighting_model,
-                                   aperture_samples=settings.aperture_samples, seed=settings.seed + n,
-                                   reconstruction=settings.reconstruction if settings.lighting_model == "area"
-                                   else "box")
+        incident = side.incident_light(prev.real_lf, settings.seed + n)
         lsn, sn = render_synthetic([incident], settings.seed + 1000 * n)
         bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
         step(f"bounce {n} done")

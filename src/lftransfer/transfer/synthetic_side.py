@@ -1,0 +1,112 @@
+"""The synthetic half of a transfer: the rig model's codecs, the synthetic scene posed in the array's frame, its
+renderer, the virtual point light and the view camera, set up once and shared by the bounce loop and the live
+loop.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from lftransfer.lightfield import LightField
+from lftransfer.render import fast
+from lftransfer.render.camera import sensor_dict
+from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
+from lftransfer.rig.model import RigModel
+from lftransfer.scenes import SyntheticScene, check_synthetic
+from lftransfer.scenes.frame import scene_in_frame
+
+__all__ = ["SyntheticSide", "resolve_renderer", "synthetic_renderer"]
+
+
+def resolve_renderer(scene, kind: str = "auto") -> str:
+    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene."""
+    if kind not in ("auto", "fast", "exact"):
+        raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
+    if kind == "auto":
+        return "fast" if fast.supports(scene.synthetic) else "exact"
+    return kind
+
+
+def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
+    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see ``TransferSettings``)."""
+    if resolve_renderer(scene, kind) == "fast":
+        return fast.CachedRenderer(scene.synthetic)
+    return HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
+
+
+class SyntheticSide:
+    """Everything the pipeline renders and encodes, for one rig model and one synthetic scene.
+
+    The renderer works in the lens array's frame (interface plane z = 0): the scene (objects, point light, view
+    camera) is moved there by ``model.world_to_array()``; a moving scene is posed at a time first
+    (:meth:`pose`), so the frame change is exact.
+
+    Args:
+        model: what the pipeline knows of the rig (nominal or calibrated).
+        scene: the synthetic part of the scene (:class:`~lftransfer.scenes.SyntheticScene`).
+        settings: a ``TransferSettings`` (angular samples, lighting model, reconstruction, samples, renderer).
+        time_s: the moment of an animated scene the objects start at.
+
+    Attributes:
+        decoder: raw LF camera image -> LightField (K, V, U, 3).
+        encoder: LightField -> projector image.
+        point_light: the virtual twin of the real point light (array frame).
+    """
+
+    def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0) -> None:
+        from lftransfer.backend import mitsuba
+
+        mi = mitsuba()
+        self.model = model
+        self.settings = settings
+        self.scene = check_synthetic(scene)
+        U = V = settings.angular_samples
+        self.decoder = model.decoder(U, V)
+        self.encoder = model.encoder(U, V)
+        self.time_s = float(time_s)
+        posed = self._posed(self.time_s)
+        self.renderer = synthetic_renderer(posed, settings.renderer)
+        self.point_light = PointLight(np.asarray(posed.light.position, float), np.asarray(posed.light.intensity, float))
+        view = posed.view
+        self.width, self.height = view.resolution
+        self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
+                                               self.height))
+
+    def _posed(self, t: float) -> SyntheticScene:
+        return scene_in_frame(self.scene.at(t), self.model.world_to_array())
+
+    def pose(self, t: float) -> bool:
+        """Move the synthetic objects to their pose at time ``t`` (seconds); returns whether any moved."""
+        t = float(t)
+        if t == self.time_s or not self.scene.moving:
+            self.time_s = t
+            return False
+        self.time_s = t
+        return self.renderer.update(self._posed(t).synthetic)
+
+    def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
+        """The captured real light field as a light of the synthetic half-space (the settings' lighting model
+        and reconstruction)."""
+        s = self.settings
+        return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=s.aperture_samples,
+                               seed=seed, reconstruction=s.reconstruction if s.lighting_model == "area" else "box")
+
+    def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
+        """Ls (the light field the synthetic scene sends through the array) and S (its view image) under
+        ``lights``; ``timer(stage)`` is an optional context manager factory timing "render_lightfield" and
+        "render_view"."""
+        from contextlib import nullcontext
+
+        time_it = timer or (lambda _stage: nullcontext())
+        s = self.settings
+        U = V = s.angular_samples
+        with time_it("render_lightfield"):
+            ls = self.renderer.render_lightfield(self.model.array, lights, U, V,
+                                                 model="area" if s.lighting_model == "area" else "point",
+                                                 spp=s.lf_spp, seed=seed)
+        with time_it("render_view"):
+            view = self.renderer.render_view(self.sensor, self.width, self.height, lights, spp=s.view_spp, seed=seed)
+        return ls, view
