@@ -16,7 +16,7 @@ import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -114,6 +114,39 @@ def write_exr(path: str | Path, image: np.ndarray) -> Path:
     tmp = _atomic_target(path)
     try:
         mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).write(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Path:
+    """Write 8-bit (H, W, 3) frames as an H.264 MP4 (imageio's ffmpeg), atomically.
+
+    Frames are padded with black to even sizes (the yuv420p pixel format needs them); every frame must have the
+    first one's size.
+    """
+    import imageio.v2 as iio2
+
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        writer = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=float(fps), codec="libx264",
+                                 pixelformat="yuv420p", macro_block_size=1, quality=8,
+                                 ffmpeg_log_level="error")
+        try:
+            size = None
+            for frame in frames:
+                img = np.asarray(frame, np.uint8)[..., :3]
+                if size is None:
+                    size = img.shape
+                if img.shape != size:
+                    raise ValueError(f"{path}: frame of shape {img.shape}, the first was {size}")
+                writer.append_data(np.pad(img, ((0, img.shape[0] % 2), (0, img.shape[1] % 2), (0, 0))))
+            if size is None:
+                raise ValueError(f"{path}: no frames to write")
+        finally:
+            writer.close()
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -383,6 +383,96 @@ def record(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Sc
                            f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)
 
 
+@app.command("render", cls=_Command)
+def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+               out: Path = typer.Option(Path("out/render"), metavar="DIR", help="Output folder (made if missing)."),
+               frames: Optional[int] = typer.Option(None, min=1, metavar="N", help=(
+                   "Frames to render (default: every frame of the scene's [animation]; a still scene: 8 live "
+                   "frames or 1 converged frame).")),
+               mode: str = typer.Option("live", metavar="live|converged", help=(
+                   "live: the paper's loop, one capture and one render per frame, bounces accumulating over "
+                   "frames | converged: every frame an independent N-bounce transfer.")),
+               bounces: int = _bounces_option(),
+               resume: bool = _flag("--resume", "Continue after the last finished frame in DIR (same settings)."),
+               verify_every: int = typer.Option(0, min=0, metavar="K", help=(
+                   "Path trace the ground truth of every K-th frame and report its PSNR (0: none; simulated rig).")),
+               gt_spp: Optional[int] = typer.Option(None, min=1, metavar="N", help=_GT_SPP_HELP),
+               quick: bool = _flag("--quick", _QUICK_HELP),
+               no_cache: bool = _flag("--no-cache", "Render the ground truth again (do not read or write the cache)."),
+               renderer: str = typer.Option("auto", metavar="auto|fast|exact", help=_RENDERER_HELP),
+               truth_seed: int = _truth_seed_option(),
+               exact_rig: bool = _flag("--exact-rig", _EXACT_HELP),
+               rig_model: str = typer.Option("calibrated", metavar="calibrated|nominal|oracle", help=_MODEL_HELP),
+               calibration: Optional[Path] = typer.Option(None, metavar="FILE", help=_CAL_HELP),
+               rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
+               max_memory: Optional[str] = _memory_option()) -> None:
+    """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
+    report with per-frame timings (and metrics with --verify-every)."""
+    from lftransfer.app.pipeline import CalibrationFailedError, RunOptions
+    from lftransfer.app.sequence import MODES, SequenceError, SequenceOptions, render_sequence
+    from lftransfer.calibration.rig import CalibrationFileError
+    from lftransfer.rig.base import RigError
+
+    if mode not in MODES:
+        fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    _check_renderer(renderer)
+    scene = _load(scene_file, quick)
+    rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
+    options = RunOptions(bounces=bounces, compare_models=(), gt_spp=gt_spp, use_cache=not no_cache,
+                         renderer=renderer, **rig_opts)
+    seq = SequenceOptions(mode=mode, frames=frames, resume=resume, verify_every=verify_every)
+    if resume and not (out / "report.json").is_file():
+        fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
+    _check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
+                       calibrate=calibration is None and rig_model == "calibrated", max_memory=max_memory)
+    status = out / "status.json"
+    with Progress(TextColumn("[bold]{task.description:<40}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("set-up", total=None, rate="")
+        started = [None, 0]
+
+        def step(msg: str) -> None:
+            bar.update(task, description=escape(msg[:40]))
+
+        def progress(record, done: int, total: int) -> None:
+            import time
+
+            if started[0] is None:
+                started[0], started[1] = time.perf_counter() - record.seconds, done - 1
+            elapsed = time.perf_counter() - started[0]
+            rate = (done - started[1]) / elapsed if elapsed > 0 else 0.0
+            psnr = (record.metrics or {}).get("psnr_objects_db")
+            bar.update(task, total=total, completed=done, rate=f"{rate:.2f} frames/s",
+                       description=escape(f"frame {record.index} (t = {record.time_s:.2f} s)"
+                                          + (f", {psnr:.1f} dB" if psnr is not None else "")))
+
+        try:
+            report = render_sequence(scene, out, options, seq, bounces=bounces, progress=progress, step=step)
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
+        except (SequenceError, CalibrationFileError) as exc:
+            bar.stop()
+            fail(str(exc))
+        except (RigError, CalibrationFailedError) as exc:
+            bar.stop()
+            fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
+    summary = report["summary"]
+    table = Table(title=escape(f"{mode} sequence -> {out}"))
+    table.add_column("")
+    table.add_column("value", justify="right")
+    _row(table, "frames", str(summary["frames"]))
+    _row(table, "median frame time", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
+    if "psnr_objects_db_min" in summary:
+        _row(table, "psnr over the objects (verified frames)",
+             f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
+    _row(table, "rig model", report["rig_model"])
+    for note in report["approximations"]:
+        _row(table, "approximation", note)
+    _row(table, "videos", f"{out / 'composite.mp4'}, {out / 'bounces.mp4'}")
+    Console().print(table)
+
+
 @app.command(cls=_Command)
 def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SCENE.toml",
                                                     help="Scene TOML (default: Fig. 4)."),

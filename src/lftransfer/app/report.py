@@ -67,6 +67,46 @@ def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndar
     return np.concatenate(rows, axis=0)
 
 
+def device_image(codes: np.ndarray, bits: int, *, stretch: bool = False) -> np.ndarray:
+    """A camera or projector image of device integers (H, W, 3) as 8-bit sRGB for viewing; ``stretch`` maps its
+    99.9th percentile to 90 % (a dim capture), otherwise the full code range to the full display range."""
+    x = np.asarray(codes, np.float64)[..., :3] / (2 ** bits - 1)
+    if stretch:
+        x = np.clip(x * 0.9 / max(float(np.percentile(x, 99.9)), 1e-9), 0.0, 1.0)
+    return np.round(np.clip(x, 0.0, 1.0) ** (1 / 2.2) * 255).astype(np.uint8)
+
+
+def live_panel(frame, ground_truth: np.ndarray | None, scale: float, *, camera_bits: int, projector_bits: int,
+               tile_width: int = 384) -> np.ndarray:
+    """One frame of the live loop as a panel (the Fig. 4 panel of a live sequence).
+
+    Top row: the LF camera's capture, the projector's image (the previous frame's synthetic light field) and the
+    ground truth where there is one; bottom row: real view, synthetic view, composite, all at display ``scale``.
+
+    Args:
+        frame: :class:`lftransfer.transfer.live.LiveFrame`.
+        ground_truth: (H, W, 3) path-traced image at the frame's time, or None.
+        scale: display scale of the radiance images (kept over a sequence so that it does not flicker).
+
+    Returns:
+        (H, W, 3) uint8 sRGB.
+    """
+    views = [(frame.real_view, "real view"), (frame.synthetic_view.rgb, "synthetic view"),
+             (frame.composite, f"composite  t = {frame.time_s:.2f} s")]
+    bottom = [_label(_resize(to_display(np.clip(img, 0, None), scale), tile_width), title) for img, title in views]
+    h = bottom[0].shape[0]
+
+    def fit(img: np.ndarray, title: str) -> np.ndarray:
+        tile = cv2.resize(img, (tile_width, h), interpolation=cv2.INTER_AREA)
+        return _label(tile, title)
+
+    top = [fit(device_image(frame.captured_raw, camera_bits, stretch=True), "LF camera (captured)"),
+           fit(device_image(frame.projected_image, projector_bits), "projector (previous Ls)")]
+    top.append(_label(_resize(to_display(ground_truth, scale), tile_width), "ground truth (path traced)")
+               if ground_truth is not None else np.zeros_like(bottom[0]))
+    return np.concatenate([np.concatenate(top, axis=1), np.concatenate(bottom, axis=1)], axis=0)
+
+
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,
                   captured_raw: np.ndarray | None = None, camera_bits: int = 12) -> list[Path]:
     """Write every output file of a run into ``out`` (the ground truth's only where there is one); returns their
@@ -87,7 +127,6 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
                   (result.projected_image >> 8).astype(np.uint8)),
     ]
     if captured_raw is not None:
-        raw = captured_raw.astype(np.float64) / (2 ** camera_bits - 1)
-        files.append(write_png(out / "captured_lf.png", np.round(np.clip(raw * 0.9 / max(np.percentile(raw, 99.9), 1e-9), 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)))
+        files.append(write_png(out / "captured_lf.png", device_image(captured_raw, camera_bits, stretch=True)))
     files.append(write_json(out / "report.json", report))
     return files

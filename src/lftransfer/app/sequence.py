@@ -1,0 +1,344 @@
+"""Sequences: ``lft render`` runs light field transfer over the frames of a scene's animation and writes videos.
+
+Two modes (DESIGN.md sections 4 and 8):
+
+- ``live``: the paper's loop, :class:`~lftransfer.transfer.live.LiveTransfer`: one capture and one render per
+  frame, each frame's synthetic light field lit by the latest capture, so bounces accumulate over frames;
+- ``converged``: every frame is an independent N-bounce transfer (:func:`~lftransfer.transfer.bounce.run_transfer`
+  at that frame's time): the reference the live loop converges to when nothing moves.
+
+The output folder holds ``frames/NNNN.exr`` (the composite, linear radiance), ``frames/NNNN.png`` and
+``frames/panel_NNNN.png`` (the Fig. 4 panel of the frame), ``composite.mp4`` and ``bounces.mp4`` (the panels),
+``report.json`` (settings and per-frame timings and metrics, rewritten after every frame), ``status.json``
+(:mod:`lftransfer.app.run_folder`) and, in live mode, ``state/projected_lf.npz`` (what the projector shows next).
+``--resume`` continues after the last finished frame of an interrupted sequence with the same settings.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable, Literal
+
+import numpy as np
+
+from lftransfer.app.pipeline import NOMINAL, RunOptions, calibrate, open_rig, write_calibration
+from lftransfer.app.report import bounce_panel, display_scale, live_panel, to_display
+from lftransfer.app.run_folder import remove_temporaries, write_status
+from lftransfer.calibration.rig import load_calibration
+from lftransfer.composite import composite
+from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
+from lftransfer.lightfield import LightField
+from lftransfer.rig.model import nominal_rig
+from lftransfer.transfer.bounce import TransferSettings, run_transfer
+from lftransfer.transfer.live import LiveTransfer
+from lftransfer.transfer.synthetic_side import resolve_renderer
+from lftransfer.validation import read_json
+
+__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "render_sequence", "sequence_times"]
+
+MODES = ("live", "converged")
+STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
+STATE_FILE = "state/projected_lf.npz"
+
+FrameProgress = Callable[["FrameRecord", int, int], None]
+
+
+class SequenceError(ValueError):
+    """Options that do not fit the scene, or a folder that cannot be resumed; the message says which."""
+
+
+@dataclass(frozen=True)
+class SequenceOptions:
+    """Options of a sequence.
+
+    Attributes:
+        mode: ``"live"`` or ``"converged"`` (module docstring).
+        frames: how many frames (None: every frame of the scene's ``[animation]``; a still scene gets
+            :data:`STILL_LIVE_FRAMES` live frames or one converged frame).
+        resume: continue after the last finished frame of the folder's sequence.
+        verify_every: render the path-traced ground truth of every k-th frame (0: none; simulated rig only) and
+            report its metrics.
+    """
+
+    mode: Literal["live", "converged"] = "live"
+    frames: int | None = None
+    resume: bool = False
+    verify_every: int = 0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise SequenceError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.frames is not None and not (isinstance(self.frames, int) and self.frames >= 1):
+            raise SequenceError(f"frames must be an integer >= 1, got {self.frames!r}")
+        if not (isinstance(self.verify_every, int) and self.verify_every >= 0):
+            raise SequenceError(f"verify_every must be an integer >= 0, got {self.verify_every!r}")
+
+
+@dataclass
+class FrameRecord:
+    """What ``report.json`` keeps of one frame.
+
+    Attributes:
+        index: frame number.
+        time_s: scene time, seconds.
+        seconds: wall time of the frame (transfer, ground truth and writing), s.
+        timings_s: seconds per stage of the transfer.
+        clipped_fraction: fraction of lit light field samples above the projector's range.
+        metrics: psnr_db and psnr_objects_db against the frame's ground truth (dB), or None.
+    """
+
+    index: int
+    time_s: float
+    seconds: float
+    timings_s: dict[str, float]
+    clipped_fraction: float
+    metrics: dict[str, float | None] | None = None
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "timings_s": {k: round(v, 4) for k, v in self.timings_s.items()}}
+
+
+def sequence_times(scene, options: SequenceOptions) -> np.ndarray:
+    """(F,) float64 frame times, seconds: the ``[animation]`` frames (the first ``options.frames``; more frames than
+    the animation has hold its last pose), or a still scene's frames at time 0."""
+    times = scene.frame_times()
+    if scene.animation is None:
+        n = options.frames or (STILL_LIVE_FRAMES if options.mode == "live" else 1)
+        return np.zeros(n)
+    if options.frames is None:
+        return times
+    extra = np.arange(len(times), options.frames) / scene.animation.fps
+    return np.concatenate([times, extra])[: options.frames]
+
+
+def _frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
+    """psnr_db (every pixel) and psnr_objects_db (the objects' pixels) of a composite, as :func:`evaluate` does."""
+    from lftransfer.sim.verify import downsample, metric_factor, object_mask, psnr
+
+    f = metric_factor(image.shape[1])
+    ref = downsample(gt.image, f)
+    mask = object_mask(gt, f)
+    peak = float(ref.max())
+    values = {"psnr_db": psnr(downsample(image, f), ref, peak),
+              "psnr_objects_db": psnr(downsample(image, f), ref, peak, mask=mask)}
+    return {k: (v if np.isfinite(v) else None) for k, v in values.items()}
+
+
+def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: TransferSettings, n: int) -> dict:
+    """What must match for ``--resume`` to continue a folder's sequence."""
+    return {"scene": str(scene.source) if scene.source else None, "mode": seq.mode, "frames": n,
+            "rig": str(options.rig), "truth_seed": options.truth_seed, "rig_model": options.rig_model,
+            "calibration": str(options.calibration) if options.calibration else None,
+            "settings": {k: v for k, v in asdict(settings).items() if k != "bounce_views"},
+            "resolution": list(scene.view.resolution)}
+
+
+def _model(opened, scene, options: RunOptions, out: Path, resume: bool, step: Callable[[str], None]):
+    """The rig model of the sequence and how it was had (a resumed sequence reuses its calibration file)."""
+    ps = scene.synthetic_part()
+    kept = out / "calibration.json"
+    if options.calibration is not None:
+        return load_calibration(options.calibration, ps).model, f"calibration file {options.calibration}"
+    if options.rig_model == "calibrated":
+        if resume and kept.is_file():
+            return load_calibration(kept, ps).model, f"calibrated (resumed from {kept})"
+        calibration = calibrate(opened.rig, ps, progress=step)
+        write_calibration(kept, calibration, opened.truth)
+        return calibration.model, "calibrated"
+    if options.rig_model == "oracle":
+        if opened.truth is None:
+            raise SequenceError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
+        return opened.truth, "true (oracle)"
+    return nominal_rig(scene.rig), NOMINAL
+
+
+def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), seq: SequenceOptions = SequenceOptions(),
+                    *, bounces: int = 2, progress: FrameProgress | None = None,
+                    step: Callable[[str], None] | None = None) -> dict:
+    """Render a sequence (module docstring) and write it into ``out``.
+
+    Args:
+        scene: ``SceneConfig`` (the simulated rig takes its real objects and their keyframes).
+        out: the output folder (made).
+        options: the rig, the rig model and the ground truth's samples (:class:`RunOptions`; the lighting model
+            and reconstruction come from the scene's ``[render]``).
+        seq: :class:`SequenceOptions`.
+        bounces: N of each converged frame.
+        progress: called after each frame with its record, the frames done and the total.
+        step: called with a message during set-up (calibration).
+
+    Returns:
+        The report (also ``report.json``).
+    """
+    out = Path(out)
+    step = step or (lambda _msg: None)
+    times = sequence_times(scene, seq)
+    n = len(times)
+    render = scene.render
+    settings = TransferSettings(bounces=bounces, angular_samples=scene.rig.angular_samples,
+                                lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
+                                reconstruction=render.reconstruction if render.lighting_model == "area" else "box",
+                                lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer,
+                                bounce_views=seq.mode == "converged")
+    key = _settings_key(scene, options, seq, settings, n)
+    report_path = out / "report.json"
+    done: list[dict] = []
+    scale = None
+    if seq.resume:
+        if not report_path.is_file():
+            raise SequenceError(f"--resume: {report_path} does not exist: nothing to resume")
+        old = read_json(report_path, "sequence report", SequenceError)
+        if not isinstance(old, dict):
+            raise SequenceError(f"--resume: {report_path}: not a sequence report")
+        if old.get("key") != key:
+            raise SequenceError(f"--resume: {out} holds a sequence with other settings ({old.get('key')}); "
+                                f"run without --resume to start again")
+        done = [f for f in old.get("frames", []) if (out / "frames" / f"{f['index']:04d}.exr").is_file()]
+        done = done[:next((i for i, f in enumerate(done) if f["index"] != i), len(done))]
+        scale = old.get("display_scale")
+    else:
+        for sub in ("frames", "state"):
+            shutil.rmtree(out / sub, ignore_errors=True)
+        for name in ("report.json", "composite.mp4", "bounces.mp4", "calibration.json", "calibration_report.html",
+                     "calibration_errors.json"):
+            (out / name).unlink(missing_ok=True)
+    (out / "frames").mkdir(parents=True, exist_ok=True)
+    write_status(out, "running", rig=str(options.rig))
+    opened = None
+    try:
+        opened = open_rig(scene, options)
+        model, rig_model = _model(opened, scene, options, out, seq.resume, step)
+        ps = scene.synthetic_part()
+        verify = seq.verify_every > 0 and opened.world is not None
+        state = out / STATE_FILE
+        live = None
+        if seq.mode == "live":
+            projected = None
+            if done and state.is_file():
+                with np.load(state) as z:
+                    projected = LightField(z["data"], model.array)
+            elif done:
+                raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
+            live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
+                                time_s=float(times[len(done)]) if len(done) < n else 0.0)
+            live.index = len(done)
+        report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
+                  "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
+                  "frames_total": n, "display_scale": scale, "frames": done,
+                  "approximations": _approximations(ps, settings)}
+        for i in range(len(done), n):
+            t0 = time.perf_counter()
+            t = float(times[i])
+            gt = None
+            if verify and i % seq.verify_every == 0:
+                from lftransfer.sim.verify import render_ground_truth
+
+                gt = render_ground_truth(opened.world.at(t), spp=options.gt_spp or render.gt_spp,
+                                         use_cache=options.use_cache)
+            if live is not None:
+                frame = live.step(t)
+                comp, timings, clipped = frame.composite, frame.timings_s, frame.clipped_fraction
+            else:
+                result = run_transfer(opened.rig, model, ps, settings, time_s=t)
+                comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+                timings, clipped = result.timings_s, result.clipped_fraction
+            if scale is None:
+                scale = display_scale(comp)
+                report["display_scale"] = scale
+            if live is not None:
+                panel = live_panel(frame, gt.image if gt is not None else None, scale,
+                                   camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
+            else:
+                panel = bounce_panel(result, gt.image if gt is not None else None, comp)
+            write_exr(out / "frames" / f"{i:04d}.exr", comp)
+            write_png(out / "frames" / f"{i:04d}.png", to_display(comp, scale))
+            write_png(out / "frames" / f"panel_{i:04d}.png", panel)
+            if live is not None:
+                _write_state(state, live.projected)
+            record = FrameRecord(index=i, time_s=t, seconds=time.perf_counter() - t0, timings_s=dict(timings),
+                                 clipped_fraction=clipped, metrics=_frame_metrics(comp, gt) if gt is not None else None)
+            report["frames"].append(record.to_json())
+            write_json(report_path, report)
+            if progress:
+                progress(record, i + 1, n)
+        step("write the videos")
+        report["summary"] = _summary(report["frames"])
+        _write_videos(out, n, report["fps"])
+        write_json(report_path, report)
+    except KeyboardInterrupt:
+        write_status(out, "interrupted", rig=str(options.rig), error="interrupted (Ctrl-C); --resume continues")
+        raise
+    except BaseException as exc:
+        write_status(out, "failed", rig=str(options.rig), error=f"{type(exc).__name__}: {exc}",
+                     traceback=traceback.format_exc(limit=8).splitlines())
+        raise
+    finally:
+        try:
+            if opened is not None:
+                opened.rig.close()
+        finally:
+            remove_temporaries(out)
+    write_status(out, "complete", rig=str(options.rig))
+    return report
+
+
+def _variant() -> str:
+    from lftransfer.backend import variant
+
+    return variant()
+
+
+def _fps(scene) -> float:
+    return float(scene.animation.fps) if scene.animation is not None else 24.0
+
+
+def _approximations(scene, settings: TransferSettings) -> list[str]:
+    """What the renderer leaves out of this scene, said in the report (never silently dropped)."""
+    notes = []
+    if resolve_renderer(scene, settings.renderer) == "fast":
+        notes.append("fast path: diffuse irradiance cached at the vertices of a 6 mm tessellation")
+        if len(scene.synthetic) > 1:
+            notes.append(f"fast path: light exchanged between the {len(scene.synthetic)} synthetic objects is not "
+                         f"rendered (one reflection inside the synthetic half-space); use --renderer exact")
+    return notes
+
+
+def _summary(frames: list[dict]) -> dict:
+    """Frames per second of the transfer (median frame time) and the metrics' range over verified frames."""
+    seconds = [f["timings_s"].get("total", sum(v for k, v in f["timings_s"].items() if k != "total"))
+               for f in frames]
+    verified = [f["metrics"] for f in frames if f.get("metrics")]
+    out = {"frames": len(frames), "median_frame_s": float(np.median(seconds)) if seconds else None,
+           "transfer_fps": float(1.0 / np.median(seconds)) if seconds and np.median(seconds) > 0 else None}
+    for key in ("psnr_db", "psnr_objects_db"):
+        values = [m[key] for m in verified if m.get(key) is not None]
+        if values:
+            out[f"{key}_min"], out[f"{key}_max"] = float(min(values)), float(max(values))
+    return out
+
+
+def _write_state(path: Path, lf: LightField) -> None:
+    """The projector's next light field, atomically (a resumed live loop starts from it)."""
+    import os
+    import tempfile
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".projected_lf.", suffix=".npz", dir=path.parent)
+    os.close(fd)
+    try:
+        np.savez(tmp, data=lf.data)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def _write_videos(out: Path, n: int, fps: float) -> None:
+    import imageio.v3 as iio
+
+    frames = out / "frames"
+    write_video(out / "composite.mp4", (iio.imread(frames / f"{i:04d}.png") for i in range(n)), fps)
+    write_video(out / "bounces.mp4", (iio.imread(frames / f"panel_{i:04d}.png") for i in range(n)), fps)
