@@ -137,3 +137,25 @@ def test_04_linear_reconstruction_relights_a_gradient_exactly(variant, reconstru
         assert error < 0.002, error                                   # measured 0.06 %
     else:
         assert error > 0.006, error                                   # measured 0.94 %
+
+
+@pytest.mark.parametrize("renderer", ["exact", "fast"])
+def test_05_emitting_sphere_lights_a_plane(variant, renderer):
+    """A sphere of radiance L and radius R lights the point of a plane at distance D under its centre with
+    E = pi L (R / D)^2 (its cone's projected solid angle); a ray that meets it sees L."""
+    from lftransfer.render.fast import CachedRenderer
+    from lftransfer.render.lights import EmitterLight
+
+    L, R, D = 5.0, 0.01, 0.08
+    sun = ObjectConfig.model_validate({"name": "sun", "shape": "sphere", "radius": R, "translate": [0, 0, -0.05],
+                                       "material": {"type": "emitter", "radiance": [L, 0.5 * L, 0.2 * L]}})
+    plane = _plane(-0.05 - D, "+z")
+    r = CachedRenderer([sun, plane]) if renderer == "fast" else HalfSpaceRenderer([sun, plane], max_depth=1)
+    light = EmitterLight(samples=64)
+    measured = _radiance_at(r, [0.0, 0.0, -0.05 - D], [light], [0.3, 0.0, 1.0] / np.linalg.norm([0.3, 0.0, 1.0]))
+    expected = np.pi * np.array([L, 0.5 * L, 0.2 * L]) * (R / D) ** 2 * ALBEDO / np.pi
+    np.testing.assert_allclose(measured, expected, rtol=0.002)          # measured 0.01 % (exact), 0.07 % (fast)
+    seen, hit, _ = r.render_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, -1.0]]), [light])
+    np.testing.assert_allclose(seen[0], [L, 0.5 * L, 0.2 * L], rtol=1e-6)
+    dark, _, _ = r.render_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, -1.0]]), [])
+    np.testing.assert_array_equal(dark[0], 0.0)                         # no light given, no emission seen

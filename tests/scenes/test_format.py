@@ -191,6 +191,11 @@ def test_with_overrides_revalidates():
     (LIGHT + BOX.replace("[0.0, 0.0, 0.2]", "[0.0, 0.0, 0.04]"), "real[0]", "must lie in z > 0"),
     (LIGHT + BOX + "[[synthetic]]\nname = 's'\nshape = 'sphere'\nradius = 0.05\ntranslate = [0, 0, -0.04]\n",
      "synthetic[0]", "must lie in z < 0"),
+    (LIGHT + BOX + "[real.material]\ntype = 'emitter'\nradiance = [1, 1, 1]\n", "real[0]",
+     "an emitter is a synthetic object"),
+    (LIGHT + BOX + "[[synthetic]]\nname = 's'\nshape = 'sphere'\nradius = 0.01\ntranslate = [0, 0, -0.1]\n"
+     "[synthetic.material]\ntype = 'emitter'\nradiance = [1, -1, 1]\n", "synthetic[0].material.radiance[1]",
+     "greater than or equal to 0"),
     (LIGHT + BOX + "scale = [1, 2]\n", "real[0].scale", "1 or 3 components"),
     (LIGHT + BOX + "scale = -1\n", "real[0].scale", "positive"),
     (LIGHT, "synthetic", "at least one"),

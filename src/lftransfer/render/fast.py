@@ -15,7 +15,7 @@ light is kept per light object, so a live loop that keeps its point light and sw
 each frame relights only for the new light field.
 
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`):
-only diffuse materials (for glossy or metal objects use the exact path), one reflection inside the half-space
+only diffuse materials and emitters (for glossy or metal objects use the exact path), one reflection inside the half-space
 (interreflections between synthetic objects are dropped), and irradiance varies linearly across triangles of
 size ``max_edge`` (6 mm by default, four times finer than a lenslet).
 """
@@ -29,14 +29,14 @@ import numpy as np
 from lftransfer.backend import mitsuba
 from lftransfer.render.integrator import Light
 from lftransfer.render.renderer import HalfSpaceRenderer
-from lftransfer.render.shapes import bsdf_dict, object_keys
+from lftransfer.render.shapes import bsdf_dict, emitter_dict, object_keys, shape_dict
 
 DEFAULT_MAX_EDGE = 0.006  # m
 
 
 def supports(objects: Sequence) -> bool:
-    """Whether the fast path renders these objects exactly as the exact path would (all diffuse)."""
-    return all(getattr(o.material, "type", "diffuse") == "diffuse" for o in objects)
+    """Whether the fast path renders these objects as the exact path would (all diffuse or emitters)."""
+    return all(getattr(o.material, "type", "diffuse") in ("diffuse", "emitter") for o in objects)
 
 
 def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +98,7 @@ class CachedRenderer(HalfSpaceRenderer):
 
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE) -> None:
         if not supports(objects):
-            raise ValueError("the fast path renders diffuse materials only; use HalfSpaceRenderer")
+            raise ValueError("the fast path renders diffuse materials and emitters only; use HalfSpaceRenderer")
         self.max_edge = float(max_edge)
         self.max_depth = 1
         self._build(list(objects))
@@ -113,6 +113,15 @@ class CachedRenderer(HalfSpaceRenderer):
         base = 0
         bases = []
         for key, obj in zip(object_keys(self.objects), self.objects):
+            if emitter_dict(obj.material) is not None:
+                # an emitter reflects nothing (no cache vertices) and keeps its exact shape, so that emitter
+                # sampling draws directions over what it subtends (a sphere's cone), not over facets
+                shapes[key] = shape_dict(obj)
+                verts.append(np.zeros((0, 3), np.float32))
+                norms.append(np.zeros((0, 3), np.float32))
+                albedo.append(np.zeros(3, np.float32))
+                bases.append(base)
+                continue
             v, n = tessellate(obj, max_edge)
             props = mi.Properties()
             props["bsdf"] = mi.load_dict(bsdf_dict(obj.material))
@@ -124,7 +133,7 @@ class CachedRenderer(HalfSpaceRenderer):
             shapes[key] = mesh
             verts.append(v)
             norms.append(n)
-            albedo.append(np.asarray(obj.material.albedo, np.float32))
+            albedo.append(np.asarray(getattr(obj.material, "albedo", [0.0, 0.0, 0.0]), np.float32))
             bases.append(base)
             base += len(v)
         self.scene = mi.load_dict({"type": "scene", **shapes}, parallel=False, optimize=False)
@@ -165,7 +174,7 @@ class CachedRenderer(HalfSpaceRenderer):
 
         objects = list(objects)
         if not supports(objects):
-            raise ValueError("the fast path renders diffuse materials only; use HalfSpaceRenderer")
+            raise ValueError("the fast path renders diffuse materials and emitters only; use HalfSpaceRenderer")
         if len(objects) != len(self.objects) or any(a.shape != b.shape or a.material != b.material
                                                     for a, b in zip(objects, self.objects)):
             self._build(objects)
@@ -174,6 +183,9 @@ class CachedRenderer(HalfSpaceRenderer):
         if not moved:
             return False
         params = mi.traverse(self.scene)
+        if any(objects[i].material.type == "emitter" for i in moved):
+            self._build(objects)
+            return True
         for i in moved:
             v, n = tessellate(objects[i], self.max_edge)
             end = self._bases[i + 1] if i + 1 < len(self._bases) else len(self.vertices)
@@ -254,12 +266,18 @@ class CachedRenderer(HalfSpaceRenderer):
         first = dr.gather(mi.UInt32, self._base, sid, hit) + pi.prim_index * 3
         b1, b2 = pi.prim_uv.x, pi.prim_uv.y
         b0 = 1.0 - b1 - b2
+        emitted = mi.Color3f(0.0)
+        seen = [light for light in lights if hasattr(light, "emitted")]
+        if seen:    # emitting objects seen directly
+            si = pi.compute_surface_interaction(rays, mi.RayFlags.All, hit)
+            for light in seen:
+                emitted += light.emitted(self.scene, si, hit)
         out = []
         for c in range(3):
             e = self._irradiance[c]
             value = (b0 * dr.gather(mi.Float, e, first, hit) + b1 * dr.gather(mi.Float, e, first + 1, hit)
                      + b2 * dr.gather(mi.Float, e, first + 2, hit))
-            out.append(dr.select(hit, value * dr.gather(mi.Float, self._albedo, sid * 3 + c, hit), 0.0))
+            out.append(dr.select(hit, value * dr.gather(mi.Float, self._albedo, sid * 3 + c, hit) + emitted[c], 0.0))
         t = dr.select(hit, pi.t, dr.inf)
         dr.eval(out, t)
         radiance = np.stack([np.array(x, dtype=np.float32) for x in out], axis=1)

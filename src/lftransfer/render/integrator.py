@@ -1,7 +1,8 @@
 """Wavefront path tracing of ray batches in one half-space, with next-event estimation only.
 
-Every light of this package is a delta or an explicitly sampled area light (point light, lenslets), so a path
-gathers light only through ``light.illuminate`` at each vertex; BSDF sampling continues the path for
+Every light of this package is a delta or an explicitly sampled area light (point light, lenslets, emitting
+objects), so a path gathers light only through ``light.illuminate`` at each vertex (and sees an emitter's own
+radiance only at its first hit, ``light.emitted``); BSDF sampling continues the path for
 interreflections inside the half-space. Rays that miss at the first intersection are compacted away before
 any shading, since most rays of a lenslet camera see the dark background.
 """
@@ -16,7 +17,8 @@ from lftransfer.backend import mitsuba
 
 
 class Light(Protocol):
-    """Anything that adds reflected radiance at surface points (see :mod:`lftransfer.render.lights`)."""
+    """Anything that adds reflected radiance at surface points (see :mod:`lftransfer.render.lights`); a light
+    that is also seen directly (emitting objects) has ``emitted(scene, si, active)`` too."""
 
     def illuminate(self, scene, si, active, seed: int = 0): ...
 
@@ -76,6 +78,10 @@ def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     for depth in range(max_depth):
         si = scene.ray_intersect(ray, active)
         active &= si.is_valid()
+        if depth == 0:     # emitters seen directly; later vertices gather them by next-event estimation
+            for light in lights:
+                if hasattr(light, "emitted"):
+                    result += light.emitted(scene, si, active)
         for light in lights:
             result += throughput * light.illuminate(scene, si, active, seed=seed * 16 + depth)
         if depth + 1 == max_depth:

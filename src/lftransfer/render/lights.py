@@ -1,4 +1,4 @@
-"""Light sources of the renderer: the point light and a light field seen through the lens array.
+"""Light sources of the renderer: the point light, emitting objects and a light field seen through the lens array.
 
 Each light adds its reflected radiance at a batch of surface points in one call (next-event estimation with
 shadow rays). The light field light is the paper's interface seen from one half-space: every lenslet k is an
@@ -70,6 +70,55 @@ class PointLight:
         f = _weight(si, wn, visible, irradiance)
         intensity = mi.Color3f(*[float(c) for c in self.intensity])
         return dr.select(visible, f * intensity / r2, 0.0)
+
+
+class EmitterLight:
+    """The emitting objects of a half-space (an ``emitter`` material, e.g. the sun of the paper's Fig. 5).
+
+    They light the other objects by next-event estimation: ``samples`` directions per shading point drawn by
+    Mitsuba's emitter sampling of the scene the renderer traces (solid-angle sampling of the visible cap for
+    spheres), with shadow rays; a ray that meets an emitter sees its radiance (:meth:`emitted`). Give this light
+    to a render only where the emitters' own light belongs (the direct frame), never with a captured light
+    field that already carries it back.
+
+    Args:
+        samples: emitter samples per shading point.
+        seed: seeds the samples (each shading point and call draws its own).
+    """
+
+    def __init__(self, samples: int = 16, seed: int = 0) -> None:
+        if samples < 1:
+            raise ValueError(f"samples must be >= 1, got {samples}")
+        self.samples = int(samples)
+        self.seed = int(seed)
+
+    def emitted(self, scene, si, active):
+        """Radiance the hit emitters send back along the rays (mi.Color3f, (N,)); zero where no emitter."""
+        mi = mitsuba()
+        import drjit as dr
+
+        active = mi.Bool(active) & si.is_valid()
+        return dr.select(active, si.emitter(scene, active).eval(si, active), 0.0)
+
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+        """Light from the scene's emitters at the points ``si`` (mi.Color3f, (N,)), reflected towards ``-si.wi``
+        or, with ``irradiance=True``, the irradiance on the surface with normal ``si.n``."""
+        mi = mitsuba()
+        import drjit as dr
+
+        result = mi.Color3f(0.0)
+        if len(scene.emitters()) == 0:
+            return result
+        n = dr.width(si.p)
+        rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
+        active = mi.Bool(active)
+        for _ in range(self.samples):
+            sample = mi.Point2f(rng.next_float32(), rng.next_float32())
+            ds, value = scene.sample_emitter_direction(si, sample, True, active)
+            ok = active & (ds.pdf > 0.0)
+            f = _weight(si, ds.d, ok, irradiance)
+            result += dr.select(ok, f * value, 0.0)
+        return result / self.samples
 
 
 def _weight(si, wn, active, irradiance: bool):

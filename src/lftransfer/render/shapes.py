@@ -26,7 +26,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 
-__all__ = ["board_shapes", "bsdf_dict", "lens_array_absorber", "shape_dict", "scene_dict", "object_keys",
+__all__ = ["board_shapes", "bsdf_dict", "emitter_dict", "lens_array_absorber", "shape_dict", "scene_dict", "object_keys",
            "mesh_cache_dir", "write_ply",
            "SPHERE_SUBDIVISIONS"]
 
@@ -45,7 +45,8 @@ def bsdf_dict(material) -> dict:
     - glossy -> ``roughplastic`` (GGX, ``alpha`` = roughness), or ``plastic`` when roughness is 0, with
       ``diffuse_reflectance`` = albedo and ``specular_reflectance`` = specular;
     - metal -> ``roughconductor`` (material ``none``, GGX, ``alpha`` = roughness), or ``conductor`` when
-      roughness is 0, with ``specular_reflectance`` = specular.
+      roughness is 0, with ``specular_reflectance`` = specular;
+    - emitter -> a black ``diffuse`` surface (its light is the shape's ``area`` emitter, :func:`emitter_dict`).
 
     Args:
         material: ``DiffuseMaterial``, ``GlossyMaterial`` or ``MetalMaterial``.
@@ -70,7 +71,17 @@ def bsdf_dict(material) -> dict:
         if material.roughness > 0:
             d.update(type="roughconductor", distribution="ggx", alpha=float(material.roughness))
         return d
+    if kind == "emitter":
+        return {"type": "diffuse", "reflectance": _rgb([0.0, 0.0, 0.0])}
     raise ValueError(f"unknown material type {kind!r}")
+
+
+def emitter_dict(material) -> dict | None:
+    """Mitsuba ``area`` emitter dict of an emitter material (``radiance`` per RGB channel), or None for a material
+    that does not emit."""
+    if material.type != "emitter":
+        return None
+    return {"type": "area", "radiance": _rgb(material.radiance)}
 
 
 def mesh_cache_dir() -> Path:
@@ -171,6 +182,14 @@ def shape_dict(obj) -> dict:
     Returns:
         A dict for ``mi.load_dict`` (inside a scene dict).
     """
+    d = _geometry_dict(obj)
+    emitter = emitter_dict(obj.material)
+    if emitter is not None:
+        d["emitter"] = emitter
+    return d
+
+
+def _geometry_dict(obj) -> dict:
     mi = mitsuba()
     m = obj.to_world()
     bsdf = bsdf_dict(obj.material)

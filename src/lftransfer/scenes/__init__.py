@@ -9,6 +9,7 @@ Example:
 
 from lftransfer.scenes.format import (
     DiffuseMaterial,
+    EmitterMaterial,
     GlossyMaterial,
     LightConfig,
     Material,
@@ -30,6 +31,7 @@ from lftransfer.scenes.format import (
 
 __all__ = [
     "DiffuseMaterial",
+    "EmitterMaterial",
     "GlossyMaterial",
     "LightConfig",
     "Material",

@@ -46,6 +46,7 @@ __all__ = [
     "DiffuseMaterial",
     "GlossyMaterial",
     "MetalMaterial",
+    "EmitterMaterial",
     "Material",
     "ObjectConfig",
     "Keyframe",
@@ -256,6 +257,19 @@ class MetalMaterial(_Model):
     roughness: Unit = 0.1
 
 
+class EmitterMaterial(_Model):
+    """A diffuse emitter that reflects nothing (a Mitsuba ``area`` emitter on a black surface), e.g. the sun of
+    the paper's Fig. 5: synthetic objects only (the real side's light is ``[light]``). It lights the synthetic
+    objects directly and the real ones through the projector.
+
+    Attributes:
+        radiance: emitted radiance per RGB channel, W m^-2 sr^-1, the same in every direction of its front side.
+    """
+
+    type: Literal["emitter"] = "emitter"
+    radiance: NonNegVec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+
 def _material_tag(value: Any) -> str | None:
     """The material's ``type``; a table without one is diffuse."""
     tag = value.get("type", "diffuse") if isinstance(value, dict) else getattr(value, "type", None)
@@ -264,11 +278,11 @@ def _material_tag(value: Any) -> str | None:
 
 Material = Annotated[
     Union[Annotated[DiffuseMaterial, Tag("diffuse")], Annotated[GlossyMaterial, Tag("glossy")],
-          Annotated[MetalMaterial, Tag("metal")]],
+          Annotated[MetalMaterial, Tag("metal")], Annotated[EmitterMaterial, Tag("emitter")]],
     Discriminator(_material_tag, custom_error_type="material_type",
-                  custom_error_message="a material table needs type = 'diffuse', 'glossy' or 'metal'"),
+                  custom_error_message="a material table needs type = 'diffuse', 'glossy', 'metal' or 'emitter'"),
 ]
-_MATERIAL_TAGS = {"diffuse", "glossy", "metal"}
+_MATERIAL_TAGS = {"diffuse", "glossy", "metal", "emitter"}
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -563,6 +577,8 @@ class ObjectConfig(_Model):
 
 def _in_half_space(side: str):
     def check(obj: ObjectConfig) -> ObjectConfig:
+        if side == "real" and obj.material.type == "emitter":
+            raise ValueError(f"{obj.name!r}: an emitter is a synthetic object; the real side's light is [light]")
         lo, hi = obj.bounds()
         if side == "real" and lo[2] <= 0:
             raise ValueError(f"a real object must lie in z > 0; {obj.name!r} spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")

@@ -112,7 +112,7 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
     light = {"type": "point", "position": list(map(float, scene.light.position)),
              "intensity": {"type": "rgb", "value": list(map(float, scene.light.intensity))}}
     extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
-             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": True},
+             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
              "point_light": light}
     images: dict[str, list[np.ndarray]] = {}
     for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):

@@ -201,7 +201,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     step = progress or (lambda _msg: None)
     timer = StageTimer()
     side = SyntheticSide(model, scene, settings, time_s=time_s)
-    decoder, encoder, point_light = side.decoder, side.encoder, side.point_light
+    decoder, encoder = side.decoder, side.encoder
     black = rig.info.black()
 
     def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
@@ -219,7 +219,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     with timer("decode"):
         r0 = decoder(raw0)
     step("render synthetic direct")
-    ls0, s0 = render_synthetic([point_light], settings.seed)
+    ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
     step("direct done")
 

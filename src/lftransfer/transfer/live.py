@@ -7,7 +7,7 @@ Frame t, with the projector showing the synthetic light field of frame t - 1 (bl
 2. project encode(Ls_{t-1}); capture the LF camera and decode it: R_t, the real scene lit by the real point light
    *and* by Ls_{t-1};
 3. capture the view camera (the real view under the same projection);
-4. render the synthetic scene lit by the virtual point light and by R_t: its outgoing light field Ls_t (shown in
+4. render the synthetic scene lit by its own light (the virtual point light, emitting objects) and by R_t: its outgoing light field Ls_t (shown in
    frame t + 1) and its view S_t;
 5. composite S_t over the real view.
 
@@ -132,7 +132,7 @@ class LiveTransfer:
         with timer("capture_view"):
             real_view = rig.capture_view().radiance
         # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
-        lights = [side.point_light, side.incident_light(captured, s.seed)]
+        lights = [*side.direct_lights, side.incident_light(captured, s.seed)]
         synthetic_lf, view = side.render(lights, s.seed, timer)
         with timer("composite"):
             comp = composite(view.rgb, view.alpha, real_view)

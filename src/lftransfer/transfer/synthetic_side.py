@@ -12,7 +12,7 @@ import numpy as np
 from lftransfer.lightfield import LightField
 from lftransfer.render import fast
 from lftransfer.render.camera import sensor_dict
-from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.lights import EmitterLight, LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
@@ -54,6 +54,8 @@ class SyntheticSide:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
         encoder: LightField -> projector image.
         point_light: the virtual twin of the real point light (array frame).
+        direct_lights: the synthetic scene's own light: the point light, and its emitting objects where it
+            has any (:class:`~lftransfer.render.lights.EmitterLight`).
     """
 
     def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0) -> None:
@@ -70,6 +72,8 @@ class SyntheticSide:
         posed = self._posed(self.time_s)
         self.renderer = synthetic_renderer(posed, settings.renderer)
         self.point_light = PointLight(np.asarray(posed.light.position, float), np.asarray(posed.light.intensity, float))
+        emits = any(o.material.type == "emitter" for o in posed.synthetic)
+        self.direct_lights = [self.point_light] + ([EmitterLight(seed=settings.seed)] if emits else [])
         view = posed.view
         self.width, self.height = view.resolution
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
