@@ -199,7 +199,7 @@ def test_with_overrides_revalidates():
     (LIGHT + BOX + "scale = [1, 2]\n", "real[0].scale", "1 or 3 components"),
     (LIGHT + BOX + "scale = -1\n", "real[0].scale", "positive"),
     (LIGHT, "synthetic", "at least one"),
-    (BOX, "light", "required field is missing"),
+    (BOX, "<scene>", "nothing lights the scene: give a [light] table"),
     (LIGHT + "[rig]\nlattice = 'square'\n" + BOX, "rig.lattice", "'hex' or 'rect'"),
     (LIGHT + "[view]\ntarget = [0.55, 0.22, 0.0]\n" + BOX, "view.target", "must differ from origin"),
     (LIGHT + BOX + "source = 'x'\n", "real[0].source", "unknown key"),
@@ -220,8 +220,8 @@ def test_one_error_summarises_the_others(tmp_path):
 def test_missing_file_and_unknown_builtin(tmp_path):
     with pytest.raises(SceneError, match="nothing.toml: cannot read"):
         load_scene(tmp_path / "nothing.toml")
-    with pytest.raises(SceneError, match="available: .*fig4"):
-        builtin_scene("fig5")
+    with pytest.raises(SceneError, match="available: .*fig4, fig5"):
+        builtin_scene("fig99")
 
 
 def test_model_validate_applies_the_same_rules():

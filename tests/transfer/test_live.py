@@ -63,3 +63,22 @@ def test_02_moving_objects_move_on_both_sides(quick):
     live.reset()
     again = live.step(0.0)
     np.testing.assert_array_equal(again.synthetic_view.alpha, a.synthetic_view.alpha)
+
+
+def test_03_fig5_the_sun_lights_the_head_through_the_projector(variant):
+    """The paper's Fig. 5 scene has no real light: at the first live frame (projector black) the head is dark;
+    from the second on, the synthetic sun's light, sent by the projector, lights it; the sun is seen at its own
+    radiance and the planet's side towards the sun is lit."""
+    scene = quick_scene(load_scene(builtin_scene("fig5")))
+    assert scene.light is None and scene.moving
+    opened = open_rig(scene, RunOptions(truth_seed=None))
+    settings = TransferSettings(angular_samples=scene.rig.angular_samples)
+    live = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
+    dark = live.step(4.0)
+    lit = live.step(4.0)
+    assert float(dark.real_view.max()) == 0.0
+    head = lit.real_view.sum(axis=2) > 0
+    assert head.mean() > 0.02 and float(np.median(lit.real_view[head].sum(axis=1))) > 0.01
+    sun = max(o.material.radiance[0] for o in scene.synthetic if o.material.type == "emitter")
+    assert float(lit.synthetic_view.rgb[..., 0].max()) == pytest.approx(sun, rel=1e-4)
+    assert lit.clipped_fraction == 0.0

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Callable
 
 from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.composite import composite
-from lftransfer.app.report import write_json, write_outputs
+from lftransfer.app.report import emitter_ceiling, write_json, write_outputs
 from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, write_status
 from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
@@ -608,5 +608,5 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     }
     step("write outputs")
     write_outputs(out, result, gt.image if gt is not None else None, comp, report, captured_raw=result.captured_raw,
-                  camera_bits=scene.rig.lf_camera_bits)
+                  camera_bits=scene.rig.lf_camera_bits, ceiling=emitter_ceiling(pipeline_scene))
     return report

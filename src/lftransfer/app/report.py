@@ -10,10 +10,30 @@ import numpy as np
 from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
 
 
-def display_scale(image: np.ndarray, percentile: float = 99.5, target: float = 0.9) -> float:
-    """Factor that maps the image's ``percentile`` brightness to ``target`` of the display range."""
-    level = float(np.percentile(image, percentile))
+def display_scale(image: np.ndarray, percentile: float = 99.5, target: float = 0.9,
+                  ceiling: float | None = None) -> float:
+    """Factor that maps the image's ``percentile`` brightness to ``target`` of the display range.
+
+    Args:
+        image: (H, W, 3) linear radiance.
+        ceiling: the percentile is taken over the lit pixels (some channel above 0) whose channels all stay below
+            this radiance: emitters seen directly are left out (they would otherwise set the scale and leave the
+            lit objects black; they saturate instead). None: over every pixel.
+    """
+    values = np.asarray(image)
+    if ceiling is not None:
+        peak = values.reshape(-1, values.shape[-1]).max(axis=1).reshape(values.shape[:-1])
+        values = values[(peak > 0) & (peak < ceiling)]
+    if values.size == 0:
+        return 1.0
+    level = float(np.percentile(values, percentile))
     return target / level if level > 0 else 1.0
+
+
+def emitter_ceiling(scene) -> float | None:
+    """Half the dimmest emitter's brightest channel (:func:`display_scale`'s ``ceiling``), None without emitters."""
+    levels = [max(o.material.radiance) for o in scene.synthetic if o.material.type == "emitter"]
+    return 0.5 * min(levels) if levels and min(levels) > 0 else None
 
 
 def _label(tile: np.ndarray, text: str) -> np.ndarray:
@@ -32,18 +52,17 @@ def _resize(image: np.ndarray, width: int) -> np.ndarray:
 
 
 def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, *,
-                 tile_width: int = 512) -> np.ndarray:
+                 tile_width: int = 512, ceiling: float | None = None) -> np.ndarray:
     """The paper's Fig. 4 as one picture.
 
     Rows: real side (direct, bounce 1, ...), synthetic side (direct, bounce 1, ...), then the composite and the
     ground truth (where there is one: the simulated rig). Each tile is shown at its own display scale, written on it relative to the direct image.
+    ``ceiling``: see :func:`display_scale` (emitters seen directly saturate).
 
     Returns:
         (H, W, 3) uint8 sRGB.
     """
-    base_real = display_scale(result.bounces[0].real_view)
-    base_syn = display_scale(result.bounces[0].synthetic_view.rgb)
-    base = min(base_real, base_syn)
+    base = _base_scale(result, composite_rgb, ceiling)
     rows = []
     for side in ("real", "synthetic"):
         tiles = []
@@ -52,7 +71,7 @@ def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndar
             if img is None:
                 img = np.zeros_like(result.real_view)
             img = np.clip(img, 0.0, None)
-            s = base if b.index == 0 else display_scale(img)
+            s = base if b.index == 0 else display_scale(img, ceiling=ceiling)
             title = f"{side} {'direct' if b.index == 0 else f'bounce {b.index}'}  x{s / base:.3g}"
             tiles.append(_label(_resize(to_display(img, s), tile_width), title))
         rows.append(np.concatenate(tiles, axis=1))
@@ -107,12 +126,23 @@ def live_panel(frame, ground_truth: np.ndarray | None, scale: float, *, camera_b
     return np.concatenate([np.concatenate(top, axis=1), np.concatenate(bottom, axis=1)], axis=0)
 
 
+def _base_scale(result, composite_rgb: np.ndarray, ceiling: float | None) -> float:
+    """The display scale of a run's direct images (the dimmer of the real and synthetic ones; the composite's
+    where both are black, as in a scene lit only by synthetic emitters)."""
+    direct = [img for img in (result.bounces[0].real_view, result.bounces[0].synthetic_view.rgb)
+              if img is not None and np.any(img > 0)]
+    if not direct:
+        return display_scale(composite_rgb, ceiling=ceiling)
+    return min(display_scale(img, ceiling=ceiling) for img in direct)
+
+
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,
-                  captured_raw: np.ndarray | None = None, camera_bits: int = 12) -> list[Path]:
+                  captured_raw: np.ndarray | None = None, camera_bits: int = 12,
+                  ceiling: float | None = None) -> list[Path]:
     """Write every output file of a run into ``out`` (the ground truth's only where there is one); returns their
-    paths."""
+    paths. ``ceiling``: see :func:`display_scale`."""
     out = Path(out)
-    scale = min(display_scale(result.bounces[0].real_view), display_scale(result.bounces[0].synthetic_view.rgb))
+    scale = _base_scale(result, composite_rgb, ceiling)
     files = [
         write_png(out / "composite.png", to_display(composite_rgb, scale)),
         write_exr(out / "composite.exr", composite_rgb),
@@ -121,7 +151,7 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
         files += [write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
                   write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32))]
     files += [
-        write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb)),
+        write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb, ceiling=ceiling)),
         write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)
                   if result.projected_image.dtype == np.uint8 else
                   (result.projected_image >> 8).astype(np.uint8)),

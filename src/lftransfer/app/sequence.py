@@ -26,7 +26,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from lftransfer.app.pipeline import NOMINAL, RunOptions, calibrate, open_rig, write_calibration
-from lftransfer.app.report import bounce_panel, display_scale, live_panel, to_display
+from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import remove_temporaries, write_status
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.composite import composite
@@ -247,13 +247,13 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                 comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
                 timings, clipped = result.timings_s, result.clipped_fraction
             if scale is None:
-                scale = display_scale(comp)
+                scale = display_scale(comp, ceiling=emitter_ceiling(ps))
                 report["display_scale"] = scale
             if live is not None:
                 panel = live_panel(frame, gt.image if gt is not None else None, scale,
                                    camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
             else:
-                panel = bounce_panel(result, gt.image if gt is not None else None, comp)
+                panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=emitter_ceiling(ps))
             write_exr(out / "frames" / f"{i:04d}.exr", comp)
             write_png(out / "frames" / f"{i:04d}.png", to_display(comp, scale))
             write_png(out / "frames" / f"panel_{i:04d}.png", panel)

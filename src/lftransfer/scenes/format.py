@@ -601,7 +601,8 @@ class _SceneBase(_Model):
     Attributes:
         rig: light field interface hardware (nominal values; defaults: the paper's rig).
         view: the view camera.
-        light: the point light (its position as measured by hand).
+        light: the real point light (its position as measured by hand), or None: the scene is lit by its
+            emitting synthetic objects alone (through the projector on the real side).
         render: render settings.
         animation: the time line of keyframed objects (``[animation]``), or None for a still scene.
         source: the TOML file it was loaded from, or None.
@@ -609,7 +610,7 @@ class _SceneBase(_Model):
 
     rig: RigConfig = Field(default_factory=RigConfig)
     view: ViewConfig = Field(default_factory=ViewConfig)
-    light: LightConfig
+    light: LightConfig | None = None
     render: RenderConfig = Field(default_factory=RenderConfig)
     animation: AnimationConfig | None = None
     source: Path | None = None
@@ -631,6 +632,18 @@ class _SceneBase(_Model):
         if not self.moving:
             return self
         return self.model_copy(update={side: [o.at(t) for o in objs] for side, objs in self._sides().items()})
+
+    @property
+    def emitters(self) -> list[ObjectConfig]:
+        """The synthetic objects that emit light."""
+        return [o for o in self.synthetic if o.material.type == "emitter"]
+
+    @model_validator(mode="after")
+    def _something_lights_it(self):
+        if self.light is None and not self.emitters:
+            raise ValueError("nothing lights the scene: give a [light] table (the real point light) or a synthetic "
+                             "object with material type = 'emitter'")
+        return self
 
     @model_validator(mode="after")
     def _animation_fits(self):

@@ -96,7 +96,8 @@ class SimRig:
         self._absorber = lens_array_absorber(array)
         self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
                                        max_depth=scene.render.max_depth)
-        self._point_light = PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
+        self._point_light = None if scene.light is None else \
+            PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
         cam = self._truth.camera
         self._cam_shape = (cam.device.height, cam.device.width)
         px = np.stack(np.meshgrid(np.arange(cam.device.width), np.arange(cam.device.height)), -1).reshape(-1, 2)
@@ -201,7 +202,7 @@ class SimRig:
         return [self._projector_light] if self._projector_light is not None else []
 
     def _lights(self):
-        return [self._point_light] + self._projector_lights()
+        return ([self._point_light] if self._point_light is not None else []) + self._projector_lights()
 
     def _expose_frames(self, radiance: np.ndarray, frames: int) -> np.ndarray:
         cam = self._truth.camera

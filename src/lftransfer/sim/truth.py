@@ -150,10 +150,13 @@ def true_light_scene(scene, seed: int, size: Perturbation = Perturbation()):
     axis (drawn from ``seed``, independently of :func:`perturbed_rig`).
 
     Returns:
-        A new SceneConfig (for the simulated rig and the ground truth only).
+        A new SceneConfig (for the simulated rig and the ground truth only); the scene itself when it has no
+        point light.
     """
     from lftransfer.scenes import with_overrides
 
+    if scene.light is None:
+        return scene
     rng = np.random.default_rng([seed, 17])
     error = rng.uniform(-size.light_error_m, size.light_error_m, 3)
     return with_overrides(scene, light={"position": (np.asarray(scene.light.position) + error).tolist()})

@@ -71,7 +71,7 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
 
     payload = {
         "real": objects(scene.real), "synthetic": objects(scene.synthetic),
-        "light": scene.light.model_dump(mode="json"), "view": scene.view.model_dump(mode="json"),
+        "light": scene.light.model_dump(mode="json") if scene.light is not None else None, "view": scene.view.model_dump(mode="json"),
         "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
@@ -109,11 +109,12 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
             warn(cached.message())
     mi = mitsuba()
     view = scene.view
-    light = {"type": "point", "position": list(map(float, scene.light.position)),
-             "intensity": {"type": "rgb", "value": list(map(float, scene.light.intensity))}}
+    light = {"point_light": {"type": "point", "position": list(map(float, scene.light.position)),
+                             "intensity": {"type": "rgb", "value": list(map(float, scene.light.intensity))}}} \
+        if scene.light is not None else {}
     extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
              "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
-             "point_light": light}
+             **light}
     images: dict[str, list[np.ndarray]] = {}
     for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
         mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False, optimize=False)

@@ -53,7 +53,7 @@ class SyntheticSide:
     Attributes:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
         encoder: LightField -> projector image.
-        point_light: the virtual twin of the real point light (array frame).
+        point_light: the virtual twin of the real point light (array frame), or None for a scene without one.
         direct_lights: the synthetic scene's own light: the point light, and its emitting objects where it
             has any (:class:`~lftransfer.render.lights.EmitterLight`).
     """
@@ -71,9 +71,11 @@ class SyntheticSide:
         self.time_s = float(time_s)
         posed = self._posed(self.time_s)
         self.renderer = synthetic_renderer(posed, settings.renderer)
-        self.point_light = PointLight(np.asarray(posed.light.position, float), np.asarray(posed.light.intensity, float))
-        emits = any(o.material.type == "emitter" for o in posed.synthetic)
-        self.direct_lights = [self.point_light] + ([EmitterLight(seed=settings.seed)] if emits else [])
+        light = posed.light
+        self.point_light = None if light is None else \
+            PointLight(np.asarray(light.position, float), np.asarray(light.intensity, float))
+        self.direct_lights = ([self.point_light] if self.point_light is not None else []) \
+            + ([EmitterLight(seed=settings.seed)] if posed.emitters else [])
         view = posed.view
         self.width, self.height = view.resolution
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
