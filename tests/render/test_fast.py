@@ -146,3 +146,21 @@ def test_06_irradiance_is_kept_per_light(variant, monkeypatch):
     cache.update([_objects()[0], _objects()[1].model_copy(update={"translate": [0.05, 0.03, -0.06]})])
     cache.render_rays(o, d, [point, second])
     assert computed[3:] == [point, second]
+
+
+def test_07_auto_never_drops_light_between_synthetic_objects(variant):
+    """Two reflecting synthetic objects exchange light the fast path does not render: "auto" takes the exact
+    path for them, and a forced fast path says what it drops; an emitter beside one reflecting object is fine."""
+    from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+    from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
+
+    scene = load_scene(builtin_scene("fig4"))
+    cube = scene.synthetic[0].model_dump(mode="json")
+    ball = {"name": "ball", "shape": "sphere", "radius": 0.01, "translate": [0.05, 0.0, -0.1]}
+    two = with_overrides(scene, synthetic=[cube, ball])
+    assert resolve_renderer(scene) == "fast" and resolve_renderer(two) == "exact"
+    assert any("exchange with each other" in note for note in approximations(two, "fast"))
+    assert approximations(two, "auto") == []
+    sun = {**ball, "material": {"type": "emitter", "radiance": [1.0, 1.0, 1.0]}}
+    lit = with_overrides(scene, synthetic=[cube, sun])
+    assert resolve_renderer(lit) == "fast" and len(approximations(lit)) == 1

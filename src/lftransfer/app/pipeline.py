@@ -24,7 +24,7 @@ from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
-from lftransfer.transfer.synthetic_side import resolve_renderer
+from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 
 if TYPE_CHECKING:
     from lftransfer.sim.verify import NegativeControl
@@ -599,6 +599,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         },
         "gt_spp": gt_spp if verified else None,
         "renderer": resolve_renderer(pipeline_scene, options.renderer),
+        "approximations": approximations(pipeline_scene, options.renderer),
         "rig": str(options.rig),
         "truth_seed": opened.truth_seed,
         "rig_model": rig_model,

@@ -35,7 +35,7 @@ from lftransfer.lightfield import LightField
 from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer
-from lftransfer.transfer.synthetic_side import resolve_renderer
+from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
 __all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "render_sequence", "sequence_times"]
@@ -229,7 +229,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
         report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
                   "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
                   "frames_total": n, "display_scale": scale, "frames": done,
-                  "approximations": _approximations(ps, settings)}
+                  "approximations": approximations(ps, settings.renderer)}
         for i in range(len(done), n):
             t0 = time.perf_counter()
             t = float(times[i])
@@ -294,17 +294,6 @@ def _variant() -> str:
 
 def _fps(scene) -> float:
     return float(scene.animation.fps) if scene.animation is not None else 24.0
-
-
-def _approximations(scene, settings: TransferSettings) -> list[str]:
-    """What the renderer leaves out of this scene, said in the report (never silently dropped)."""
-    notes = []
-    if resolve_renderer(scene, settings.renderer) == "fast":
-        notes.append("fast path: diffuse irradiance cached at the vertices of a 6 mm tessellation")
-        if len(scene.synthetic) > 1:
-            notes.append(f"fast path: light exchanged between the {len(scene.synthetic)} synthetic objects is not "
-                         f"rendered (one reflection inside the synthetic half-space); use --renderer exact")
-    return notes
 
 
 def _summary(frames: list[dict]) -> dict:

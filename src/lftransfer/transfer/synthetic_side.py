@@ -18,16 +18,39 @@ from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
 from lftransfer.scenes.frame import scene_in_frame
 
-__all__ = ["SyntheticSide", "resolve_renderer", "synthetic_renderer"]
+__all__ = ["SyntheticSide", "approximations", "resolve_renderer", "synthetic_renderer"]
+
+
+def _reflecting(scene) -> list:
+    return [o for o in scene.synthetic if o.material.type != "emitter"]
 
 
 def resolve_renderer(scene, kind: str = "auto") -> str:
-    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene."""
+    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene.
+
+    "auto" is the fast path where it renders the scene fully: diffuse materials and emitters, and at most one
+    object that reflects light (the fast path keeps one reflection inside the synthetic half-space, so light
+    exchanged between two reflecting synthetic objects would be lost); otherwise the exact path.
+    """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
     if kind == "auto":
-        return "fast" if fast.supports(scene.synthetic) else "exact"
+        return "fast" if fast.supports(scene.synthetic) and len(_reflecting(scene)) <= 1 else "exact"
     return kind
+
+
+def approximations(scene, kind: str = "auto") -> list[str]:
+    """What the chosen renderer leaves out of this scene or approximates, one sentence each (reports say it:
+    an effect is never dropped silently)."""
+    if resolve_renderer(scene, kind) != "fast":
+        return []
+    notes = [f"fast path: diffuse irradiance cached at the vertices of a {fast.DEFAULT_MAX_EDGE * 1000:.0f} mm "
+             f"tessellation, linear across each triangle"]
+    n = len(_reflecting(scene))
+    if n > 1:
+        notes.append(f"fast path: the light the {n} reflecting synthetic objects exchange with each other is not "
+                     f"rendered (one reflection inside the synthetic half-space); --renderer exact renders it")
+    return notes
 
 
 def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
