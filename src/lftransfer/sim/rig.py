@@ -146,6 +146,27 @@ class SimRig:
             raise TypeError(f"SimRig.setup: not a set-up request: {request!r}")
         self._setup = request
 
+    def place_real(self, objects) -> None:
+        """Put the real objects somewhere else (the interactive viewer's hand on the simulated world).
+
+        Args:
+            objects: the real objects (``ObjectConfig``), validated against the scene like a scene file's.
+
+        Raises:
+            SceneError: an object outside the real half-space, or otherwise invalid.
+        """
+        from lftransfer.scenes import with_overrides
+
+        self._world_scene = with_overrides(self._world_scene, real=list(objects))
+        self._real = self._real_renderer(self._time_s)
+        if isinstance(self._setup, RealScene):
+            self._world = self._real
+
+    @property
+    def real_objects(self) -> list:
+        """The real objects as they stand now (world frame; the simulator's hidden truth)."""
+        return list(self._world_scene.real)
+
     def _real_renderer(self, t: float) -> HalfSpaceRenderer:
         """The real objects posed at time ``t`` (seconds), seen from the true array's frame."""
         posed = scene_in_frame(self._world_scene.at(t), self._world_to_array)
