@@ -104,6 +104,14 @@ class LiveTransfer:
         self.projected = projected if projected is not None else self._black_lf
         self.index = 0
 
+    def set_scene(self, scene: SyntheticScene, settings: TransferSettings | None = None) -> None:
+        """Change the synthetic scene (an interactive edit) and optionally the settings (lighting model,
+        reconstruction, samples; the angular samples stay); the accumulated light carries on."""
+        if settings is not None and settings.angular_samples != self.settings.angular_samples:
+            raise ValueError("the angular samples of a running live loop cannot change; start a new one")
+        self.side.set_scene(scene, settings)
+        self.settings = self.side.settings
+
     def reset(self) -> None:
         """Start again from a black projector (the accumulated bounces are dropped)."""
         self.projected = self._black_lf

@@ -94,11 +94,7 @@ class SyntheticSide:
         self.time_s = float(time_s)
         posed = self._posed(self.time_s)
         self.renderer = synthetic_renderer(posed, settings.renderer)
-        light = posed.light
-        self.point_light = None if light is None else \
-            PointLight(np.asarray(light.position, float), np.asarray(light.intensity, float))
-        self.direct_lights = ([self.point_light] if self.point_light is not None else []) \
-            + ([EmitterLight(seed=settings.seed)] if posed.emitters else [])
+        self._set_lights(posed)
         view = posed.view
         self.width, self.height = view.resolution
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
@@ -115,6 +111,27 @@ class SyntheticSide:
             return False
         self.time_s = t
         return self.renderer.update(self._posed(t).synthetic)
+
+    def set_scene(self, scene: SyntheticScene, settings=None) -> None:
+        """Replace the synthetic scene (objects moved, materials or lights changed, as an interactive edit does)
+        and optionally the settings; the codecs stay, the renderer is updated in place where it can be."""
+        scene = check_synthetic(scene)
+        settings = settings if settings is not None else self.settings
+        same_kind = resolve_renderer(scene, settings.renderer) == resolve_renderer(self.scene, self.settings.renderer)
+        self.scene, self.settings = scene, settings
+        posed = self._posed(self.time_s)
+        if same_kind and len(posed.synthetic) == len(self.renderer.objects):
+            self.renderer.update(posed.synthetic)
+        else:
+            self.renderer = synthetic_renderer(posed, settings.renderer)
+        self._set_lights(posed)
+
+    def _set_lights(self, posed: SyntheticScene) -> None:
+        light = posed.light
+        self.point_light = None if light is None else \
+            PointLight(np.asarray(light.position, float), np.asarray(light.intensity, float))
+        self.direct_lights = ([self.point_light] if self.point_light is not None else []) \
+            + ([EmitterLight(seed=self.settings.seed)] if posed.emitters else [])
 
     def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
         """The captured real light field as a light of the synthetic half-space (the settings' lighting model
