@@ -38,7 +38,7 @@ from lftransfer.transfer.live import LiveTransfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
-__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "render_sequence", "sequence_times"]
+__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "acquire_model", "render_sequence", "sequence_times"]
 
 MODES = ("live", "converged")
 STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
@@ -137,8 +137,9 @@ def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: Tr
             "resolution": list(scene.view.resolution)}
 
 
-def _model(opened, scene, options: RunOptions, out: Path, resume: bool, step: Callable[[str], None]):
-    """The rig model of the sequence and how it was had (a resumed sequence reuses its calibration file)."""
+def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool, step: Callable[[str], None]):
+    """The rig model of a sequence or a live session and how it was had: a calibration file, a calibration run
+    now (written to ``out/calibration.json``; a resumed sequence reuses it), the oracle or the nominal model."""
     ps = scene.synthetic_part()
     kept = out / "calibration.json"
     if options.calibration is not None:
@@ -211,7 +212,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     opened = None
     try:
         opened = open_rig(scene, options)
-        model, rig_model = _model(opened, scene, options, out, seq.resume, step)
+        model, rig_model = acquire_model(opened, scene, options, out, seq.resume, step)
         ps = scene.synthetic_part()
         verify = seq.verify_every > 0 and opened.world is not None
         state = out / STATE_FILE

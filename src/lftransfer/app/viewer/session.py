@@ -1,0 +1,339 @@
+"""The state behind ``lft live``: the live loop on its own thread, the edits the page sends, the frames it shows.
+
+The loop thread runs :meth:`lftransfer.transfer.live.LiveTransfer.step` frame after frame and hands each finished
+frame to a callback (the server broadcasts it); edits from any page are validated at once (a bad value is refused
+with a message, the loop never sees it) and applied between frames, so a change reaches the screen on the next
+frame and the page never waits for a render.
+"""
+
+from __future__ import annotations
+
+import base64
+import math
+import queue
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from lftransfer.app.report import device_image, display_scale, emitter_ceiling, live_panel, to_display
+from lftransfer.render.lights import LIGHTING_MODELS
+from lftransfer.scenes import SceneError, with_overrides
+from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
+
+__all__ = ["EditError", "LAYERS", "LiveSession", "ViewerFrame"]
+
+LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected")
+MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces")
+_POSE_LIMIT_M = 0.5        # |translate| components the page may ask for, metres
+
+
+class EditError(ValueError):
+    """An edit the page sent that cannot be applied; the message is shown on the page."""
+
+
+@dataclass
+class ViewerFrame:
+    """A frame as the page gets it.
+
+    Attributes:
+        index: frame number since the start or the last reset.
+        time_s: the scene time shown.
+        fps: frames per second over the last few frames.
+        stages_ms: milliseconds per stage of the last frame (:data:`LIVE_STAGES`) and "total".
+        images: layer name -> JPEG bytes (the layers some page asked for).
+        clipped_fraction: fraction of lit projected samples above the projector's range.
+    """
+
+    index: int
+    time_s: float
+    fps: float
+    stages_ms: dict[str, float]
+    images: dict[str, bytes]
+    clipped_fraction: float
+
+    def message(self, layer: str) -> dict:
+        """The JSON message for a page that shows ``layer``."""
+        image = self.images.get(layer) or self.images.get("composite", b"")
+        return {"type": "frame", "index": self.index, "time_s": round(self.time_s, 3), "fps": round(self.fps, 3),
+                "stages_ms": {k: round(v, 1) for k, v in self.stages_ms.items()}, "layer": layer,
+                "clipped_fraction": self.clipped_fraction,
+                "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
+
+
+def _number(payload: dict, key: str, low: float, high: float) -> float:
+    """A finite number in [low, high] from the page, or an EditError that says which field and why."""
+    value = payload.get(key)
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise EditError(f"{key}: expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise EditError(f"{key}: expected a finite number, got {value!r}")
+    if not low <= x <= high:
+        raise EditError(f"{key}: {x:g} is outside [{low:g}, {high:g}]")
+    return x
+
+
+def _vector(payload: dict, key: str, low: float, high: float) -> list[float]:
+    values = payload.get(key)
+    if not isinstance(values, list) or len(values) != 3:
+        raise EditError(f"{key}: expected 3 numbers, got {values!r}")
+    return [_number({f"{key}[{i}]": v}, f"{key}[{i}]", low, high) for i, v in enumerate(values)]
+
+
+@dataclass
+class _Pending:
+    edits: "queue.Queue[tuple[str, Any]]" = field(default_factory=queue.Queue)
+
+
+class LiveSession:
+    """The live loop of one scene on one rig, driven from web pages.
+
+    Args:
+        scene: the whole scene (``SceneConfig``); its real objects are used only through ``sim_rig``.
+        live: the live loop (rig, rig model, synthetic part of ``scene``).
+        out: folder for saved frames and scenes.
+        sim_rig: the simulated rig when there is one (its real objects can be moved), else None.
+
+    Example:
+        >>> session = LiveSession(scene, LiveTransfer(rig, model, scene.synthetic_part()), Path("out/live"))
+        >>> session.start(on_frame=print); session.submit({"type": "pause"}); session.stop()   # doctest: +SKIP
+    """
+
+    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None) -> None:
+        self.scene = scene
+        self.live = live
+        self.out = Path(out)
+        self.sim_rig = sim_rig
+        self.paused = False
+        self.exchanges = 1
+        self.layers: set[str] = {"composite"}
+        self.last: LiveFrame | None = None
+        self.scale: float | None = None
+        self.error: str | None = None
+        self._pending = _Pending()
+        self._stop = threading.Event()
+        self._step_once = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._times: list[float] = []
+        self._clock = 0.0
+
+    # -- what the page may ask for ------------------------------------------------------------------------------
+    def describe(self) -> dict:
+        """The page's controls: objects with their current pose and material, settings."""
+        def obj(side: str, i: int, o) -> dict:
+            m = o.material
+            return {"side": side, "index": i, "name": o.name, "translate": list(o.translate),
+                    "rotate_deg": list(o.rotate_deg), "material": m.type,
+                    "albedo": list(getattr(m, "albedo", [0, 0, 0])), "roughness": getattr(m, "roughness", None),
+                    "specular": list(getattr(m, "specular", [0, 0, 0]))}
+        objects = [obj("synthetic", i, o) for i, o in enumerate(self.scene.synthetic)]
+        if self.sim_rig is not None:
+            objects += [obj("real", i, o) for i, o in enumerate(self.sim_rig.real_objects)]
+        return {"type": "scene", "objects": objects, "layers": list(LAYERS), "lighting_models": list(LIGHTING_MODELS),
+                "lighting_model": self.live.settings.lighting_model, "exchanges": self.exchanges,
+                "max_exchanges": MAX_EXCHANGES, "paused": self.paused, "stages": list(LIVE_STAGES),
+                "moving": self.scene.moving}
+
+    def submit(self, payload: dict) -> dict | None:
+        """Check an edit from a page and queue it for the loop; returns an acknowledgement for the page.
+
+        Raises:
+            EditError: a malformed or out-of-range edit (nothing is queued).
+        """
+        if not isinstance(payload, dict) or not isinstance(payload.get("type"), str):
+            raise EditError(f"expected an object with a 'type', got {payload!r}")
+        kind = payload["type"]
+        if kind in ("pause", "resume", "step", "reset", "save"):
+            self._pending.edits.put((kind, None))
+        elif kind == "exchanges":
+            self._pending.edits.put((kind, int(_number(payload, "exchanges", 1, MAX_EXCHANGES))))
+        elif kind == "lighting_model":
+            model = payload.get("lighting_model")
+            if model not in LIGHTING_MODELS:
+                raise EditError(f"lighting_model: expected one of {', '.join(LIGHTING_MODELS)}, got {model!r}")
+            self._pending.edits.put((kind, model))
+        elif kind == "layer":
+            layer = payload.get("layer")
+            if layer not in LAYERS:
+                raise EditError(f"layer: expected one of {', '.join(LAYERS)}, got {layer!r}")
+            self.layers.add(layer)
+        elif kind == "object":
+            self._pending.edits.put((kind, self._object_edit(payload)))
+        else:
+            raise EditError(f"unknown edit type {kind!r}")
+        return {"type": "ack", "edit": kind}
+
+    def _object_edit(self, payload: dict) -> tuple[str, int, dict]:
+        side = payload.get("side")
+        objects = self.scene.synthetic if side == "synthetic" else \
+            (self.sim_rig.real_objects if side == "real" and self.sim_rig is not None else None)
+        if objects is None:
+            raise EditError("side: real objects can be moved on the simulated rig only" if side == "real"
+                            else f"side: expected 'synthetic' or 'real', got {side!r}")
+        index = payload.get("index")
+        if not isinstance(index, int) or not 0 <= index < len(objects):
+            raise EditError(f"index: expected 0..{len(objects) - 1}, got {index!r}")
+        change: dict[str, Any] = {}
+        if "translate" in payload:
+            change["translate"] = _vector(payload, "translate", -_POSE_LIMIT_M, _POSE_LIMIT_M)
+        if "rotate_deg" in payload:
+            change["rotate_deg"] = _vector(payload, "rotate_deg", -360.0, 360.0)
+        material = objects[index].material.model_dump()
+        for key in ("albedo", "specular"):
+            if key in payload:
+                if key not in material:
+                    raise EditError(f"{key}: a {material['type']} material has no {key}")
+                material[key] = _vector(payload, key, 0.0, 1.0)
+        if "roughness" in payload:
+            if "roughness" not in material:
+                raise EditError(f"roughness: a {material['type']} material has no roughness")
+            material["roughness"] = _number(payload, "roughness", 0.0, 1.0)
+        change["material"] = material
+        edited = objects[index].model_dump()
+        edited.update(change)
+        # validated like a scene file (half-space rule): the message names the object and what is wrong
+        try:
+            if side == "synthetic":
+                with_overrides(self.scene, synthetic=[edited if i == index else o for i, o in enumerate(objects)])
+            else:
+                with_overrides(self.scene, real=[edited if i == index else o for i, o in enumerate(objects)])
+        except SceneError as exc:
+            raise EditError(str(exc).split(": ", 1)[-1]) from None
+        return side, index, edited
+
+    # -- the loop -----------------------------------------------------------------------------------------------
+    def start(self, on_frame: Callable[[ViewerFrame], None], on_error: Callable[[str], None] | None = None) -> None:
+        """Run the loop on its own thread until :meth:`stop`."""
+        self._on_frame, self._on_error = on_frame, on_error or (lambda _m: None)
+        self._thread = threading.Thread(target=self._run, name="lft-live-loop", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 60.0) -> None:
+        """Stop the loop after the frame in progress."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _apply(self) -> None:
+        while True:
+            try:
+                kind, value = self._pending.edits.get_nowait()
+            except queue.Empty:
+                return
+            if kind == "pause":
+                self.paused = True
+            elif kind == "resume":
+                self.paused = False
+            elif kind == "step":
+                self._step_once.set()
+            elif kind == "reset":
+                self.live.reset()
+                self._clock = 0.0
+                self._times.clear()
+            elif kind == "exchanges":
+                self.exchanges = value
+            elif kind == "lighting_model":
+                settings: TransferSettings = replace(self.live.settings, lighting_model=value)
+                self.live.set_scene(self.scene.synthetic_part(), settings)
+            elif kind == "object":
+                side, index, edited = value
+                if side == "synthetic":
+                    objs = list(self.scene.synthetic)
+                    objs[index] = edited
+                    self.scene = with_overrides(self.scene, synthetic=objs)
+                    self.live.set_scene(self.scene.synthetic_part())
+                else:
+                    objs = [o.model_dump() for o in self.sim_rig.real_objects]
+                    objs[index] = edited
+                    self.sim_rig.place_real(objs)
+            elif kind == "save":
+                self.save()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._apply()
+                if self.paused and not self._step_once.is_set():
+                    time.sleep(0.02)
+                    continue
+                self._step_once.clear()
+                t0 = time.perf_counter()
+                times = self.scene.frame_times()
+                t = float(times[int(self._clock) % len(times)]) if self.scene.moving else 0.0
+                for _ in range(self.exchanges):
+                    frame = self.live.step(t)
+                self._clock += 1
+                self.last = frame
+                self._times.append(time.perf_counter() - t0)
+                self._on_frame(self._viewer_frame(frame))
+            except Exception as exc:  # noqa: BLE001 - the loop keeps running; the page shows why a frame failed
+                self.error = f"{type(exc).__name__}: {exc}"
+                self._on_error(self.error)
+                time.sleep(0.5)
+
+    def _viewer_frame(self, frame: LiveFrame) -> ViewerFrame:
+        if self.scale is None:
+            self.scale = display_scale(frame.composite, ceiling=emitter_ceiling(self.scene))
+        images = {}
+        for layer in self.layers:
+            images[layer] = _jpeg(self._layer(frame, layer))
+        recent = self._times[-8:]
+        fps = len(recent) / sum(recent) if recent and sum(recent) > 0 else 0.0
+        return ViewerFrame(index=frame.index, time_s=frame.time_s, fps=fps,
+                           stages_ms={k: 1000.0 * v for k, v in frame.timings_s.items()}, images=images,
+                           clipped_fraction=frame.clipped_fraction)
+
+    def _layer(self, frame: LiveFrame, layer: str) -> np.ndarray:
+        rig = self.scene.rig
+        if layer == "panel":
+            return live_panel(frame, None, self.scale, camera_bits=rig.lf_camera_bits,
+                              projector_bits=rig.projector_bits, tile_width=320)
+        if layer == "real":
+            return to_display(np.clip(frame.real_view, 0, None), self.scale)
+        if layer == "synthetic":
+            return to_display(np.clip(frame.synthetic_view.rgb, 0, None), self.scale)
+        if layer == "captured":
+            return device_image(frame.captured_raw, rig.lf_camera_bits, stretch=True)
+        if layer == "projected":
+            return device_image(frame.projected_image, rig.projector_bits)
+        return to_display(np.clip(frame.composite, 0, None), self.scale)
+
+    def save(self) -> list[Path]:
+        """Write the current frame (EXR and PNG) and the current scene (TOML) into the output folder."""
+        from lftransfer.imageio_utils import write_exr, write_png, write_text
+
+        frame = self.last
+        self.out.mkdir(parents=True, exist_ok=True)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        files = [write_text(self.out / f"scene-{stamp}.toml", scene_toml(self.scene))]
+        if frame is not None:
+            files += [write_exr(self.out / f"frame-{stamp}.exr", frame.composite),
+                      write_png(self.out / f"frame-{stamp}.png", to_display(frame.composite, self.scale or 1.0))]
+        return files
+
+
+def scene_toml(scene) -> str:
+    """The scene as a TOML file that :func:`lftransfer.scenes.load_scene` reads back."""
+    import tomli_w
+
+    data = scene.model_dump(mode="json", exclude={"source"}, exclude_none=True)
+    for side in ("real", "synthetic"):
+        for o in data.get(side, []):
+            if not o.get("keyframes"):
+                o.pop("keyframes", None)
+    return tomli_w.dumps(data)
+
+
+def _jpeg(image: np.ndarray, quality: int = 88) -> bytes:
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(image[..., :3]), cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return buf.tobytes()
