@@ -477,42 +477,157 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
 def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SCENE.toml",
                                                     help="Scene TOML (default: Fig. 4)."),
           json_out: Optional[Path] = typer.Option(None, "--json", metavar="FILE",
-                                                  help="Write the results as JSON here."),
-          iterations: int = typer.Option(10, min=1, metavar="N", help="Timed pipeline iterations (>= 1)."),
-          lighting_model: str = typer.Option("area", metavar="area|point|prefiltered",
-                                             help="Lighting model of the fast path."),
-          peer: bool = typer.Option(True, "--peer/--no-peer", metavar="",
-                                    help="Also time Mitsuba's path integrator on the same job."),
+                                                  help="Write the results and the settings used as JSON here."),
+          iterations: int = typer.Option(10, min=1, metavar="N",
+                                         help="Timed frames of the live step (>= 1), after one warm-up frame."),
+          calibration: Optional[Path] = typer.Option(None, metavar="FILE", help=(
+              "Use this calibration file (from `lft calibrate`, or the demo's calibration.json) instead of "
+              "calibrating the simulated rig first.")),
+          rig_model: str = typer.Option("calibrated", metavar="calibrated|nominal|oracle", help=(
+              "The rig model the step uses: calibrated (what a run uses, default) | nominal | oracle (neither is "
+              "what users run; the output says so).")),
+          truth_seed: int = _truth_seed_option(),
+          lighting_model: Optional[str] = typer.Option(None, metavar="area|point|prefiltered",
+                                                       help="Lighting model (default: the scene's)."),
+          reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
+              "Area model: how the captured light field is read between lenslets (default: the scene's).")),
+          renderer: str = typer.Option("auto", metavar="auto|fast|exact", help=_RENDERER_HELP),
+          accuracy: bool = typer.Option(True, "--accuracy/--no-accuracy", metavar="", help=(
+              "Also render the last frame with the exact path and report the fast path's PSNR against it.")),
+          peer: bool = typer.Option(True, "--peer/--no-peer", metavar="", help=(
+              "Also time Mitsuba's path integrator on the light field job (point model), at equal RMSE.")),
           quick: bool = _flag("--quick", _QUICK_HELP),
           max_memory: Optional[str] = _memory_option()) -> None:
-    """Time one light field transfer iteration (decode, relight, render, encode, view, composite)."""
-    from lftransfer.app.bench.iteration import BenchSettings, run_bench
+    """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and the
+    scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the step's
+    rays once."""
+    from lftransfer.app.bench.step import BenchOptions, count_bench_steps, run_bench
+    from lftransfer.app.pipeline import CalibrationFailedError
     from lftransfer.app.report import write_json
+    from lftransfer.app.terminal import say
+    from lftransfer.rig.base import RigError
 
     _check_lighting_model(lighting_model)
+    _check_reconstruction(reconstruction)
+    _check_renderer(renderer)
     scene = _load(scene_file, quick)
-    _check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=False,
+    rig_opts = _rig_options(scene, truth_seed, False, rig_model, calibration, "sim")
+    calibrates = calibration is None and rig_model == "calibrated"
+    _check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
                        max_memory=max_memory)
-    with Progress(TextColumn("[bold]{task.description:<70}"), TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("starting", total=None)
-        result = run_bench(scene, BenchSettings(iterations=iterations, lighting_model=lighting_model, peer=peer),
-                           progress=lambda msg: bar.update(task, description=escape(msg[:70])))
-    table = Table(title="light field transfer iteration")
+    options = BenchOptions(iterations=iterations, lighting_model=lighting_model, reconstruction=reconstruction,
+                           renderer=renderer, truth_seed=rig_opts["truth_seed"], rig_model=rig_model,
+                           calibration=calibration, accuracy=accuracy, peer=peer)
+    if calibrates:
+        say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
+            "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."
+            + _demo_calibration_hint(scene))
+    try:
+        with _step_bar(count_bench_steps(scene, options)) as progress:
+            result = run_bench(scene, options, progress=progress)
+    except CalibrationFailedError as exc:
+        fail(str(exc), FAILED)
+    except RigError as exc:
+        fail(f"bench failed: {exc}", FAILED)
+    data = result.to_json()
+    data["settings"]["quick"] = quick
+    data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed,
+                                                 lighting_model, reconstruction, renderer, accuracy, peer)
+    _bench_table(result)
+    if json_out is not None:
+        write_json(json_out, data)
+        say(f"wrote {json_out}")
+
+
+def _demo_calibration_hint(scene) -> str:
+    """`` The demo's FILE fits this scene: ...`` where the demo's calibration file exists and fits, else ``""``."""
+    from lftransfer.calibration.rig import CalibrationFileError, load_calibration
+
+    demo_file = Path("out/demo/calibration.json")
+    if not demo_file.is_file():
+        return ""
+    try:
+        load_calibration(demo_file, scene.synthetic_part())
+    except CalibrationFileError:
+        return ""
+    return (f" The demo's {demo_file} fits this scene's rig: --calibration {demo_file} uses it (made for the "
+            f"demo's --truth-seed).")
+
+
+def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed, lighting_model,
+                   reconstruction, renderer, accuracy, peer) -> str:
+    """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
+    import shlex
+
+    parts = ["lft", "bench"]
+    if scene_file is not None:
+        parts += ["--scene", str(scene_file)]
+    if quick:
+        parts.append("--quick")
+    parts += ["--iterations", str(iterations)]
+    if calibration is not None:
+        parts += ["--calibration", str(calibration)]
+    elif rig_model != "calibrated":
+        parts += ["--rig-model", rig_model]
+    if truth_seed != 0:
+        parts += ["--truth-seed", str(truth_seed)]
+    for name, value in (("--lighting-model", lighting_model), ("--reconstruction", reconstruction)):
+        if value is not None:
+            parts += [name, value]
+    if renderer != "auto":
+        parts += ["--renderer", renderer]
+    if not accuracy:
+        parts.append("--no-accuracy")
+    if not peer:
+        parts.append("--no-peer")
+    return shlex.join(parts)
+
+
+def _bench_table(result) -> None:
+    """The bench's results as a table on stdout."""
+    s = result.settings
+    res = s["resolution"]
+    table = Table(title="lft bench: LiveTransfer.step on the simulated rig")
     table.add_column("quantity")
     table.add_column("value", justify="right")
-    _row(table, "pipeline iteration (median)", f"{result['pipeline_iteration_ms']:.1f} ms")
-    for stage, t in result["stages_ms"].items():
-        _row(table, f"  {stage}", f"{t['median']:.1f} ms")
-    _row(table, "capture (rig, not in the iteration)", f"{result['capture_ms']:.0f} ms")
-    _row(table, "fast vs exact composite PSNR", f"{result['fast_vs_exact_psnr_db']:.1f} dB")
-    if "peer_ratio" in result:
-        _row(table, "peer (Mitsuba path, projectors)", f"{result['peer_ms']:.0f} ms at {result['peer_spp']} spp")
-        _row(table, "peer ratio", f"{result['peer_ratio']:.0f}x")
-    _row(table, "variant, peak RSS", f"{result['variant']}, {result['peak_rss_mb']:.0f} MB")
+    _row(table, "rig model", s["rig_model"])
+    _row(table, "settings", f"{s['lighting_model']} model, {s['reconstruction']} reconstruction, "
+                            f"{s['renderer']['used']} renderer, {s['angular_samples']}^2 angular samples, "
+                            f"lf {s['lf_spp']} / view {s['view_spp']} spp, {s['aperture_samples']} aperture points")
+    _row(table, "resolution", f"LF camera {res['lf_camera'][0]}x{res['lf_camera'][1]}, projector "
+                              f"{res['projector'][0]}x{res['projector'][1]}, view {res['view'][0]}x{res['view'][1]}, "
+                              f"{res['lenslets'][0]}x{res['lenslets'][1]} lenslets")
+    p = result.pipeline_iteration
+    _row(table, "pipeline_iteration_ms (median)",
+         f"{result.pipeline_iteration_ms:.1f} ms (min {p.min:.1f}, max {p.max:.1f}; {s['iterations']} frames)")
+    labels = {"render_lightfield": "relight + render light field"}
+    for stage, t in result.stages_ms.items():
+        _row(table, f"  {labels.get(stage, stage.replace('_', ' '))}", f"{t.median:.1f} ms")
+    rig = result.rig_stages_ms
+    _row(table, "rig capture (simulator; not in the pipeline)",
+         f"{result.capture_ms:.0f} ms (LF {rig['capture'].median:.0f}, view {rig['capture_view'].median:.0f})")
+    _row(table, "rig setup/project, bookkeeping (in neither)", f"{result.unstaged_ms:.1f} ms")
+    f = result.floor
+    where = {"scene": "the scene's shapes", "renderer": "the renderer's geometry"}[f.geometry]
+    _row(table, "floor_ms (the step's rays cast once)", f"{result.floor_ms:.1f} ms ({sum(f.rays):,} rays, "
+                                                        f"{where})")
+    other = f.renderer_geometry_ms if f.geometry == "scene" else f.scene_geometry_ms
+    if other is not None:
+        _row(table, "  same rays, the other geometry", f"{other:.1f} ms")
+    _row(table, "iteration_over_floor", f"{result.iteration_over_floor:.1f}x")
+    if result.fast_vs_exact is not None:
+        v = result.fast_vs_exact.psnr_db
+        _row(table, "fast vs exact composite PSNR", "n/a (exact path)" if v is None else f"{v:.1f} dB")
+    if result.peer is not None:
+        q = result.peer
+        bound = "" if q.reached_target else " (lower bound: the peer missed our RMSE)"
+        _row(table, "peer: light field job, point model", f"ours {q.ours_ms:.0f} ms, Mitsuba path {q.peer_ms:.0f} ms "
+                                                          f"at {q.peer_spp} spp")
+        _row(table, "peer ratio", f"{q.ratio:.0f}x{bound}")
+    _row(table, "variant, peak RSS", f"{s['variant']}, {result.peak_rss_mb:.0f} MB")
     Console().print(table)
-    if json_out is not None:
-        write_json(json_out, result)
-
+    for note in result.notes:
+        Console().print(escape(f"note: {note}"), soft_wrap=True, highlight=False)
 
 @contextmanager
 def _step_bar(total: int):

@@ -17,20 +17,27 @@ travelling along +d_ij) with:
 Orientation: with ``look_at(c, c - z, up = +y)`` Mitsuba's image row 0 is the +y side of the camera frame and
 column 0 its -x side (Mitsuba's camera x axis is "left"). For a projector emitting along w and a camera looking
 along -d alike, row r is the grid's row j = r (v_0 = -a first) and column c is the grid's column U - 1 - c: the
-columns are reversed, the rows are not. ``tests/bench/test_peer.py`` checks this against our renderer.
+columns are reversed, the rows are not. ``tests/app/bench/test_peer.py`` checks this against our renderer.
 
 The path integrator picks ONE emitter at random per light sample, so its noise grows with the number of
 lenslets; our renderer sums all lenslets at every shading point. Its camera samples are jittered over each
 pixel (box filter), i.e. it estimates the pixel-averaged radiance, where our renderer samples the pixel centre
 direction: at silhouettes the two differ by a bias that no spp removes (:func:`spp_for_rmse` then reports
 ``max_spp`` as a lower bound).
+
+:func:`peer_comparison` sets the peer against the live step's own renderer on that job (the light field render
+alone, point model, the scene's light field samples), at equal RMSE against the converged light field. It is a
+renderer comparison, not a timing of the live step: Mitsuba's plugins have no direction-dependent area emitter,
+so the area model the demo uses has no peer.
 """
 
 from __future__ import annotations
 
 import math
+import statistics
 import time
-from typing import Sequence
+from dataclasses import dataclass
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -38,7 +45,8 @@ from lftransfer.backend import mitsuba
 from lftransfer.lightfield import LightField
 from lftransfer.render.shapes import scene_dict
 
-__all__ = ["PeerRenderer", "rmse", "spp_for_rmse", "projector_texture"]
+__all__ = ["PeerRenderer", "PeerComparison", "footprint_average", "peer_comparison", "rmse", "spp_for_rmse",
+           "projector_texture"]
 
 
 def _bilinear_grid(data: np.ndarray, a: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -233,3 +241,115 @@ def spp_for_rmse(peer: PeerRenderer, reference: LightField, target_rmse: float, 
         dr.sync_thread()
         total += time.perf_counter() - start
     return spp, total / int(repeats), error
+
+
+def footprint_average(renderer, array, lights: Sequence, U: int, V: int, n: int = 4) -> LightField:
+    """Light field of pinhole lenslet cameras averaged over each sample's (u, v) footprint (n x n sub-samples).
+
+    This is what a light field render converges to when its rays are spread over the sample's cell, as a
+    ``batch`` sensor's pixels are: the common reference of our renderer and the peer.
+
+    Args:
+        renderer: a :class:`lftransfer.render.renderer.HalfSpaceRenderer` (exact path) of the objects.
+        array: the lens array (frame of the objects).
+        lights: the lights.
+        U, V: angular samples.
+        n: sub-samples per axis of each sample's footprint.
+
+    Returns:
+        LightField (K, V, U, 3), masked samples zero.
+    """
+    lf = LightField.zeros(array, U, V)
+    a = array.half_width
+    step_u, step_v = 2 * a / U, 2 * a / V
+    sub = (np.arange(n) + 0.5) / n - 0.5
+    uu = lf.u[None, :, None, None] + step_u * sub[None, None, None, :]     # (1, U, 1, n)
+    vv = lf.v[:, None, None, None] + step_v * sub[None, None, :, None]     # (V, 1, n, 1)
+    uu, vv = np.broadcast_arrays(uu, vv)                                     # (V, U, n, n)
+    d = -np.stack([uu, vv, np.ones_like(uu)], -1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    K = array.K
+    origins = np.zeros((K, V * U * n * n, 3), np.float32)
+    origins[..., :2] = array.centres[:, None, :]
+    dirs = np.broadcast_to(d.reshape(1, -1, 3), origins.shape)
+    radiance, _, _ = renderer.render_rays(origins.reshape(-1, 3), dirs.reshape(-1, 3), lights)
+    lf.data[...] = radiance.reshape(K, V, U, n * n, 3).mean(axis=3) * lf.mask()[None, :, :, None]
+    return lf
+
+
+@dataclass(frozen=True)
+class PeerComparison:
+    """Our renderer against the peer on the light field job (point model), at equal RMSE.
+
+    Attributes:
+        ratio: peer_ms / ours_ms (a lower bound where the peer did not reach our RMSE by ``max_spp``).
+        ours_ms: median time of the live step's renderer: relight with the captured light field (point model)
+            and render the outgoing light field at ``ours_spp`` rays per sample, milliseconds.
+        ours_spp: rays per light field sample of ours (the scene's ``render.spp``, as ``lft run`` uses it).
+        ours_rmse: RMSE of ours against the converged light field (radiance units); the peer's target.
+        peer_ms: time of one peer render at ``peer_spp``, milliseconds.
+        peer_spp: the smallest power of two reaching ``ours_rmse`` (or ``max_spp``).
+        peer_rmse: the peer's RMSE at ``peer_spp``.
+        reached_target: whether the peer reached our RMSE.
+        lenslets_lit: lenslets carrying light (one ``projector`` emitter each).
+    """
+
+    ratio: float
+    ours_ms: float
+    ours_spp: int
+    ours_rmse: float
+    peer_ms: float
+    peer_spp: int
+    peer_rmse: float
+    reached_target: bool
+    lenslets_lit: int
+
+
+def peer_comparison(renderer, array, captured: LightField, *, spp: int, seed: int = 0, repeats: int = 3,
+                    max_spp: int = 4096, progress: Callable[[str], None] | None = None) -> PeerComparison:
+    """Time the live step's renderer and the peer on the same light field job, at equal RMSE.
+
+    Args:
+        renderer: the renderer the live step uses (``LiveTransfer.side.renderer``), its objects posed in the
+            array's frame.
+        array: the lens array of the rig model the step uses.
+        captured: the light field the step decoded (lights the synthetic half-space, point model).
+        spp: our rays per light field sample.
+        seed: Monte Carlo seed of ours.
+        repeats: timed renders of ours (>= 1, after one warm-up); a new light each time, so each relights.
+        max_spp: the largest peer sample count tried.
+        progress: called with a message per step.
+
+    Returns:
+        :class:`PeerComparison`.
+    """
+    import drjit as dr
+
+    from lftransfer.render.lights import LightFieldLight
+    from lftransfer.render.renderer import HalfSpaceRenderer
+
+    say = progress or (lambda _m: None)
+    U, V = captured.U, captured.V
+    objects = list(renderer.objects)
+
+    def ours() -> tuple[LightField, float]:
+        light = LightFieldLight(captured, side="synthetic", model="point")
+        start = time.perf_counter()
+        lf = renderer.render_lightfield(array, [light], U, V, model="point", spp=spp, seed=seed)
+        dr.sync_thread()
+        return lf, time.perf_counter() - start
+
+    say("peer: converged point-model light field (exact path, averaged over each sample's footprint)")
+    light = LightFieldLight(captured, side="synthetic", model="point")
+    reference = footprint_average(HalfSpaceRenderer(objects, max_depth=1), array, [light], U, V)
+    say("peer: our renderer on the same job (point model)")
+    lf, _ = ours()                                             # warm-up: kernels compiled
+    ours_s = statistics.median(ours()[1] for _ in range(max(1, int(repeats))))
+    target = rmse(lf, reference)
+    peer = PeerRenderer(objects, captured, U, V, max_depth=1)
+    say(f"peer: Mitsuba path + {len(peer.active_lenslets)} projector emitters, spp for RMSE {target:.3g}")
+    peer_spp, peer_s, peer_rmse = spp_for_rmse(peer, reference, target, max_spp=max_spp)
+    return PeerComparison(ratio=round(peer_s / ours_s, 2), ours_ms=round(1000 * ours_s, 2), ours_spp=int(spp),
+                          ours_rmse=float(target), peer_ms=round(1000 * peer_s, 2), peer_spp=int(peer_spp),
+                          peer_rmse=float(peer_rmse), reached_target=bool(peer_rmse <= target),
+                          lenslets_lit=int(len(peer.active_lenslets)))

@@ -1,0 +1,326 @@
+"""The speed benchmark: the live loop's own step function, timed frame by frame on the simulated rig.
+
+What is timed is :meth:`lftransfer.transfer.live.LiveTransfer.step`, the function ``lft render --mode live``
+calls per frame, with the rig model a run uses (calibrated by default) and the settings the demo and
+``lft render`` build from the scene (:func:`transfer_settings`: angular samples, lighting model, aperture
+samples, reconstruction, ``render.spp`` rays per light field sample and per view pixel, renderer). Each frame's stages are split into:
+
+- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
+  render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
+  frame, median over the timed frames after ``warmup`` frames that compile the kernels;
+- the rig's capture (:data:`RIG_STAGES`): in the simulated rig, the simulator's rendering of the real scene;
+  a physical rig's exposure instead;
+- the rest of the step's wall time (``unstaged_ms``): the rig's ``setup`` and ``project`` calls and the step's
+  bookkeeping, in no stage of the step's timer, counted in neither.
+
+Beside it, measured in the same run: the ray-casting floor (:mod:`lftransfer.app.bench.floor`: the step's own
+light field and view rays, one intersection each), the fast path's accuracy against the exact path on the same
+frame (:mod:`lftransfer.app.bench.accuracy`) and, optionally, Mitsuba's own path tracer on the light field job
+(:mod:`lftransfer.app.bench.peer`).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import resource
+import statistics
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from lftransfer.app.bench.accuracy import FastVsExact, fast_vs_exact
+from lftransfer.app.bench.floor import FloorTiming, RayRecorder, ray_floor
+from lftransfer.app.bench.peer import PeerComparison, peer_comparison
+from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.live import LiveTransfer
+
+__all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_MODELS", "Spread",
+           "count_bench_steps", "run_bench", "transfer_settings"]
+
+Progress = Callable[[str], None]
+RIG_STAGES = ("capture", "capture_view")
+PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "render_view", "composite")
+RIG_MODELS = ("calibrated", "nominal", "oracle")
+NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
+
+
+@dataclass(frozen=True)
+class BenchOptions:
+    """What the benchmark runs.
+
+    Attributes:
+        iterations: timed frames (>= 1).
+        warmup: frames run first and not timed (>= 1: the first compiles the kernels).
+        lighting_model: None: the scene's ``render.lighting_model`` (as the demo); else "area", "point",
+            "prefiltered" (as ``lft run --lighting-model``).
+        reconstruction: None: the scene's ``render.reconstruction``; else "box" or "linear" (area model only).
+        renderer: "auto" (as the demo), "fast" or "exact".
+        truth_seed: seed of the simulated rig's hidden truth (0: the demo's rig), or None: built exactly as the
+            rig file says.
+        rig_model: "calibrated" (default: calibrate the simulated rig first, unless ``calibration`` is given),
+            "nominal" (the rig file's values) or "oracle" (the hidden truth); the last two are not what a run
+            uses and the result says so.
+        calibration: a calibration file (from ``lft calibrate`` or the demo's ``calibration.json``), or None.
+        accuracy: also compare the step's composite with the exact path's (:mod:`~lftransfer.app.bench.accuracy`).
+        exact_aperture_samples: aperture points per lenslet of that exact reference (area model).
+        peer: also time Mitsuba's path tracer on the light field job (:mod:`~lftransfer.app.bench.peer`).
+        peer_max_spp: the largest peer sample count tried.
+    """
+
+    iterations: int = 10
+    warmup: int = 1
+    lighting_model: str | None = None
+    reconstruction: str | None = None
+    renderer: str = "auto"
+    truth_seed: int | None = 0
+    rig_model: str = "calibrated"
+    calibration: Path | None = None
+    accuracy: bool = True
+    exact_aperture_samples: int = 32
+    peer: bool = True
+    peer_max_spp: int = 4096
+
+    def __post_init__(self) -> None:
+        if self.iterations < 1:
+            raise ValueError(f"iterations must be >= 1, got {self.iterations}")
+        if self.warmup < 1:
+            raise ValueError(f"warmup must be >= 1 (the first frame compiles the kernels), got {self.warmup}")
+        if self.rig_model not in RIG_MODELS:
+            raise ValueError(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
+
+
+@dataclass(frozen=True)
+class Spread:
+    """Milliseconds over the timed frames: median, min, max, population standard deviation."""
+
+    median: float
+    min: float
+    max: float
+    stdev: float
+
+    @classmethod
+    def of(cls, seconds: list[float]) -> "Spread":
+        ms = [1000.0 * s for s in seconds]
+        return cls(round(statistics.median(ms), 3), round(min(ms), 3), round(max(ms), 3),
+                   round(statistics.pstdev(ms), 3))
+
+
+@dataclass(frozen=True)
+class BenchResult:
+    """Everything the benchmark measured, and the settings to reproduce it.
+
+    Attributes:
+        pipeline_iteration_ms: the pipeline's share of a frame (sum of :data:`PIPELINE_STAGES`, and of any stage
+            the step times that is not a capture), median over the timed frames, ms.
+        pipeline_iteration: its spread over the timed frames.
+        stages_ms: per pipeline stage, its spread (``render_lightfield`` includes relighting the synthetic scene
+            with the decoded light field).
+        capture_ms: the rig's capture per frame (:data:`RIG_STAGES`: LF camera and view camera), median, ms.
+        rig_stages_ms: per capture stage, its spread.
+        unstaged_ms: the step's wall time in no stage (rig setup and projection, bookkeeping), median, ms.
+        step_total_ms: the step's whole wall time, median, ms.
+        floor_ms: the floor: the step's light field and view rays cast once against the synthetic scene, ms.
+        floor: its details (rays per batch, ms per batch, against the renderer's own geometry).
+        iteration_over_floor: pipeline_iteration_ms / floor_ms.
+        fast_vs_exact: the fast path's accuracy on the last timed frame, or None (not asked for).
+        peer: Mitsuba's path tracer on the light field job, or None (not asked for).
+        settings: the settings used (scene, resolution, samples, models, rig, variant, ...).
+        frames_moved: timed frames in which a synthetic object moved (an animated scene).
+        cache_vertices: vertices of the fast path's irradiance cache, or None (exact path).
+        peak_rss_mb: the process's peak resident memory, MB.
+        calibration_s: seconds the bench spent calibrating the rig (0 when it did not).
+    """
+
+    pipeline_iteration_ms: float
+    pipeline_iteration: Spread
+    stages_ms: dict[str, Spread]
+    capture_ms: float
+    rig_stages_ms: dict[str, Spread]
+    unstaged_ms: float
+    step_total_ms: float
+    floor_ms: float
+    floor: FloorTiming
+    iteration_over_floor: float
+    fast_vs_exact: FastVsExact | None
+    peer: PeerComparison | None
+    settings: dict
+    frames_moved: int
+    cache_vertices: int | None
+    peak_rss_mb: float
+    calibration_s: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        """JSON-ready dict (nested dataclasses as dicts)."""
+        return asdict(self)
+
+
+def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> TransferSettings:
+    """The live loop's settings as the demo builds them from the scene (``lftransfer.app.pipeline._run``):
+    the rig's angular samples, the scene's lighting model, aperture samples and reconstruction, ``render.spp``
+    rays per light field sample and per view pixel; ``options`` may pick another lighting model,
+    reconstruction or renderer, as ``lft run`` may."""
+    render = scene.render
+    model = options.lighting_model or render.lighting_model
+    reconstruction = (options.reconstruction or render.reconstruction) if model == "area" else "box"
+    return TransferSettings(angular_samples=scene.rig.angular_samples, lighting_model=model,
+                            aperture_samples=render.aperture_samples, reconstruction=reconstruction,
+                            lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
+
+
+def count_bench_steps(scene, options: BenchOptions) -> int:
+    """Progress messages of :func:`run_bench` (for a progress bar), calibration included."""
+    from lftransfer.calibration.rig import count_calibration_steps
+
+    calibrates = options.calibration is None and options.rig_model == "calibrated"
+    return (2 + (count_calibration_steps(scene) if calibrates else 0) + options.warmup + options.iterations + 1
+            + int(options.accuracy) + 3 * int(options.peer))
+
+
+def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[object, str, float]:
+    """The rig model the step uses, a label for it, and the seconds spent calibrating."""
+    from lftransfer.app import pipeline
+    from lftransfer.calibration.rig import load_calibration
+    from lftransfer.rig.model import nominal_rig
+
+    if options.calibration is not None:
+        return load_calibration(options.calibration, scene.synthetic_part()).model, \
+            f"calibrated (calibration file {options.calibration})", 0.0
+    if options.rig_model == "calibrated":
+        start = time.perf_counter()
+        cal = pipeline.calibrate(opened.rig, scene.synthetic_part(), progress=say)
+        took = time.perf_counter() - start
+        return cal.model, f"calibrated (by the bench through the simulated rig, {took:.0f} s)", took
+    if options.rig_model == "oracle":
+        return opened.truth, f"true (oracle): {NOT_WHAT_USERS_RUN}", 0.0
+    return nominal_rig(scene.rig), f"nominal (rig file): {NOT_WHAT_USERS_RUN}", 0.0
+
+
+def _settings_json(scene, options: BenchOptions, settings: TransferSettings, renderer: str, rig_model: str) -> dict:
+    """The settings of a bench run, JSON-ready (machine: CPUs, platform, load averages over 1, 5 and 15 minutes at
+    the end of the run: other work on the machine slows every number)."""
+    from lftransfer.backend import variant
+
+    rig, view = scene.rig, scene.view
+    return {
+        "scene": str(scene.source) if scene.source else None,
+        "resolution": {"lenslets": [rig.rows, rig.cols], "lattice": rig.lattice, "lf_camera": list(rig.lf_camera),
+                       "projector": list(rig.projector), "view": list(view.resolution)},
+        "angular_samples": settings.angular_samples,
+        "lf_spp": settings.lf_spp,
+        "view_spp": settings.view_spp,
+        "aperture_samples": settings.aperture_samples,
+        "lighting_model": settings.lighting_model,
+        "reconstruction": settings.reconstruction,
+        "renderer": {"asked": settings.renderer, "used": renderer},
+        "rig": "sim",
+        "truth_seed": options.truth_seed,
+        "rig_model": rig_model,
+        "calibration_file": str(options.calibration) if options.calibration is not None else None,
+        "iterations": options.iterations,
+        "warmup": options.warmup,
+        "animated": bool(scene.moving),
+        "variant": variant(),
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                    "load_average": [round(x, 2) for x in os.getloadavg()]},
+    }
+
+
+def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progress | None = None) -> BenchResult:
+    """Time the live step on the simulated rig, and measure the floor, the accuracy and the peer beside it.
+
+    Args:
+        scene: the whole scene (``SceneConfig``: the simulated rig takes its real objects; the pipeline gets
+            ``scene.synthetic_part()`` only).
+        options: see :class:`BenchOptions`.
+        progress: called with a message per step (:func:`count_bench_steps` of them).
+
+    Returns:
+        :class:`BenchResult`.
+    """
+    from lftransfer.app.pipeline import RunOptions, open_rig
+    from lftransfer.render import fast
+
+    say = progress or (lambda _m: None)
+    say("set up the simulated rig")
+    opened = open_rig(scene, RunOptions(truth_seed=options.truth_seed))
+    try:
+        model, rig_model, calibration_s = _rig_model(scene, opened, options, say)
+        settings = transfer_settings(scene, options)
+        say("set up the live loop (renderer, codecs)")
+        live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
+        renderer = "fast" if isinstance(live.side.renderer, fast.CachedRenderer) else "exact"
+        times = [float(t) for t in scene.frame_times()]
+        frame_index = iter(range(10 ** 9))
+
+        def step():
+            return live.step(times[next(frame_index) % len(times)])
+
+        for i in range(options.warmup):
+            say(f"warm-up frame {i + 1}/{options.warmup} (compiles the kernels)")
+            with RayRecorder(live.side.renderer) as recorder:
+                step()
+        frames = []
+        for i in range(options.iterations):
+            say(f"live step {i + 1}/{options.iterations}")
+            frames.append(step())
+        say("floor: the step's rays cast once against the synthetic scene")
+        batches = recorder.batches
+        floor = ray_floor(live.side.renderer.objects, batches, repeats=options.iterations,
+                          renderer_scene=live.side.renderer.scene)
+        last = frames[-1]
+        accuracy = None
+        if options.accuracy:
+            say("accuracy: the exact path on the last frame (dense aperture sampling)")
+            accuracy = fast_vs_exact(last, live.side, settings, max_depth=scene.render.max_depth,
+                                     aperture_samples=options.exact_aperture_samples)
+        peer = None
+        if options.peer:
+            peer = peer_comparison(live.side.renderer, model.array, last.captured_lf, spp=settings.lf_spp,
+                                   seed=settings.seed, repeats=max(3, options.iterations // 2),
+                                   max_spp=options.peer_max_spp, progress=say)
+    finally:
+        opened.rig.close()
+
+    stages = [k for k in frames[0].timings_s if k != "total"]
+    pipeline = [k for k in stages if k not in RIG_STAGES]
+    per_frame = [sum(f.timings_s.get(k, 0.0) for k in pipeline) for f in frames]
+    capture = [sum(f.timings_s.get(k, 0.0) for k in RIG_STAGES) for f in frames]
+    unstaged = [f.timings_s["total"] - sum(f.timings_s.get(k, 0.0) for k in stages) for f in frames]
+    pipeline_ms = round(1000 * statistics.median(per_frame), 3)
+    notes = []
+    if renderer == "fast":
+        notes.append("the fast path approximates: irradiance cached at the vertices of a fine tessellation "
+                     "(diffuse objects, one reflection); " + ("fast_vs_exact measures what that costs in accuracy"
+                                                            if options.accuracy else
+                                                            "its accuracy was not measured (--no-accuracy)"))
+    if options.calibration is None and options.rig_model != "calibrated":
+        notes.append(f"rig model {rig_model}")
+    if options.peer:
+        notes.append("peer: the light field render alone in the point model (Mitsuba has no area emitter), "
+                     "not the live step")
+    extra = [k for k in pipeline if k not in PIPELINE_STAGES]
+    if extra:
+        notes.append(f"stages counted in the pipeline besides the usual ones: {', '.join(extra)}")
+    return BenchResult(
+        pipeline_iteration_ms=pipeline_ms,
+        pipeline_iteration=Spread.of(per_frame),
+        stages_ms={k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in pipeline},
+        capture_ms=round(1000 * statistics.median(capture), 3),
+        rig_stages_ms={k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in RIG_STAGES},
+        unstaged_ms=round(1000 * statistics.median(unstaged), 3),
+        step_total_ms=round(1000 * statistics.median(f.timings_s["total"] for f in frames), 3),
+        floor_ms=floor.ms,
+        floor=floor,
+        iteration_over_floor=round(pipeline_ms / floor.ms, 2),
+        fast_vs_exact=accuracy,
+        peer=peer,
+        settings=_settings_json(scene, options, settings, renderer, rig_model),
+        frames_moved=sum(bool(f.moved) for f in frames),
+        cache_vertices=live.side.renderer.cache_size if renderer == "fast" else None,
+        peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        calibration_s=round(calibration_s, 1),
+        notes=notes,
+    )
