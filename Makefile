@@ -17,7 +17,7 @@ quick: $(STAMP)
 	$(VENV)/bin/lft demo --quick --out out/quick
 
 bench: $(STAMP)
-	$(VENV)/bin/lft bench --json out/bench.json
+	$(VENV)/bin/lft bench --json out/bench.json $$( [ -f out/demo/calibration.json ] && echo --calibration out/demo/calibration.json )
 
 calibration-table: $(STAMP)
 	$(VENV)/bin/lft calibrate seeds --seeds 1,2,3,4,5 --out out/calibration

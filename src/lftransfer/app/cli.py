@@ -383,6 +383,39 @@ def record(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Sc
                            f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)
 
 
+@app.command("live", cls=_Command)
+def live(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+         rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
+         port: int = typer.Option(8080, min=1, max=65535, metavar="PORT", help="Port of the page on localhost."),
+         out: Path = typer.Option(Path("out/live"), metavar="DIR", help="Where 'save' writes frames and scenes."),
+         quick: bool = _flag("--quick", _QUICK_HELP),
+         truth_seed: int = _truth_seed_option(),
+         exact_rig: bool = _flag("--exact-rig", _EXACT_HELP),
+         rig_model: str = typer.Option("calibrated", metavar="calibrated|nominal|oracle", help=_MODEL_HELP),
+         calibration: Optional[Path] = typer.Option(None, metavar="FILE", help=_CAL_HELP),
+         renderer: str = typer.Option("auto", metavar="auto|fast|exact", help=_RENDERER_HELP)) -> None:
+    """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
+    layers, the light field images and the time of every stage; move and edit the synthetic objects (and the
+    real ones on the simulated rig), change the bounces and the lighting model, pause, step, reset, save."""
+    try:
+        from lftransfer.app.viewer.server import serve
+    except ImportError as exc:
+        fail(f"lft live needs the viewer's packages ({exc.name} is missing): pip install 'lftransfer[viewer]'")
+    from lftransfer.app.viewer.command import open_session
+
+    _check_renderer(renderer)
+    scene = _load(scene_file, quick)
+    rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
+    _check_before_work(scene, out_dir=out, calibrate=calibration is None and rig_model == "calibrated")
+    with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
+        session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig_model, calibration=calibration,
+                               truth_seed=rig_opts["truth_seed"], out=out, renderer=renderer,
+                               progress=lambda msg: status.update(escape(msg[:70])))
+    console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
+    serve(session, port=port)
+    console.print("lft live: stopped")
+
+
 @app.command("render", cls=_Command)
 def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
                out: Path = typer.Option(Path("out/render"), metavar="DIR", help="Output folder (made if missing)."),
