@@ -38,7 +38,8 @@ from lftransfer.transfer.live import LiveTransfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
-__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "acquire_model", "render_sequence", "sequence_times"]
+__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "acquire_model", "frame_metrics", "render_sequence",
+           "sequence_times"]
 
 MODES = ("live", "converged")
 STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
@@ -88,7 +89,7 @@ class FrameRecord:
         seconds: wall time of the frame (transfer, ground truth and writing), s.
         timings_s: seconds per stage of the transfer.
         clipped_fraction: fraction of lit light field samples above the projector's range.
-        metrics: psnr_db and psnr_objects_db against the frame's ground truth (dB), or None.
+        metrics: :func:`frame_metrics` against the frame's ground truth, or None.
     """
 
     index: int
@@ -115,16 +116,26 @@ def sequence_times(scene, options: SequenceOptions) -> np.ndarray:
     return np.concatenate([times, extra])[: options.frames]
 
 
-def _frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
-    """psnr_db (every pixel) and psnr_objects_db (the objects' pixels) of a composite, as :func:`evaluate` does."""
+def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
+    """A composite against its ground truth, on images box-downsampled as :func:`evaluate` does.
+
+    Returns:
+        psnr_db (every pixel) and psnr_objects_db (the objects' pixels), both with the ground truth's peak, and
+        psnr_real_db: over the pixels where only real objects are seen, with their own peak (dB). A bright
+        emitter in view sets the first two's peak and hides errors on dimmer objects; the third does not.
+        None where undefined.
+    """
     from lftransfer.sim.verify import downsample, metric_factor, object_mask, psnr
 
     f = metric_factor(image.shape[1])
     ref = downsample(gt.image, f)
+    img = downsample(image, f)
     mask = object_mask(gt, f)
+    real = (downsample(gt.alpha_real, f) > 0.5) & (downsample(gt.alpha_synthetic, f) < 0.5)
     peak = float(ref.max())
-    values = {"psnr_db": psnr(downsample(image, f), ref, peak),
-              "psnr_objects_db": psnr(downsample(image, f), ref, peak, mask=mask)}
+    real_peak = float(ref[real].max()) if real.any() else 0.0
+    values = {"psnr_db": psnr(img, ref, peak), "psnr_objects_db": psnr(img, ref, peak, mask=mask),
+              "psnr_real_db": psnr(img, ref, real_peak, mask=real) if real.any() else float("nan")}
     return {k: (v if np.isfinite(v) else None) for k, v in values.items()}
 
 
@@ -261,7 +272,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             if live is not None:
                 _write_state(state, live.projected)
             record = FrameRecord(index=i, time_s=t, seconds=time.perf_counter() - t0, timings_s=dict(timings),
-                                 clipped_fraction=clipped, metrics=_frame_metrics(comp, gt) if gt is not None else None)
+                                 clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
             report["frames"].append(record.to_json())
             write_json(report_path, report)
             if progress:
@@ -304,7 +315,7 @@ def _summary(frames: list[dict]) -> dict:
     verified = [f["metrics"] for f in frames if f.get("metrics")]
     out = {"frames": len(frames), "median_frame_s": float(np.median(seconds)) if seconds else None,
            "transfer_fps": float(1.0 / np.median(seconds)) if seconds and np.median(seconds) > 0 else None}
-    for key in ("psnr_db", "psnr_objects_db"):
+    for key in ("psnr_db", "psnr_objects_db", "psnr_real_db"):
         values = [m[key] for m in verified if m.get(key) is not None]
         if values:
             out[f"{key}_min"], out[f"{key}_max"] = float(min(values)), float(max(values))
