@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import os
 import time
+import traceback
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
 
 from lftransfer.app.report import write_json
 
-__all__ = ["OUTPUT_FILES", "STATUS_FILE", "clear_run_folder", "remove_temporaries", "write_status"]
+__all__ = ["OUTPUT_FILES", "STATUS_FILE", "clear_run_folder", "remove_temporaries", "tracked_run", "write_status"]
 
 STATUS_FILE = "status.json"
 OUTPUT_FILES = ("report.json", "composite.png", "composite.exr", "ground_truth.png", "ground_truth.exr",
@@ -66,6 +68,26 @@ def clear_run_folder(out: str | Path, keep: Iterable[str | Path] = ()) -> list[P
             p.unlink()
             removed.append(p)
     return removed
+
+
+@contextmanager
+def tracked_run(out: str | Path, rig: str, *, interrupted: str = "interrupted (Ctrl-C)"):
+    """The status of the run inside the block: ``complete`` when it ends, ``interrupted`` (with ``interrupted``
+    as the error) on Ctrl-C, ``failed`` with the error and a short traceback on any other exception (which is
+    raised again); temporary files of interrupted writes are removed either way. ``running`` is the caller's to
+    write first (before it clears the folder)."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        write_status(out, "interrupted", rig=rig, error=interrupted)
+        raise
+    except BaseException as exc:
+        write_status(out, "failed", rig=rig, error=f"{type(exc).__name__}: {exc}",
+                     traceback=traceback.format_exc(limit=8).splitlines())
+        raise
+    finally:
+        remove_temporaries(out)
+    write_status(out, "complete", rig=rig)
 
 
 def write_status(out: str | Path, state: str, **extra) -> Path:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import shutil
 import time
-import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, Literal
@@ -27,7 +26,7 @@ import numpy as np
 
 from lftransfer.app.pipeline import NOMINAL, RunOptions, calibrate, open_rig, write_calibration
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
-from lftransfer.app.run_folder import remove_temporaries, write_status
+from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.composite import composite
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
@@ -220,81 +219,71 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             (out / name).unlink(missing_ok=True)
     (out / "frames").mkdir(parents=True, exist_ok=True)
     write_status(out, "running", rig=str(options.rig))
-    opened = None
-    try:
-        opened = open_rig(scene, options)
-        model, rig_model = acquire_model(opened, scene, options, out, seq.resume, step)
-        ps = scene.synthetic_part()
-        verify = seq.verify_every > 0 and opened.world is not None
-        state = out / STATE_FILE
-        live = None
-        if seq.mode == "live":
-            projected = None
-            if done and state.is_file():
-                with np.load(state) as z:
-                    projected = LightField(z["data"], model.array)
-            elif done:
-                raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
-            live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
-                                time_s=float(times[len(done)]) if len(done) < n else 0.0)
-            live.index = len(done)
-        report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
-                  "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
-                  "frames_total": n, "display_scale": scale, "frames": done,
-                  "approximations": approximations(ps, settings.renderer)}
-        for i in range(len(done), n):
-            t0 = time.perf_counter()
-            t = float(times[i])
-            gt = None
-            if verify and i % seq.verify_every == 0:
-                from lftransfer.sim.verify import render_ground_truth
-
-                gt = render_ground_truth(opened.world.at(t), spp=options.gt_spp or render.gt_spp,
-                                         use_cache=options.use_cache)
-            if live is not None:
-                frame = live.step(t)
-                comp, timings, clipped = frame.composite, frame.timings_s, frame.clipped_fraction
-            else:
-                result = run_transfer(opened.rig, model, ps, settings, time_s=t)
-                comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
-                timings, clipped = result.timings_s, result.clipped_fraction
-            if scale is None:
-                scale = display_scale(comp, ceiling=emitter_ceiling(ps))
-                report["display_scale"] = scale
-            if live is not None:
-                panel = live_panel(frame, gt.image if gt is not None else None, scale,
-                                   camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
-            else:
-                panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=emitter_ceiling(ps))
-            write_exr(out / "frames" / f"{i:04d}.exr", comp)
-            write_png(out / "frames" / f"{i:04d}.png", to_display(comp, scale))
-            write_png(out / "frames" / f"panel_{i:04d}.png", panel)
-            if live is not None:
-                _write_state(state, live.projected)
-            record = FrameRecord(index=i, time_s=t, seconds=time.perf_counter() - t0, timings_s=dict(timings),
-                                 clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
-            report["frames"].append(record.to_json())
-            write_json(report_path, report)
-            if progress:
-                progress(record, i + 1, n)
-        step("write the videos")
-        report["summary"] = _summary(report["frames"])
-        _write_videos(out, n, report["fps"])
-        write_json(report_path, report)
-    except KeyboardInterrupt:
-        write_status(out, "interrupted", rig=str(options.rig), error="interrupted (Ctrl-C); --resume continues")
-        raise
-    except BaseException as exc:
-        write_status(out, "failed", rig=str(options.rig), error=f"{type(exc).__name__}: {exc}",
-                     traceback=traceback.format_exc(limit=8).splitlines())
-        raise
-    finally:
+    with tracked_run(out, str(options.rig), interrupted="interrupted (Ctrl-C); --resume continues"):
+        opened = None
         try:
+            opened = open_rig(scene, options)
+            model, rig_model = acquire_model(opened, scene, options, out, seq.resume, step)
+            ps = scene.synthetic_part()
+            verify = seq.verify_every > 0 and opened.world is not None
+            state = out / STATE_FILE
+            live = None
+            if seq.mode == "live":
+                projected = None
+                if done and state.is_file():
+                    with np.load(state) as z:
+                        projected = LightField(z["data"], model.array)
+                elif done:
+                    raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
+                live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
+                                    time_s=float(times[len(done)]) if len(done) < n else 0.0)
+                live.index = len(done)
+            report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
+                      "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
+                      "frames_total": n, "display_scale": scale, "frames": done,
+                      "approximations": approximations(ps, settings.renderer)}
+            for i in range(len(done), n):
+                t0 = time.perf_counter()
+                t = float(times[i])
+                gt = None
+                if verify and i % seq.verify_every == 0:
+                    from lftransfer.sim.verify import render_ground_truth
+
+                    gt = render_ground_truth(opened.world.at(t), spp=options.gt_spp or render.gt_spp,
+                                             use_cache=options.use_cache)
+                if live is not None:
+                    frame = live.step(t)
+                    comp, timings, clipped = frame.composite, frame.timings_s, frame.clipped_fraction
+                else:
+                    result = run_transfer(opened.rig, model, ps, settings, time_s=t)
+                    comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+                    timings, clipped = result.timings_s, result.clipped_fraction
+                if scale is None:
+                    scale = display_scale(comp, ceiling=emitter_ceiling(ps))
+                    report["display_scale"] = scale
+                if live is not None:
+                    panel = live_panel(frame, gt.image if gt is not None else None, scale,
+                                       camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
+                else:
+                    panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=emitter_ceiling(ps))
+                write_exr(out / "frames" / f"{i:04d}.exr", comp)
+                write_png(out / "frames" / f"{i:04d}.png", to_display(comp, scale))
+                write_png(out / "frames" / f"panel_{i:04d}.png", panel)
+                if live is not None:
+                    _write_state(state, live.projected)
+                record = FrameRecord(index=i, time_s=t, seconds=time.perf_counter() - t0, timings_s=dict(timings),
+                                     clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
+                report["frames"].append(record.to_json())
+                write_json(report_path, report)
+                if progress:
+                    progress(record, i + 1, n)
+            step("write the videos")
+            report["summary"] = _summary(report["frames"])
+            _write_videos(out, n, report["fps"])
+            write_json(report_path, report)
+        finally:
             if opened is not None:
                 opened.rig.close()
-        finally:
-            remove_temporaries(out)
-    write_status(out, "complete", rig=str(options.rig))
     return report
 
 
