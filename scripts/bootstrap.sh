@@ -23,37 +23,30 @@ if ! have_llvm; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libllvm19 >/dev/null
 fi
 
+# install_missing "DEBS" "why": Debian's packages of DEBS that are not installed yet, with one line saying why.
+install_missing() {
+  local missing="" p
+  for p in $1; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+  done
+  if [ -n "$missing" ]; then
+    echo "bootstrap: installing Debian's$missing ($2)" >&2
+    local SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq
+    # shellcheck disable=SC2086
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
+  fi
+}
+
 # The hardware back-end's projector window (lftransfer.rig.hardware.projector) and its tests: the glfw wheel
 # brings libglfw, which dlopens libX11 & co. and libGL.so.1 at run time; Mesa's software OpenGL (llvmpipe)
-# draws under Xvfb, the virtual X server the tests start. Installed only where a package is missing.
-HW_DEBS="xvfb xauth libgl1 libglx-mesa0 libgl1-mesa-dri libegl1 libx11-6 libx11-xcb1 libxext6 libxrandr2
-  libxinerama1 libxcursor1 libxi6 libxxf86vm1"
-missing=""
-for p in $HW_DEBS; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
-done
-if [ -n "$missing" ]; then
-  echo "bootstrap: installing Debian's$missing (virtual display and software OpenGL for the projector window)" >&2
-  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-  $SUDO apt-get update -qq
-  # shellcheck disable=SC2086
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
-fi
+# draws under Xvfb, the virtual X server the tests start.
+install_missing "xvfb xauth libgl1 libglx-mesa0 libgl1-mesa-dri libegl1 libx11-6 libx11-xcb1 libxext6 libxrandr2
+  libxinerama1 libxcursor1 libxi6 libxxf86vm1" "virtual display and software OpenGL for the projector window"
 
 # The browser test of `lft live` (tests/app/test_viewer.py) drives Debian's chromium through its chromedriver:
 # browsers that pip packages would download are not reachable here.
-WEB_DEBS="chromium chromium-driver"
-missing=""
-for p in $WEB_DEBS; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
-done
-if [ -n "$missing" ]; then
-  echo "bootstrap: installing Debian's$missing (the viewer's browser test)" >&2
-  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-  $SUDO apt-get update -qq
-  # shellcheck disable=SC2086
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
-fi
+install_missing "chromium chromium-driver" "the viewer's browser test"
 
 if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
