@@ -4,8 +4,9 @@
 are PNG (OpenCV) embedded as ``data:`` URIs, plots are inline SVG written here as text; nothing is fetched when
 the file is opened. Its sections follow the calibration's steps (:mod:`lftransfer.calibration.rig`):
 
-1. summary: the calibration file's key numbers and, if given, the errors against a simulated rig's hidden truth
-   (:func:`lftransfer.sim.verify.calibration_errors`) with the project's targets, each marked pass or fail;
+1. summary: the calibration file's key numbers (the measured point light among them: its position, how far it
+   moved from the scene file's, the fit's residual) and, if given, the errors against a simulated rig's hidden
+   truth (:func:`lftransfer.sim.verify.calibration_errors`) with the project's targets, each marked pass or fail;
 2. lenslet centres: the collimated image with the detected centres and the fitted lattice, a full-resolution
    crop, and the lattice fit's residuals as arrows;
 3. lenslet distortion: histograms of the per-lenslet k1 and k2 and a map of k1 over the lenslets;
@@ -41,7 +42,8 @@ NOT_AVAILABLE = "not available (loaded from file)"
 
 # the project's targets against the hidden truth: key of calibration_errors -> largest |error| that passes
 TARGETS = {"lenslet_centre_rms_px": 0.1, "projector_mapping_rms_px": 0.5, "pose_position_rms_mm": 1.0,
-           "pose_rotation_deg": 0.2, "camera_response_error": 0.01, "projector_response_error": 0.01}
+           "pose_rotation_deg": 0.2, "camera_response_error": 0.01, "projector_response_error": 0.01,
+           "light_position_error_mm": 1.0}
 
 # key of calibration_errors -> (what it is, unit, display factor)
 _ERROR_ROWS = {
@@ -62,6 +64,7 @@ _ERROR_ROWS = {
     "black_level_error": ("black level, max", "% of max radiance", 100.0),
     "exposure_rel_error": ("camera exposure, relative", "%", 100.0),
     "camera_gain_rel_rms": ("camera gain (exposure x vignetting), RMS relative", "%", 100.0),
+    "light_position_error_mm": ("point light position", "mm", 1.0),
 }
 
 _CHANNELS = ("R", "G", "B")
@@ -186,6 +189,7 @@ def _summary_section(cal, errors: dict | None) -> str:
         ("radiometry", "camera exposure", f"{rad['camera_exposure']:.5g}", "sr m^2 / W"),
         ("radiometry", "projector max_radiance", f"{rad['max_radiance']:.5g}", "W / (m^2 sr)"),
         ("radiometry", "black level (R, G, B)", _vec(rad["black_level"], ".5f"), "of max_radiance"),
+        *_light_rows(cal.light),
         ("devices", "LF camera", f"{data['lf_camera']['width']} x {data['lf_camera']['height']}, "
                                   f"{data['lf_camera']['bits']} bit", "px"),
         ("devices", "projector", f"{data['projector']['width']} x {data['projector']['height']}, "
@@ -202,6 +206,17 @@ def _summary_section(cal, errors: dict | None) -> str:
                 "project's requirement; rows without one are for information.</p>",
                 _errors_table(errors)]
     return "\n".join(out)
+
+
+def _light_rows(light) -> list[tuple[str, str, str, str]]:
+    """The summary's rows of the point light step (:class:`lftransfer.calibration.light.LightFit`, or None)."""
+    if light is None:
+        return [("point light", "position", "not measured: the scene file's position stands", "")]
+    return [("point light", "position (x, y, z)", _vec(light.position * 1e3, ".2f"), "mm"),
+            ("point light", "moved from the scene file's position", _num(light.shift_mm, ".2f"), "mm"),
+            ("point light", "fit residual, RMS (relative)", _num(100 * light.residual_rms, ".3f"), "%"),
+            ("point light", "standard error from the residuals (x, y, z)", _vec(light.std_mm, ".3f"), "mm"),
+            ("point light", "boards, view pixels", f"{light.boards}, {light.pixels}", "")]
 
 
 def _lenslet_section(cal, diag: dict) -> str:

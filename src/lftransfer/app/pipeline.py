@@ -11,7 +11,6 @@ simulated rig's truth. It reports progress through a callback and never prints.
 from __future__ import annotations
 
 import time
-import traceback
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
@@ -19,7 +18,7 @@ from typing import TYPE_CHECKING, Callable
 from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.composite import composite
 from lftransfer.app.report import emitter_ceiling, write_json, write_outputs
-from lftransfer.app.run_folder import clear_run_folder, remove_temporaries, write_status
+from lftransfer.app.run_folder import clear_run_folder, tracked_run, write_status
 from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import nominal_rig
@@ -88,8 +87,9 @@ class RunOptions:
             stands away from the file's position (:func:`lftransfer.sim.truth.true_light_scene`).
         rig_model: what the pipeline knows of the rig: ``"calibrated"`` (run every calibration step through the
             rig first), ``"nominal"`` (the rig file's values, uncalibrated) or ``"oracle"`` (the simulated rig's
-            hidden truth: a verification baseline, what perfect calibration would reach; the point light stays
-            where the scene file says, as no calibration step measures it).
+            hidden truth, the point light where it really stands: a verification baseline, what perfect
+            calibration would reach). A calibration puts the synthetic side's point light where it measured the
+            real one (the scene file's position where it has none).
         calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
         rig: which rig (:class:`RigSpec`); ``truth_seed``, ``capture_spp`` and the ``oracle`` model are for the
             simulated rig only. A replay of a recording made on the simulated rig is verified against the same
@@ -299,7 +299,8 @@ def _other_reconstructions(scene, options: RunOptions) -> list[str]:
     return [r for r in options.compare_reconstructions if r != primary]
 
 
-def write_calibration(path: Path, calibration, truth=None, source: Path | None = None) -> dict | None:
+def write_calibration(path: Path, calibration, truth=None, source: Path | None = None, *,
+                      true_light=None) -> dict | None:
     """Write a calibration file, its HTML report and (simulated rig only) its errors against the hidden truth.
 
     Args:
@@ -309,6 +310,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
         truth: the simulated rig's true ``RigModel``, or None (a physical rig or a recording: no errors).
         source: the file the calibration was read from, if any: it is not written over with the (shorter)
             calibration read from it.
+        true_light: (3,) where the simulated rig's point light really stands (world frame), or None.
 
     Returns:
         The errors (:func:`lftransfer.sim.verify.calibration_errors`), or None without a truth.
@@ -322,7 +324,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
     errors = None
     errors_path = path.parent / "calibration_errors.json"
     if truth is not None:
-        errors = calibration_errors(calibration, truth)
+        errors = calibration_errors(calibration, truth, true_light=true_light)
         write_json(errors_path, errors)
     else:
         errors_path.unlink(missing_ok=True)            # an earlier calibration's, which this one does not match
@@ -418,24 +420,14 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     out = Path(out)
     write_status(out, "running", rig=str(options.rig))
     clear_run_folder(out, keep=[options.calibration] if options.calibration is not None else [])
-    opened = None
-    try:
-        opened = open_rig(scene, options, operator=operator)
-        report = _run(scene, out, options, opened, progress, warn)
-    except KeyboardInterrupt:
-        write_status(out, "interrupted", rig=str(options.rig), error="interrupted (Ctrl-C)")
-        raise
-    except BaseException as exc:
-        write_status(out, "failed", rig=str(options.rig), error=f"{type(exc).__name__}: {exc}",
-                     traceback=traceback.format_exc(limit=8).splitlines())
-        raise
-    finally:
+    with tracked_run(out, str(options.rig)):
+        opened = None
         try:
+            opened = open_rig(scene, options, operator=operator)
+            report = _run(scene, out, options, opened, progress, warn)
+        finally:
             if opened is not None:
                 opened.rig.close()
-        finally:
-            remove_temporaries(out)
-    write_status(out, "complete", rig=str(options.rig))
     return report
 
 
@@ -506,10 +498,19 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         model, rig_model = opened.truth, "true (oracle)"
     else:
         model, rig_model = nominal_rig(scene.rig), NOMINAL
+    true_light = None if opened.world is None or opened.world.light is None else opened.world.light.position
     if calibration is not None:
         step("calibration report")
         calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth,
-                                                source=options.calibration)
+                                                source=options.calibration, true_light=true_light)
+    # the synthetic side's point light: where the calibration measured the real one, the truth for the oracle
+    nominal_scene = pipeline_scene                      # the negative control knows nothing measured
+    light_at = calibration.light_position(pipeline_scene) if calibration is not None else \
+        true_light if options.rig_model == "oracle" else None
+    if light_at is not None:
+        from lftransfer.scenes import with_overrides
+
+        pipeline_scene = with_overrides(pipeline_scene, light={"position": [float(v) for v in light_at]})
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
@@ -539,29 +540,25 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         if noisy is not None:
             warning(noisy.message())
             gt_spp_needed = noisy.spp_needed
-    for other in _other_models(scene, options):
+    reruns = [("lighting_model", other, by_model, f"transfer_{other}_model")
+              for other in _other_models(scene, options)]
+    reruns += [("reconstruction", other, by_reconstruction, f"transfer_{other}_reconstruction")
+               for other in _other_reconstructions(scene, options)]
+    for field_name, other, table, timing in reruns:       # the same run with one setting changed, measured
         t = time.perf_counter()
-        alt = run_transfer(rig, model, pipeline_scene, replace(settings, lighting_model=other, bounce_views=False),
+        alt = run_transfer(rig, model, pipeline_scene, replace(settings, **{field_name: other}, bounce_views=False),
                            progress=step)
         if verified:
             m = evaluate(alt, gt)
-            by_model[other] = {k: m[k] for k in BY_MODEL_KEYS}
-        timings[f"transfer_{other}_model"] = time.perf_counter() - t
-    for other in _other_reconstructions(scene, options):
-        t = time.perf_counter()
-        alt = run_transfer(rig, model, pipeline_scene, replace(settings, reconstruction=other, bounce_views=False),
-                           progress=step)
-        if verified:
-            m = evaluate(alt, gt)
-            by_reconstruction[other] = {k: m[k] for k in BY_MODEL_KEYS}
-        timings[f"transfer_{other}_reconstruction"] = time.perf_counter() - t
+            table[other] = {k: m[k] for k in BY_MODEL_KEYS}
+        timings[timing] = time.perf_counter() - t
     undefined = dict(metrics.get("undefined", {}))
     control = None
     if options.negative_control:
         why = negative_control_skipped(options) or (None if verified else "the run is not verified against "
                                                                           "ground truth")
         if why is None:
-            control = _negative_control(rig, scene, pipeline_scene, settings, result, gt, step)
+            control = _negative_control(rig, scene, nominal_scene, settings, result, gt, step)
             timings["negative_control"] = control.seconds
             if not control.result.measurably_worse:
                 warning(control.result.message())

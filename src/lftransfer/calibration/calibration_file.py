@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, fiel
 
 from lftransfer.validation import validation_message
 
-__all__ = ["FORMAT", "CalibrationFile", "CalibrationFileError", "parse_calibration_file"]
+__all__ = ["FORMAT", "CalibrationFile", "CalibrationFileError", "LightEntry", "parse_calibration_file"]
 
 FORMAT = "lftransfer-calibration/1"
 
@@ -178,6 +178,20 @@ class ProjectorMappingEntry(_Model):
         return _invertible(m)
 
 
+class LightEntry(_Model):
+    """``light`` (optional; files from before the point light step lack it): the real point light as measured,
+    world frame (the scene file's), metres; the rest are the fit's measurements, for reports."""
+
+    position_m: Vec3
+    start_m: Optional[Vec3] = None
+    intensity_albedo: Optional[Annotated[list[NonNegative], Field(min_length=3, max_length=3)]] = None
+    dark_ratio: Diagnostic = None
+    residual_rms: Diagnostic = None
+    std_mm: Optional[Annotated[list[Diagnostic], Field(min_length=3, max_length=3)]] = None
+    pixels: Optional[NonNegInt] = None
+    boards: Optional[NonNegInt] = None
+
+
 class CalibrationFile(_Model):
     """A whole calibration file."""
 
@@ -190,6 +204,7 @@ class CalibrationFile(_Model):
     lenslet_centres: Optional[LensletCentresEntry] = None
     distortion: Optional[DistortionEntry] = None
     projector_mapping: Optional[ProjectorMappingEntry] = None
+    light: Optional[LightEntry] = None
 
 
 def parse_calibration_file(data: object, name: str) -> CalibrationFile:

@@ -8,7 +8,9 @@
    homography is that mapping after the camera's;
 4. radiometry: responses, vignetting, cross-talk, black level, brightness and exposure (:mod:`.radiometric`);
 5. global pose: projected fringes on boards the view camera sees (:mod:`.pose`), which carry the
-   model frame into the world (array rotation, offset, pitch and tilt).
+   model frame into the world (array rotation, offset, pitch and tilt);
+6. point light (scenes with a ``[light]``): boards lit by the real point light alone, photographed by the view
+   camera, give its position (:mod:`.light`), where the synthetic side's virtual twin of it is put.
 
 The result is a :class:`Calibration`, whose :attr:`Calibration.model` is the rig model the pipeline uses, and
 which is written as JSON in OpenCV's conventions (camera matrices, distortion ``k1 k2 p1 p2 k3``).
@@ -27,6 +29,7 @@ from lftransfer.calibration.calibration_file import FORMAT, CalibrationFileError
 from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
 from lftransfer.calibration.images import to_grey
 from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
+from lftransfer.calibration.light import LightFit, calibrate_light, count_light_messages
 from lftransfer.calibration.pose import FRINGE_SHIFTS, POSE_DEPTHS, POSE_ROUNDS, ArrayPose, apply_pose, calibrate_pose
 from lftransfer.calibration.projector import (ProjectorCameraFit, decode_gray_code, fit_projector_camera,
                                               gray_code_patterns)
@@ -43,7 +46,7 @@ from lftransfer.validation import read_json
 __all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_exposure", "calibrate_rig",
            "count_calibration_steps", "load_calibration"]
 
-STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose")
+STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose", "point light")
 
 
 @dataclass
@@ -57,6 +60,8 @@ class Calibration:
         projector_fit: LF camera -> projector pixel homography.
         radiometry: responses, vignetting, cross-talk, black level, brightness, exposure.
         pose: the model frame's pose in the world.
+        light: the real point light as measured (world frame), or None (a scene without one, or a calibration
+            file from before the step existed): the scene file's position then stands.
         diagnostics: images and measurements for the report (not saved).
     """
 
@@ -66,7 +71,16 @@ class Calibration:
     projector_fit: ProjectorCameraFit | None
     radiometry: Radiometry
     pose: ArrayPose
+    light: LightFit | None = None
     diagnostics: dict = field(default_factory=dict)
+
+    def light_position(self, scene) -> tuple[float, float, float] | None:
+        """Where the synthetic side's point light goes (world frame, metres): the measured position, else the
+        scene file's; None for a scene without a point light."""
+        if scene.light is None:
+            return None
+        where = self.light.position if self.light is not None else scene.light.position
+        return tuple(float(v) for v in where)
 
     def to_json(self) -> dict:
         """The calibration as plain JSON data (OpenCV conventions for the per-lenslet cameras)."""
@@ -93,6 +107,8 @@ class Calibration:
         if self.projector_fit is not None:
             data["projector_mapping"] = {"camera_to_projector": self.projector_fit.homography.tolist(),
                                          "rms_px": self.projector_fit.rms_px, "pixels": self.projector_fit.pixels}
+        if self.light is not None:
+            data["light"] = self.light.to_json()
         return data
 
     def write(self, path) -> Path:
@@ -176,8 +192,14 @@ def load_calibration(path, scene) -> Calibration:
         pose = ArrayPose.from_json({k: float("nan") if v is None else v for k, v in entry.pose.model_dump().items()})
     except (KeyError, TypeError, ValueError) as exc:
         raise bad("pose", exc) from None
+    light = None
+    if entry.light is not None:
+        try:
+            light = LightFit.from_json(entry.light.model_dump())
+        except (KeyError, TypeError, ValueError) as exc:
+            raise bad("light", exc) from None
     return Calibration(model=model, lattice=None, distortion=None, projector_fit=None, radiometry=radiometry,
-                       pose=pose)
+                       pose=pose, light=light)
 
 
 def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
@@ -289,7 +311,8 @@ def _gray_groups(scene) -> int:
 
 def count_calibration_steps(scene) -> int:
     """Progress messages of :func:`calibrate_rig` (for a progress bar)."""
-    return 1 + SWEEP_STEPS ** 2 + _gray_groups(scene) + _RADIOMETRY_MESSAGES + 1 + _POSE_MESSAGES
+    return 1 + SWEEP_STEPS ** 2 + _gray_groups(scene) + _RADIOMETRY_MESSAGES + 1 + _POSE_MESSAGES \
+        + count_light_messages(scene)
 
 
 def check_rig_matches(rig: Rig, scene) -> None:
@@ -312,11 +335,11 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
         rig: any :class:`~lftransfer.rig.base.Rig`; the steps ask it for set-ups (collimator, focal-plane
             diffuser, boards), projections and captures, and leave it in the real scene with the projector black.
         scene: the synthetic part of the scene (``SceneConfig.synthetic_part()``): the rig file's nominal
-            values and the view camera.
+            values, the view camera and the point light as the scene file places it (the last step's start).
         progress: called with a message per capture or step.
 
     Returns:
-        Calibration.
+        Calibration (``light`` None for a scene without a point light).
     """
     say = progress or (lambda msg: None)
     check_rig_matches(rig, check_synthetic(scene))
@@ -370,7 +393,12 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
     pose, pose_diag = calibrate_pose(rig, model, scene, progress=say)
     diag["pose"] = pose_diag
     model = apply_pose(model, pose)
+
+    # 6. the point light (its black level's light taken out with the calibrated projector)
+    light = None
+    if scene.light is not None:
+        light, diag["light"] = calibrate_light(rig, model, scene, progress=say)
     rig.project(rig.info.black())
     rig.setup(RealScene())
     return Calibration(model=model, lattice=lattice, distortion=distortion, projector_fit=prj_fit,
-                       radiometry=radiometry, pose=pose, diagnostics=diag)
+                       radiometry=radiometry, pose=pose, light=light, diagnostics=diag)

@@ -117,7 +117,7 @@ class FocalPlaneDiffuser:
 
 @dataclass(frozen=True)
 class Board:
-    """A flat diffuse board held in front of the array, real objects away, point light off.
+    """A flat diffuse board held in front of the array, real objects away, point light off (or on).
 
     Attributes:
         centre: (3,) where the board's centre is asked for, rig frame, metres (z > 0).
@@ -126,6 +126,9 @@ class Board:
         albedo: diffuse reflectance of the board (a grey target).
         chart: (columns, rows, square metres) of a chessboard printed on the board's centre (dark squares of
             reflectance albedo / 4), or None for a plain board.
+        point_light: the real point light on (the board lit by it and by whatever the projector shows; the point
+            light step of the calibration keeps the projector black); off by default. :func:`describe` leaves it
+            out while it is off, so recordings made before it existed replay unchanged.
     """
 
     centre: tuple[float, float, float]
@@ -133,6 +136,7 @@ class Board:
     size: tuple[float, float] = (0.3, 0.3)
     albedo: float = 0.8
     chart: tuple[int, int, float] | None = None
+    point_light: bool = False
     kind: str = field(default="board", init=False)
 
     def __post_init__(self) -> None:
@@ -148,15 +152,21 @@ class Board:
         if self.chart is not None:
             cols, rows, square = self.chart
             object.__setattr__(self, "chart", (int(cols), int(rows), float(square)))
+        if not isinstance(self.point_light, (bool, np.bool_)):
+            raise ValueError(f"Board.point_light must be True or False, got {self.point_light!r}")
+        object.__setattr__(self, "point_light", bool(self.point_light))
 
     def prompt(self) -> str:
         c = self.centre
         what = f"the board with the printed {self.chart[0]} x {self.chart[1]} chessboard" if self.chart else \
             "the plain grey board"
-        return (f"Hold {what} with its centre about {100 * c[2]:.0f} cm in front of the array "
-                f"(x {100 * c[0]:+.0f} cm, y {100 * c[1]:+.0f} cm), facing ({self.normal[0]:+.2f}, "
-                f"{self.normal[1]:+.2f}, {self.normal[2]:+.2f}), where the projected image looks sharp; "
-                "take the real objects away, point light off.")
+        where = (f"Hold {what} with its centre about {100 * c[2]:.0f} cm in front of the array "
+                 f"(x {100 * c[0]:+.0f} cm, y {100 * c[1]:+.0f} cm), facing ({self.normal[0]:+.2f}, "
+                 f"{self.normal[1]:+.2f}, {self.normal[2]:+.2f})")
+        if self.point_light:
+            return (f"{where}, towards the point light; take the real objects away and switch the point light ON "
+                    "(the projector stays black; keep your hand and body out of the light's path).")
+        return f"{where}, where the projected image looks sharp; take the real objects away, point light off."
 
 
 Setup = Union[RealScene, Collimator, WhiteField, FocalPlaneDiffuser, Board]
@@ -298,6 +308,8 @@ class RigInfo:
 def describe(request) -> dict:
     """A request (set-up or capture) as plain JSON data."""
     data = dataclasses.asdict(request)
+    if isinstance(request, Board) and not request.point_light:
+        del data["point_light"]           # as before the field existed: older recordings keep their keys
     if isinstance(request, LFCapture):
         data["kind"] = "lf_capture"
     elif isinstance(request, ViewCapture):

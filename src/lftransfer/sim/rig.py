@@ -134,7 +134,8 @@ class SimRig:
 
     def setup(self, request: Setup) -> None:
         """Arrange the simulated world: the real scene (its objects posed at the request's time), a collimator, a white diffuser, the focal-plane diffuser
-        or a board held by the (simulated) operator, who misplaces it by a hidden error."""
+        or a board held by the (simulated) operator, who misplaces it by a hidden error (lit by the point light too
+        when the request says ``point_light``)."""
         if isinstance(request, Board):
             self._world = self._board_renderer(request)
         elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
@@ -188,7 +189,7 @@ class SimRig:
         elif isinstance(self._setup, FocalPlaneDiffuser):
             make = lambda: self._focal_plane_radiance(self._setup.transmission)  # noqa: E731
         else:
-            lights = self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
+            lights = self._setup_lights()
             make = lambda: self._lf_radiance(self._world, lights)               # noqa: E731
         radiance = make() * np.float32(request.exposure_scale)
         codes = self._expose_frames(radiance, request.frames)
@@ -202,7 +203,7 @@ class SimRig:
         w, h = self._view.resolution
         if self._world is None:                       # collimator or diffusers: the view camera sees darkness
             return ViewFrame(radiance=np.zeros((h, w, 3), np.float32))
-        lights = self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
+        lights = self._setup_lights()
         img = self._world.render_view(self._view_sensor, w, h, lights, spp=request.quality or self.view_spp,
                                       seed=self._seed)
         return ViewFrame(radiance=img.rgb)
@@ -224,6 +225,12 @@ class SimRig:
 
     def _lights(self):
         return ([self._point_light] if self._point_light is not None else []) + self._projector_lights()
+
+    def _setup_lights(self) -> list:
+        """The lights of the current set-up: the point light (where it really stands) and the projector in the
+        real scene and on a board asked for with the point light on; the projector alone otherwise."""
+        lit = isinstance(self._setup, RealScene) or (isinstance(self._setup, Board) and self._setup.point_light)
+        return self._lights() if lit else self._projector_lights()
 
     def _expose_frames(self, radiance: np.ndarray, frames: int) -> np.ndarray:
         cam = self._truth.camera

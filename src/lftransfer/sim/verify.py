@@ -394,18 +394,21 @@ def _rig_rotation(model) -> np.ndarray:
     return rotation_xy(model.tilt) @ rotation_z(model.array.rotation)
 
 
-def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict:
+def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int = 200_000) -> dict:
     """Errors of a calibration against the simulated rig's hidden truth (verification only).
 
     Args:
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
         truth: the true ``RigModel`` (``SimRig.truth``).
+        true_light: (3,) where the point light really stands, world frame, metres (the hidden world's
+            ``light.position``: :func:`lftransfer.sim.truth.true_light_scene`), or None.
         max_pixels: camera pixels sampled for the ray and mapping errors.
 
     Returns:
         JSON-ready dict: lenslet centres (LF camera px), projector mapping (projector px), global pose (mm,
         degrees), pitch, ray directions (degrees), responses (fraction of full scale), cross-talk, black level,
-        brightness, exposure, vignetting.
+        brightness, exposure, vignetting; ``light_position_error_mm`` (the distance from the measured point light
+        to the true one) where the calibration measured it and ``true_light`` is given.
     """
     from lftransfer.calibration.radiometric import response_error
 
@@ -467,4 +470,7 @@ def calibration_errors(calibration, truth, *, max_pixels: int = 200_000) -> dict
         st = tcam.exposure * tcam.vignetting[ys, xs]
         sc = ccam.exposure * ccam.vignetting[ys, xs]
         out["camera_gain_rel_rms"] = float(np.sqrt(np.mean((sc / st - 1) ** 2)))
+    light = getattr(calibration, "light", None)
+    if light is not None and true_light is not None:
+        out["light_position_error_mm"] = float(1000 * np.linalg.norm(light.position - np.asarray(true_light, float)))
     return out
