@@ -155,3 +155,16 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
         server.should_exit = True
         thread.join(30)
     assert not thread.is_alive() and session._thread is not None and not session._thread.is_alive()
+
+
+def test_04_ground_truth_beside_the_composite(session):
+    """On the simulated rig the "ground truth" layer shows the composite beside a path-traced ground truth of
+    the state as it stands (rendered on its own thread; black until the first one is done)."""
+    frame = session.live.step(0.0)
+    session.scale = 1.0
+    first = session._layer(frame, "ground truth")
+    h, w = frame.composite.shape[:2]
+    assert first.shape == (h, 2 * w, 3)
+    session._gt_thread.join(120)
+    side = session._layer(frame, "ground truth")[:, w:]
+    assert side.max() > 0

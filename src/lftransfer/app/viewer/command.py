@@ -31,4 +31,4 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = "calibrated", cali
                                 lf_spp=r.spp, view_spp=r.spp, renderer=renderer)
     live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
-    return LiveSession(scene, live, out, sim_rig=sim)
+    return LiveSession(scene, live, out, sim_rig=sim, world=opened.world)

@@ -28,7 +28,8 @@ from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
 
 __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerFrame"]
 
-LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected")
+LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "ground truth")
+GT_SPP = 64                # samples per pixel of the viewer's ground truth (a preview, not a measurement)
 MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces")
 _POSE_LIMIT_M = 0.5        # |translate| components the page may ask for, metres
 
@@ -100,14 +101,18 @@ class LiveSession:
         live: the live loop (rig, rig model, synthetic part of ``scene``).
         out: folder for saved frames and scenes.
         sim_rig: the simulated rig when there is one (its real objects can be moved), else None.
+        world: the simulated rig's hidden world (real objects, true light) for the "ground truth" layer, or None.
 
     Example:
         >>> session = LiveSession(scene, LiveTransfer(rig, model, scene.synthetic_part()), Path("out/live"))
         >>> session.start(on_frame=print); session.submit({"type": "pause"}); session.stop()   # doctest: +SKIP
     """
 
-    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None) -> None:
+    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, world=None) -> None:
         self.scene = scene
+        self.world = world
+        self._gt: tuple[str, np.ndarray] | None = None          # (state key, image) of the latest ground truth
+        self._gt_thread: threading.Thread | None = None
         self.live = live
         self.out = Path(out)
         self.sim_rig = sim_rig
@@ -290,8 +295,35 @@ class LiveSession:
                            stages_ms={k: 1000.0 * v for k, v in frame.timings_s.items()}, images=images,
                            clipped_fraction=frame.clipped_fraction)
 
+    def _world_now(self, t: float):
+        """The simulated world as it stands now: the real objects (moved by the page), the synthetic ones (edited),
+        the true light, posed at ``t``."""
+        real = self.sim_rig.real_objects if self.sim_rig is not None else self.world.real
+        return with_overrides(self.world, real=real, synthetic=list(self.scene.synthetic)).at(t)
+
+    def _ground_truth(self, frame: LiveFrame) -> np.ndarray | None:
+        """The path-traced ground truth of the current state beside the composite: rendered on its own thread
+        at :data:`GT_SPP` samples per pixel whenever the state changed, the latest finished one shown."""
+        if self.world is None:
+            return None
+        world = self._world_now(frame.time_s)
+        key = world.model_dump_json(exclude={"source"})
+        if (self._gt is None or self._gt[0] != key) and (self._gt_thread is None or not self._gt_thread.is_alive()):
+            def render() -> None:
+                from lftransfer.sim.verify import render_ground_truth
+
+                self._gt = (key, render_ground_truth(world, spp=GT_SPP, use_cache=False).image)
+            self._gt_thread = threading.Thread(target=render, name="lft-live-gt", daemon=True)
+            self._gt_thread.start()
+        return self._gt[1] if self._gt is not None else None
+
     def _layer(self, frame: LiveFrame, layer: str) -> np.ndarray:
         rig = self.scene.rig
+        if layer == "ground truth":
+            gt = self._ground_truth(frame)
+            left = to_display(np.clip(frame.composite, 0, None), self.scale)
+            right = to_display(gt, self.scale) if gt is not None else np.zeros_like(left)
+            return np.concatenate([left, right], axis=1)
         if layer == "panel":
             return live_panel(frame, None, self.scale, camera_bits=rig.lf_camera_bits,
                               projector_bits=rig.projector_bits, tile_width=320)
