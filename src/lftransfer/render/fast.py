@@ -1,12 +1,34 @@
-"""The fast path of the renderer: irradiance cached at the vertices of a fine tessellation.
+"""The fast path of the renderer: irradiance cached at the vertices of a fine tessellation, glossy lobes per ray.
 
-Light field transfer is low-pass (one spatial sample per lenslet), and diffuse surfaces reflect irradiance, so
-the expensive part of relighting, the sum over K lenslets with shadow rays, is done once per *cache vertex*
-instead of once per ray: every synthetic object becomes a triangle mesh with edges of at most ``max_edge``, each
-triangle with its own three vertices (so sharp edges stay sharp), and the irradiance at every vertex is computed
-with the same lights as the exact path (area, point or prefiltered model, shadow rays). Rendering a light field
-or a view image is then one ray cast per ray and a barycentric interpolation of the three vertex irradiances,
-times albedo / pi.
+Light field transfer is low-pass (one spatial sample per lenslet), and the diffuse part of reflection depends on
+irradiance only, so the expensive part of relighting, the sum over K lenslets with shadow rays, is done once per
+*cache vertex* instead of once per ray: every synthetic object becomes a triangle mesh with edges of at most
+``max_edge``, each triangle with its own three vertices (so sharp edges stay sharp), and the diffuse irradiance at
+every vertex is computed with the same lights as the exact path (area, point or prefiltered model, shadow rays).
+A light field or view render is then one ray cast per ray, a barycentric interpolation of the three vertex
+irradiances and one evaluation of the material's diffuse lobe at the hit (its albedo texture at the hit's
+texture coordinates).
+
+Glossy and metal materials (Mitsuba's ``roughplastic`` / ``plastic`` and ``roughconductor`` / ``conductor``) are
+split into their two lobes:
+
+- the diffuse lobe of ``roughplastic`` is separable, f_d(wi, wo) cos_o = A(uv) t(cos_i) t(cos_o) cos_o (t the
+  coating's transmittance), so the cache holds E_t = sum of L t(cos_o) / t(1) cos_o over the lights (the
+  cosine weighted by the tabulated t(c) / t(1) of :func:`diffuse_lobe_table`) and a ray multiplies it by
+  f_d(wi, n) = A(uv) t(cos_i) t(1), with no approximation beyond the interpolation;
+- the view-dependent glossy lobe is evaluated per ray: point lights and emitters by their own next-event
+  estimation restricted to the glossy lobe (one shadow ray, or the emitter samples, per ray); a light field of
+  the area model by S * S directions drawn from the lobe (Mitsuba's own visible-normal sampling, stratified;
+  S grows with the roughness, :func:`lobe_strata`), each read where it meets the array plane
+  (:meth:`LightFieldLight.incident`), an unbiased estimate of what the exact path sums over the lenslets'
+  apertures; where the light field's K_active * M aperture points cost no more than those directions (few
+  lit lenslets, rough lobes), the exact path's own lenslet sum (:meth:`LightFieldLight.reflect`) is added and
+  the two are weighted by multiple importance sampling (balance heuristic). Neither casts rays: occlusion
+  between a glossy object and the array comes from a second cache, the fraction of each lenslet's aperture
+  (``VISIBILITY_POINTS`` points) that each cache vertex sees, interpolated like the irradiance and computed once
+  per lens array while nothing moves. A smooth lobe (roughness 0) takes its one mirror direction. Under the
+  point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is the
+  exact path's lenslet sum with the cached visibility.
 
 When objects move (an animation frame, :meth:`CachedRenderer.update`), the moved objects' cache vertices are
 re-tessellated in place (the acceleration structure is rebuilt over the new vertex positions) and every light's
@@ -14,10 +36,14 @@ irradiance is computed again (a moved object can shadow any other); while nothin
 light is kept per light object, so a live loop that keeps its point light and swaps the captured light field
 each frame relights only for the new light field.
 
-What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`):
-only diffuse materials and emitters (for glossy or metal objects use the exact path), one reflection inside the half-space
-(interreflections between synthetic objects are dropped), and irradiance varies linearly across triangles of
-size ``max_edge`` (6 mm by default, four times finer than a lenslet).
+What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`
+with ``max_depth=1``): one reflection inside the half-space (interreflections between synthetic objects are
+dropped), diffuse irradiance varies linearly across triangles of size ``max_edge`` (6 mm by default, four times
+finer than a lenslet), so diffuse shadow edges, and the light field's shadows in glossy lobes, are blurred over
+one triangle; the glossy lobe is a Monte Carlo estimate with its own noise (measured no larger than the exact
+path's at its default samples, for roughness >= :data:`MIN_ROUGHNESS`); where the exact path (next-event
+estimation only) renders no light in a smooth (roughness 0) lobe, the fast path renders the mirror image of the
+light field.
 """
 
 from __future__ import annotations
@@ -28,15 +54,124 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.render.integrator import Light
+from lftransfer.render.lights import jit_array, to_numpy
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import bsdf_dict, emitter_dict, object_keys, shape_dict
 
 DEFAULT_MAX_EDGE = 0.006  # m
+DEFAULT_LOBE_SAMPLES = 16
+LOBE_ROUGHNESS = 0.15       # lobes up to this roughness take lobe_samples directions; rougher ones more
+VISIBILITY_POINTS = 4       # aperture points per lenslet of the glossy lobes' visibility cache
+TABLE_NODES = 64            # nodes of the diffuse lobe's cosine table (Mitsuba's roughplastic tabulates 64)
+MATERIALS = ("diffuse", "glossy", "metal", "emitter")
+
+
+#: Glossy and metal lobes at least this rough were measured against the exact path (tests/render/
+#: measure_glossy.py): the fast path's error is no larger than the exact path's own at its default samples.
+#: Below it, even 256 aperture points per lenslet leave the exact path unconverged, so neither is verified.
+MIN_ROUGHNESS = 0.02
 
 
 def supports(objects: Sequence) -> bool:
-    """Whether the fast path renders these objects as the exact path would (all diffuse or emitters)."""
-    return all(getattr(o.material, "type", "diffuse") in ("diffuse", "emitter") for o in objects)
+    """Whether the fast path renders these objects' materials (diffuse, glossy, metal, emitter)."""
+    return all(getattr(o.material, "type", "diffuse") in MATERIALS for o in objects)
+
+
+def verified(material) -> bool:
+    """Whether the fast path's rendering of ``material`` was measured to be as accurate as the exact path's:
+    diffuse and emitter materials, glossy and metal ones of roughness at least :data:`MIN_ROUGHNESS`."""
+    return not _glossy(material) or material.roughness >= MIN_ROUGHNESS
+
+
+def _glossy(material) -> bool:
+    return material.type in ("glossy", "metal")
+
+
+def lobe_strata(roughness: float, lobe_samples: int = DEFAULT_LOBE_SAMPLES) -> int:
+    """Strata per axis S of the directions drawn from a glossy lobe of GGX ``roughness`` (S * S per ray).
+
+    S0 = round(sqrt(lobe_samples)) up to roughness ``LOBE_ROUGHNESS``; a rougher lobe spans a solid angle
+    growing as roughness^2 and takes S = ceil(S0 * roughness / LOBE_ROUGHNESS), at most 4 S0, so that its
+    noise stays near the exact path's; a smooth lobe (roughness 0) has its one mirror direction (S = 1).
+    """
+    if roughness <= 0:
+        return 1
+    side0 = max(1, int(round(np.sqrt(lobe_samples))))
+    return int(min(4 * side0, max(side0, np.ceil(side0 * roughness / LOBE_ROUGHNESS - 1e-9))))
+
+
+def diffuse_lobe_table(material) -> np.ndarray:
+    """How the material's diffuse lobe weighs light by its cosine, relative to normal incidence.
+
+    w(c) = f_d(n, wo(c)) / f_d(n, n) with cos(wo) = c, from Mitsuba's own BSDF evaluated with its diffuse
+    component only (albedo 1, no texture): 1 for ``diffuse``, the coating's t(c) / t(1) for ``glossy``, 0 for
+    ``metal`` and ``emitter`` (no diffuse lobe).
+
+    Args:
+        material: a scene material.
+
+    Returns:
+        (TABLE_NODES,) float32 at c = i / (TABLE_NODES - 1), read by linear interpolation.
+    """
+    mi = mitsuba()
+    import drjit as dr
+
+    if material.type == "diffuse":
+        return np.ones(TABLE_NODES, np.float32)
+    if material.type != "glossy":
+        return np.zeros(TABLE_NODES, np.float32)
+    white = material.model_copy(update={"albedo": [1.0, 1.0, 1.0], "texture": None})
+    bsdf = mi.load_dict(bsdf_dict(white))
+    c = np.maximum(np.linspace(0.0, 1.0, TABLE_NODES), 1e-4)
+    si = dr.zeros(mi.SurfaceInteraction3f, TABLE_NODES)
+    si.wi = mi.Vector3f(0.0, 0.0, 1.0)
+    si.n = mi.Normal3f(0.0, 0.0, 1.0)
+    si.sh_frame = mi.Frame3f(si.n)
+    wo = mi.Vector3f(mi.Float(np.sqrt(1.0 - c**2)), 0.0, mi.Float(c))
+    value = np.array(bsdf.eval(_context("diffuse"), si, wo), np.float64)[0] / c
+    return (value / value[-1]).astype(np.float32)
+
+
+def _context(lobe: str):
+    """A BSDF context that enables only the diffuse lobe or only the glossy (and smooth) lobe."""
+    mi = mitsuba()
+    ctx = mi.BSDFContext()
+    ctx.type_mask = mi.BSDFFlags.DiffuseReflection if lobe == "diffuse" \
+        else mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DeltaReflection
+    return ctx
+
+
+def texcoords(obj, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Mitsuba's texture coordinates of an object's exact shape at its cache vertices.
+
+    Each vertex is read a hair inside its own triangle (so that a box's vertex takes its own face's
+    coordinates), by a ray along -normal onto the exact shape; on a sphere, a triangle across the seam u = 0 / 1
+    gets u + 1 on its small side (the texture repeats).
+
+    Args:
+        obj: ``ObjectConfig``.
+        vertices: (3F, 3) cache vertices of the object (:func:`tessellate`), metres.
+        normals: (3F, 3) their unit normals.
+
+    Returns:
+        (3F, 2) float32 (u, v).
+    """
+    mi = mitsuba()
+
+    scene = mi.load_dict({"type": "scene", "shape": shape_dict(obj)}, parallel=False, optimize=False)
+    tri = np.asarray(vertices, np.float64).reshape(-1, 3, 3)
+    inner = (tri + 1e-3 * (tri.mean(axis=1, keepdims=True) - tri)).reshape(-1, 3)
+    normals = np.asarray(normals, np.float64)
+    o = inner + 1e-4 * normals
+    d = -normals
+    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
+                                      mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3)))))
+    uv = np.array(si.uv, np.float64).T.reshape(-1, 3, 2)
+    if obj.shape == "sphere":
+        u = uv[..., 0]
+        seam = (u.max(axis=1) - u.min(axis=1)) > 0.5
+        u[seam] = np.where(u[seam] < 0.5, u[seam] + 1.0, u[seam])
+    return uv.reshape(-1, 2).astype(np.float32)
 
 
 def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.ndarray]:
@@ -78,28 +213,38 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
         normals = mesh.vertex_normals[faces]
     else:
         normals = np.repeat(mesh.face_normals, 3, axis=0)
-    return vertices.astype(np.float32), normals.astype(np.float32)
+    return np.array(vertices, dtype=np.float32), np.array(normals, dtype=np.float32)
 
 
 class CachedRenderer(HalfSpaceRenderer):
-    """Renders diffuse objects from an irradiance cache at the vertices of a fine tessellation.
+    """Renders objects from a diffuse irradiance cache at the vertices of a fine tessellation, with glossy lobes
+    evaluated per ray (module docs).
 
     The cache is recomputed whenever the list of lights changes (by identity), so rendering a light field and a
     view image with the same list relights once.
 
     Args:
-        objects: scene objects (diffuse).
+        objects: scene objects (diffuse, glossy, metal or emitter; albedo textures on rectangles, boxes, spheres).
         max_edge: longest triangle edge of the cache, metres.
+        lobe_samples: directions drawn per ray from a glossy lobe of roughness up to ``LOBE_ROUGHNESS`` for a
+            light field of the area model (rounded to a square number; rougher lobes take more,
+            :func:`lobe_strata`; a smooth lobe takes its one mirror direction).
+        glossy: evaluate the glossy lobes (False: the diffuse cache alone, a control for tests).
 
     Example:
         >>> r = CachedRenderer(scene.synthetic)                                   # doctest: +SKIP
         >>> lf = r.render_lightfield(array, lights, U=48, V=48, model="point")     # doctest: +SKIP
     """
 
-    def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE) -> None:
+    def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE,
+                 lobe_samples: int = DEFAULT_LOBE_SAMPLES, glossy: bool = True) -> None:
         if not supports(objects):
-            raise ValueError("the fast path renders diffuse materials and emitters only; use HalfSpaceRenderer")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
+        if lobe_samples < 1:
+            raise ValueError(f"lobe_samples must be >= 1, got {lobe_samples}")
         self.max_edge = float(max_edge)
+        self.lobe_samples = int(lobe_samples)
+        self.glossy = bool(glossy)
         self.max_depth = 1
         self._build(list(objects))
 
@@ -109,48 +254,63 @@ class CachedRenderer(HalfSpaceRenderer):
 
         max_edge = self.max_edge
         self.objects = objects
-        shapes, verts, norms, albedo = {}, [], [], []
+        shapes, verts, norms, rows, tables = {}, [], [], [], []
         base = 0
         bases = []
-        for key, obj in zip(object_keys(self.objects), self.objects):
+        info = []          # per object: (has cache vertices, glossy lobe, smooth lobe)
+        for i, (key, obj) in enumerate(zip(object_keys(self.objects), self.objects)):
+            tables.append(diffuse_lobe_table(obj.material))
             if emitter_dict(obj.material) is not None:
                 # an emitter reflects nothing (no cache vertices) and keeps its exact shape, so that emitter
                 # sampling draws directions over what it subtends (a sphere's cone), not over facets
                 shapes[key] = shape_dict(obj)
-                verts.append(np.zeros((0, 3), np.float32))
-                norms.append(np.zeros((0, 3), np.float32))
-                albedo.append(np.zeros(3, np.float32))
                 bases.append(base)
+                info.append((False, False, False))
                 continue
             v, n = tessellate(obj, max_edge)
+            textured = getattr(obj.material, "texture", None) is not None
             props = mi.Properties()
             props["bsdf"] = mi.load_dict(bsdf_dict(obj.material))
-            mesh = mi.Mesh(key, len(v), len(v) // 3, props=props)
+            mesh = mi.Mesh(key, len(v), len(v) // 3, props=props, has_vertex_normals=True,
+                           has_vertex_texcoords=textured)
             params = mi.traverse(mesh)
             params["vertex_positions"] = mi.Float(v.ravel())
+            params["vertex_normals"] = mi.Float(n.ravel())
+            if textured:
+                params["vertex_texcoords"] = mi.Float(texcoords(obj, v, n).ravel())
             params["faces"] = mi.UInt32(np.arange(len(v), dtype=np.uint32))
             params.update()
             shapes[key] = mesh
             verts.append(v)
             norms.append(n)
-            albedo.append(np.asarray(getattr(obj.material, "albedo", [0.0, 0.0, 0.0]), np.float32))
+            rows.append(np.full(len(v), i, np.uint32))
             bases.append(base)
+            info.append((True, _glossy(obj.material), _glossy(obj.material) and obj.material.roughness == 0))
             base += len(v)
         self.scene = mi.load_dict({"type": "scene", **shapes}, parallel=False, optimize=False)
-        self.vertices = np.concatenate(verts)                     # (M, 3) cache points
-        self.normals = np.concatenate(norms)                      # (M, 3)
-        # Registry id of each loaded shape -> its first cache vertex and its albedo / pi.
+        self.vertices = np.concatenate(verts) if verts else np.zeros((0, 3), np.float32)   # (M, 3) cache points
+        self.normals = np.concatenate(norms) if norms else np.zeros((0, 3), np.float32)    # (M, 3)
+        self._rows = np.concatenate(rows) if rows else np.zeros(0, np.uint32)              # (M,) object index
+        self._tables = np.stack(tables).astype(np.float32)                                 # (objects, TABLE_NODES)
+        self._reflects_diffuse = self._tables[:, -1] > 0                                   # (objects,)
+        # Registry id of each loaded shape -> its first cache vertex and what its material does.
         ids = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in self.scene.shapes()]
         order = {s.id(): i for i, s in enumerate(self.scene.shapes())}
         keys = list(shapes)
         table_base = np.zeros(max(ids) + 1, np.uint32)
-        table_albedo = np.zeros((max(ids) + 1, 3), np.float32)
-        for key, b, a in zip(keys, bases, albedo):
+        table_flags = np.zeros(max(ids) + 1, np.uint32)        # bit 0: cached, bit 1: glossy, bit 2: smooth
+        self._sids = np.zeros(len(keys), np.int64)              # registry id of each object's shape
+        for i, (key, b, (cached, glossy, smooth)) in enumerate(zip(keys, bases, info)):
             sid = ids[order[key]]
+            self._sids[i] = sid
             table_base[sid] = b
-            table_albedo[sid] = a / np.pi
-        self._base = mi.UInt32(table_base)
-        self._albedo = mi.Float(table_albedo.ravel())
+            table_flags[sid] = int(cached) | (int(glossy) << 1) | (int(smooth) << 2)
+        self._flags_size = len(table_flags)
+        self._base = jit_array(mi.UInt32, table_base)
+        self._flags = jit_array(mi.UInt32, table_flags)
+        self._any_glossy = self.glossy and any(glossy for _, glossy, _ in info)
+        self._glossy_objects = np.array([_glossy(o.material) for o in self.objects], bool)
+        self._visibility: dict = {}
         self._keys = keys
         self._bases = bases
         self._irradiance = None
@@ -161,8 +321,8 @@ class CachedRenderer(HalfSpaceRenderer):
         """Move to new poses of the same objects (an animation frame).
 
         Objects whose pose changed are re-tessellated; when their vertex count is unchanged (a rigid motion) the
-        vertex positions are written into the loaded meshes and the acceleration structure is rebuilt over them,
-        otherwise the whole cache is built again. Every light's irradiance is then stale.
+        vertex positions and normals are written into the loaded meshes and the acceleration structure is rebuilt
+        over them, otherwise the whole cache is built again. Every light's irradiance is then stale.
 
         Args:
             objects: the objects, posed (``ObjectConfig.at(t)``), in the same order as before.
@@ -174,7 +334,7 @@ class CachedRenderer(HalfSpaceRenderer):
 
         objects = list(objects)
         if not supports(objects):
-            raise ValueError("the fast path renders diffuse materials and emitters only; use HalfSpaceRenderer")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
         if len(objects) != len(self.objects) or any(a.shape != b.shape or a.material != b.material
                                                     for a, b in zip(objects, self.objects)):
             self._build(objects)
@@ -193,10 +353,12 @@ class CachedRenderer(HalfSpaceRenderer):
                 self._build(objects)
                 return True
             params[f"{self._keys[i]}.vertex_positions"] = mi.Float(v.ravel())
+            params[f"{self._keys[i]}.vertex_normals"] = mi.Float(n.ravel())
             self.vertices[self._bases[i]:end] = v
             self.normals[self._bases[i]:end] = n
         params.update()
         self.objects = objects
+        self._visibility.clear()
         self._per_light.clear()
         self._lit_by = None
         return True
@@ -207,8 +369,8 @@ class CachedRenderer(HalfSpaceRenderer):
         return len(self.vertices)
 
     def relight(self, lights: Sequence[Light], seed: int = 0) -> None:
-        """Compute the irradiance at every cache vertex from ``lights`` (with shadow rays); a light object that
-        lit the cache before, with nothing moved since, is not computed again."""
+        """Compute the diffuse irradiance at every cache vertex from ``lights`` (with shadow rays); a light
+        object that lit the cache before, with nothing moved since, is not computed again."""
         mi = mitsuba()
 
         m = len(self.vertices)
@@ -221,65 +383,229 @@ class CachedRenderer(HalfSpaceRenderer):
             for c in range(3):
                 total[c] += e[c]
         self._per_light = kept
-        self._irradiance = [mi.Float(t) for t in total]
+        self._irradiance = [jit_array(mi.Float, t) for t in total]
         self._lit_by = tuple(lights)
 
     def _irradiance_of(self, light: Light, seed: int) -> list[np.ndarray]:
-        """(3,) arrays (M,) of one light's irradiance at the cache vertices."""
+        """(3,) arrays (M,) of one light's diffuse irradiance at the cache vertices: each direction weighted by
+        its cosine times the vertex's material's :func:`diffuse_lobe_table` (zero for metals)."""
         mi = mitsuba()
         import drjit as dr
 
         m = len(self.vertices)
         total = [np.zeros(m, np.float32) for _ in range(3)]
-        # Shade only the vertices this light can reach (a light field through the array reaches those facing it
-        # on its side of the plane).
-        idx = np.flatnonzero(light.may_light(self.vertices, self.normals)) if hasattr(light, "may_light") \
-            else np.arange(m)
+        # Shade only the vertices with a diffuse lobe that this light can reach (a light field through the array
+        # reaches those facing it on its side of the plane).
+        wanted = self._reflects_diffuse[self._rows] if m else np.zeros(0, bool)
+        if hasattr(light, "may_light"):
+            wanted &= light.may_light(self.vertices, self.normals)
+        idx = np.flatnonzero(wanted)
         if len(idx) == 0:
             return total
         v, n = self.vertices[idx], self.normals[idx]
         si = dr.zeros(mi.SurfaceInteraction3f, len(idx))
-        si.p = mi.Point3f(v[:, 0], v[:, 1], v[:, 2])
-        si.n = mi.Normal3f(n[:, 0], n[:, 1], n[:, 2])
+        si.p = mi.Point3f(*(jit_array(mi.Float, v[:, i]) for i in range(3)))
+        si.n = mi.Normal3f(*(jit_array(mi.Float, n[:, i]) for i in range(3)))
         si.sh_frame = mi.Frame3f(si.n)
         si.wi = mi.Vector3f(0, 0, 1)
-        e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=True), np.float32)
+        weight = self._cosine_weight(self._rows[idx])
+        e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=weight), np.float32)
         for c in range(3):
             total[c][idx] = e[c]
         return total
 
+    def _cosine_weight(self, rows: np.ndarray):
+        """weight(cosine) -> cosine * table(cosine) per shading point, for shading points of objects ``rows``."""
+        mi = mitsuba()
+        import drjit as dr
+
+        if np.all(self._tables[rows] == 1.0):
+            return True          # all diffuse: the plain cosine
+        tables = jit_array(mi.Float, self._tables.ravel())
+        start = jit_array(mi.UInt32, (rows * TABLE_NODES).astype(np.uint32))
+
+        def weight(cosine):
+            x = dr.clip(cosine, 0.0, 1.0) * (TABLE_NODES - 1)
+            i = dr.minimum(mi.UInt32(x), TABLE_NODES - 2)
+            f = x - mi.Float(i)
+            return cosine * ((1.0 - f) * dr.gather(mi.Float, tables, start + i)
+                             + f * dr.gather(mi.Float, tables, start + i + 1))
+        return weight
+
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Radiance (N, 3), hit mask (N,) and distance (N,): one ray cast and a cache lookup per ray."""
+        """Radiance (N, 3), hit mask (N,) and distance (N,): one ray cast and a cache lookup per ray (and the
+        glossy lobe at rays that meet a glossy object)."""
         mi = mitsuba()
         import drjit as dr
 
         if self._lit_by is None or len(self._lit_by) != len(lights) or \
                 any(a is not b for a, b in zip(self._lit_by, lights)):
             self.relight(lights, seed=seed)
+        n = len(origins)
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
-        rays = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+        rays = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
+                        mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))))
         pi = self.scene.ray_intersect_preliminary(rays)
-        hit = pi.is_valid()
+        dr.eval(pi)          # every field in one kernel (read apart, each would intersect again)
+        t = np.array(pi.t, dtype=np.float32)
+        hit = np.isfinite(t)
+        radiance = np.zeros((n, 3), np.float32)
+        idx = np.flatnonzero(hit)
+        if len(idx):
+            index = jit_array(mi.UInt32, idx.astype(np.uint32))
+            pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
+            rays = dr.gather(mi.Ray3f, rays, index)
+            radiance[idx] = to_numpy(self._shade(rays, pi, lights, seed))
+        return radiance, hit, t
+
+    def _shade(self, rays, pi, lights: Sequence[Light], seed: int):
+        """Radiance (mi.Color3f, (N,)) leaving the hits ``pi`` of ``rays`` (all valid) back along the rays."""
+        mi = mitsuba()
+        import drjit as dr
+
+        si = pi.compute_surface_interaction(rays, mi.RayFlags.All)
         sid = dr.reinterpret_array(mi.UInt32, pi.shape)
-        first = dr.gather(mi.UInt32, self._base, sid, hit) + pi.prim_index * 3
+        flags = dr.gather(mi.UInt32, self._flags, sid)
+        cached = (flags & 1) != 0
+        first = dr.gather(mi.UInt32, self._base, sid, cached) + pi.prim_index * 3
         b1, b2 = pi.prim_uv.x, pi.prim_uv.y
         b0 = 1.0 - b1 - b2
-        emitted = mi.Color3f(0.0)
-        seen = [light for light in lights if hasattr(light, "emitted")]
-        if seen:    # emitting objects seen directly
-            si = pi.compute_surface_interaction(rays, mi.RayFlags.All, hit)
-            for light in seen:
-                emitted += light.emitted(self.scene, si, hit)
-        out = []
-        for c in range(3):
-            e = self._irradiance[c]
-            value = (b0 * dr.gather(mi.Float, e, first, hit) + b1 * dr.gather(mi.Float, e, first + 1, hit)
-                     + b2 * dr.gather(mi.Float, e, first + 2, hit))
-            out.append(dr.select(hit, value * dr.gather(mi.Float, self._albedo, sid * 3 + c, hit) + emitted[c], 0.0))
-        t = dr.select(hit, pi.t, dr.inf)
-        dr.eval(out, t)
-        radiance = np.stack([np.array(x, dtype=np.float32) for x in out], axis=1)
-        t = np.array(t, dtype=np.float32)
-        return radiance, np.isfinite(t), t
+        e = [b0 * dr.gather(mi.Float, x, first, cached) + b1 * dr.gather(mi.Float, x, first + 1, cached)
+             + b2 * dr.gather(mi.Float, x, first + 2, cached) for x in self._irradiance]
+        bsdf = si.bsdf()
+        # the diffuse lobe towards the normal: albedo(uv) / pi for a diffuse material, A(uv) t(cos_i) t(1) for a
+        # glossy one (module docs)
+        f = bsdf.eval(_context("diffuse"), si, mi.Vector3f(0.0, 0.0, 1.0), cached)
+        out = dr.select(cached, mi.Color3f(e[0], e[1], e[2]) * f, 0.0)
+        for light in lights:
+            if hasattr(light, "emitted"):     # emitting objects seen directly
+                out += light.emitted(self.scene, si, mi.Bool(True))
+        if self._any_glossy:
+            glossy = cached & ((flags & 2) != 0)
+            smooth = (flags & 4) != 0
+            ctx = _context("glossy")
+            corners = [first + c for c in range(3)]
+            for light in lights:
+                if not hasattr(light, "reflect"):       # point lights, emitters: their own sampling
+                    out += light.illuminate(self.scene, si, glossy, seed=seed, ctx=ctx)
+                    continue
+                table = self._lenslet_visibility(light)
+                K = light.K
+
+                def seen(k, table=table, K=K):
+                    ok = glossy & (k < K)
+                    return (b0 * dr.gather(mi.Float, table, corners[0] * K + k, ok)
+                            + b1 * dr.gather(mi.Float, table, corners[1] * K + k, ok)
+                            + b2 * dr.gather(mi.Float, table, corners[2] * K + k, ok))
+
+                if light.model != "area":         # lenslets are points: summed, as the exact path does
+                    out += light.reflect(si, glossy & ~smooth, ctx, seen, seed=seed)
+                    continue
+                strata, summed, any_summed = self._strategies(light)
+                side = dr.gather(mi.UInt32, strata, sid, glossy)
+                by_lenslet = glossy & (dr.gather(mi.UInt32, summed, sid, glossy) != 0)
+                if any_summed:
+                    out += light.reflect(si, by_lenslet, ctx, seen, self._base_samples(), seed=seed)
+                out += self._lobe(si, glossy, by_lenslet, side, light, seen, seed)
+        return out
+
+    def _base_samples(self) -> int:
+        side0 = max(1, int(round(np.sqrt(self.lobe_samples))))
+        return side0 * side0
+
+    def _strategies(self, light):
+        """Per shape registry id: the strata per axis of its glossy lobe's directions (mi.UInt32), and whether
+        its lobe also sums the lenslets (mi.UInt32, 0 / 1): when the K_active * M aperture points of this light
+        cost no more than the directions its roughness asks for (:func:`lobe_strata`), the lenslet sum and
+        ``lobe_samples`` directions are combined by multiple importance sampling; otherwise the directions alone
+        estimate the lobe. Also whether any shape sums the lenslets."""
+        mi = mitsuba()
+        cost = len(light.active_lenslets) * light.M
+        strata = np.zeros(self._flags_size, np.uint32)
+        summed = np.zeros(self._flags_size, np.uint32)
+        side0 = int(round(np.sqrt(self._base_samples())))
+        for sid, obj in zip(self._sids, self.objects):
+            if not _glossy(obj.material):
+                continue
+            side = lobe_strata(obj.material.roughness, self.lobe_samples)
+            if obj.material.roughness > 0 and cost <= side * side:
+                strata[sid], summed[sid] = side0, 1
+            else:
+                strata[sid] = side
+        return jit_array(mi.UInt32, strata), jit_array(mi.UInt32, summed), bool(summed.any())
+
+    def _lobe(self, si, active, summed, strata, light, seen, seed: int):
+        """The directions drawn from a glossy lobe: its light from a light field of the area model
+        (mi.Color3f, (N,)).
+
+        ``strata`` ** 2 directions (per shading point) drawn from the lobe (Mitsuba's visible-normal sampling,
+        stratified), each read where it meets the array plane (:meth:`LightFieldLight.incident`), occluded as the
+        cache says (``seen(k)``, the fraction of the lenslet k it meets that the shading point sees). Where
+        ``summed``, the lenslet sum of :meth:`LightFieldLight.reflect` estimates the same light, and each
+        direction takes the balance heuristic's share n p_b / (n p_b + p_l); a smooth lobe (one direction) and
+        the others take it all.
+        """
+        mi = mitsuba()
+        import drjit as dr
+
+        n = dr.width(si.p)
+        ctx = _context("glossy")
+        bsdf = si.bsdf()
+        rng = mi.PCG32(n, dr.opaque(mi.UInt64, seed * 1000003 + 17), dr.arange(mi.UInt64, n))
+        strata = dr.maximum(strata, 1)            # no integer division by zero in inactive lanes
+        count = strata * strata
+        side = mi.Float(strata)
+        n_f = mi.Float(count)
+
+        def cond(j, rng, acc):
+            return active & (j < count)
+
+        def body(j, rng, acc):
+            r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
+            sample = mi.Point2f((mi.Float(j % strata) + r2) / side, (mi.Float(j // strata) + r3) / side)
+            bs, weight = bsdf.sample(ctx, si, r1, sample, active)
+            w = si.to_world(bs.wo)
+            ok = active & dr.any(weight != 0.0)
+            radiance, k, p_l = light.incident(si.p, w, ok)
+            mis = dr.select(summed, n_f * bs.pdf / dr.maximum(n_f * bs.pdf + p_l, 1e-30), 1.0)
+            acc += dr.select(ok, weight * radiance * (seen(k) * mis), 0.0)
+            return j + 1, rng, acc
+
+        _, _, acc = dr.while_loop((mi.UInt32(0), rng, mi.Color3f(0.0)), cond, body)
+        return dr.select(active, acc / n_f, 0.0)
+
+    def _lenslet_visibility(self, light):
+        """mi.Float (M * K,): the fraction of each lenslet k's aperture (``VISIBILITY_POINTS`` stratified points)
+        that cache vertex v sees, at [v * K + k]; computed for the vertices of glossy objects that the light may
+        reach, once per lens array and side while nothing moves."""
+        mi = mitsuba()
+        import drjit as dr
+
+        array = light.lightfield.array
+        key = (array, light.side)
+        if key in self._visibility:
+            return self._visibility[key]
+        m, K = len(self.vertices), array.K
+        wanted = self._glossy_objects[self._rows] & light.may_light(self.vertices, self.normals) if m \
+            else np.zeros(0, bool)
+        idx = np.flatnonzero(wanted)
+        seen = np.zeros((m, K), np.float32)
+        if len(idx):
+            x = np.repeat(self.vertices[idx], K, axis=0)                  # (len(idx) * K, 3), k fastest
+            nrm = np.repeat(self.normals[idx], K, axis=0)
+            si = dr.zeros(mi.SurfaceInteraction3f, len(x))
+            si.p = mi.Point3f(*(jit_array(mi.Float, x[:, i]) for i in range(3)))
+            si.n = mi.Normal3f(*(jit_array(mi.Float, nrm[:, i]) for i in range(3)))
+            centres = np.tile(array.centres, (len(idx), 1))
+            total = mi.Float(0.0)
+            for offset in array.sample_aperture(VISIBILITY_POINTS, seed=0):
+                target = centres + offset
+                p = mi.Point3f(jit_array(mi.Float, target[:, 0]), jit_array(mi.Float, target[:, 1]), 0.0)
+                total += dr.select(self.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
+                dr.eval(total)
+            seen[idx] = (np.array(total, np.float32) / VISIBILITY_POINTS).reshape(len(idx), K)
+        table = jit_array(mi.Float, seen)
+        self._visibility[key] = table
+        return table

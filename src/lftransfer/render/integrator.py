@@ -14,6 +14,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.render.lights import jit_array, to_numpy
 
 
 class Light(Protocol):
@@ -48,7 +49,8 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         return radiance, np.zeros(0, bool), distance
     o = np.ascontiguousarray(origins, dtype=np.float32)
     d = np.ascontiguousarray(directions, dtype=np.float32)
-    rays = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+    rays = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
+                    mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))))
     t = scene.ray_intersect_preliminary(rays).t
     t_np = np.array(t)
     hit = np.isfinite(t_np)
@@ -67,8 +69,8 @@ def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     import drjit as dr
 
     n = len(origins)
-    ray = mi.Ray3f(mi.Point3f(origins[:, 0], origins[:, 1], origins[:, 2]),
-                   mi.Vector3f(directions[:, 0], directions[:, 1], directions[:, 2]))
+    ray = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, origins[:, i]) for i in range(3))),
+                   mi.Vector3f(*(jit_array(mi.Float, directions[:, i]) for i in range(3))))
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(dr.opaque(mi.UInt32, seed), n)
     ctx = mi.BSDFContext()
@@ -94,4 +96,4 @@ def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         sampler.schedule_state()
         if not dr.any(active):
             break
-    return np.array(result, dtype=np.float32).T  # Color3f converts to (3, N)
+    return to_numpy(result)

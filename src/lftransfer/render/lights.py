@@ -27,18 +27,52 @@ lenslets that carry light. Shapes of inputs are written as (N,) for N shading po
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
-from typing import Literal
+from typing import Callable, Literal, Union
 
 import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.lightfield import LightField
 
+SAMPLING_POOL = 1024        # aperture points of a jittered area model
 LightingModel = Literal["point", "area", "prefiltered"]
 LIGHTING_MODELS: tuple[str, ...] = ("point", "area", "prefiltered")
 Reconstruction = Literal["box", "linear"]
 RECONSTRUCTIONS: tuple[str, ...] = ("box", "linear")
+#: What ``illuminate`` returns: False, the radiance reflected towards ``-si.wi`` (BSDF-weighted); True, the
+#: irradiance on the surface with normal ``si.n`` (each direction weighted by its cosine), W m^-2; a function
+#: ``weight(cosine) -> mi.Float`` (per shading point, (N,)), each direction weighted by ``weight(cosine)``
+#: instead (the cache of the fast path weights by the cosine times a BSDF's diffuse transmittance).
+Irradiance = Union[bool, Callable]
+
+
+def jit_array(kind, values: np.ndarray):
+    """A Dr.Jit array (``kind``, e.g. ``mi.Float``) holding ``values`` (any shape, flattened), from a 64-byte
+    aligned NumPy buffer.
+
+    Dr.Jit reads a NumPy buffer in place, and the kernels that load from it are specialised to its alignment,
+    which varies from one NumPy allocation to the next: such kernels would be compiled again call after call
+    (hundreds of milliseconds each on the LLVM back-end). An aligned buffer keeps them the same.
+    """
+    flat = np.asarray(values).ravel()
+    dtype = np.float32 if kind.__name__.startswith("Float") else np.uint32
+    buf = np.empty(len(flat) + 64 // np.dtype(dtype).itemsize, dtype=dtype)
+    start = (-buf.ctypes.data % 64) // buf.itemsize
+    aligned = buf[start:start + len(flat)]
+    aligned[:] = flat
+    return kind(aligned)
+
+
+def to_numpy(color) -> np.ndarray:
+    """(N, 3) float32 of a mi.Color3f (N,), evaluated first on its own: converting it directly would fuse the
+    conversion, whose layout names N, into the kernel that computes it, and every new N would compile that
+    kernel again."""
+    import drjit as dr
+
+    dr.eval(color)
+    return np.stack([np.array(color[c], dtype=np.float32) for c in range(3)], axis=1)
 
 
 @dataclass
@@ -53,11 +87,13 @@ class PointLight:
     position: np.ndarray
     intensity: np.ndarray
 
-    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
         """Light from this light at the points ``si`` (mi.Color3f, (N,)).
 
-        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted), or with ``irradiance=True`` the
-        irradiance on the surface with normal ``si.n`` (W m^-2), for caches of diffuse shading.
+        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted, the BSDF components that ``ctx``
+        enables, all by default), or with ``irradiance=True`` the irradiance on the surface with normal ``si.n``
+        (W m^-2), for caches of diffuse shading (or, with a weight function, the weighted irradiance: see
+        :data:`Irradiance`).
         """
         mi = mitsuba()
         import drjit as dr
@@ -67,7 +103,7 @@ class PointLight:
         r2 = dr.squared_norm(w)
         wn = w * dr.rsqrt(r2)
         visible = active & ~scene.ray_test(si.spawn_ray_to(p), active)
-        f = _weight(si, wn, visible, irradiance)
+        f = _weight(si, wn, visible, irradiance, ctx)
         intensity = mi.Color3f(*[float(c) for c in self.intensity])
         return dr.select(visible, f * intensity / r2, 0.0)
 
@@ -100,9 +136,10 @@ class EmitterLight:
         active = mi.Bool(active) & si.is_valid()
         return dr.select(active, si.emitter(scene, active).eval(si, active), 0.0)
 
-    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
         """Light from the scene's emitters at the points ``si`` (mi.Color3f, (N,)), reflected towards ``-si.wi``
-        or, with ``irradiance=True``, the irradiance on the surface with normal ``si.n``."""
+        (the BSDF components ``ctx`` enables) or, with ``irradiance``, the (weighted) irradiance on the surface
+        with normal ``si.n``."""
         mi = mitsuba()
         import drjit as dr
 
@@ -116,19 +153,22 @@ class EmitterLight:
             sample = mi.Point2f(rng.next_float32(), rng.next_float32())
             ds, value = scene.sample_emitter_direction(si, sample, True, active)
             ok = active & (ds.pdf > 0.0)
-            f = _weight(si, ds.d, ok, irradiance)
+            f = _weight(si, ds.d, ok, irradiance, ctx)
             result += dr.select(ok, f * value, 0.0)
         return result / self.samples
 
 
-def _weight(si, wn, active, irradiance: bool):
-    """BSDF value times cosine for direction ``wn`` (world, towards the light), or the plain cosine."""
+def _weight(si, wn, active, irradiance: Irradiance, ctx=None):
+    """BSDF value times cosine for direction ``wn`` (world, towards the light; the components ``ctx`` enables),
+    or the plain cosine (``irradiance=True``), or ``irradiance(cosine)`` (a weight function)."""
     mi = mitsuba()
     import drjit as dr
 
+    if callable(irradiance):
+        return mi.Color3f(irradiance(dr.maximum(dr.dot(si.n, wn), 0.0)))
     if irradiance:
         return mi.Color3f(dr.maximum(dr.dot(si.n, wn), 0.0))
-    return si.bsdf().eval(mi.BSDFContext(), si, si.to_local(wn), active)
+    return si.bsdf().eval(ctx if ctx is not None else mi.BSDFContext(), si, si.to_local(wn), active)
 
 
 class LightFieldLight:
@@ -189,31 +229,32 @@ class LightFieldLight:
             # Summed-area table (V+1, U+1) per lenslet and channel: box-filtered lookups in O(1).
             sat = np.zeros((self.K, self.V + 1, self.U + 1, 3), np.float64)
             sat[:, 1:, 1:] = data.astype(np.float64).cumsum(1).cumsum(2)
-            self._table = mi.Float(sat.astype(np.float32).ravel())
+            self._table = jit_array(mi.Float, sat.astype(np.float32).ravel())
         else:
-            self._table = mi.Float(data.ravel())
+            self._table = jit_array(mi.Float, data.ravel())
         centres = array.centres.astype(np.float32)
-        self._cx = mi.Float(centres[:, 0])
-        self._cy = mi.Float(centres[:, 1])
+        self._cx = jit_array(mi.Float, centres[:, 0])
+        self._cy = jit_array(mi.Float, centres[:, 1])
         self.M = 1 if model != "area" else aperture_samples
         self.seed = int(seed)
-        self.pool = 1024 if (model == "area" and jitter) else self.M
+        self.pool = SAMPLING_POOL if (model == "area" and jitter) else self.M
         if model == "area":
             offsets = array.sample_aperture(self.pool, seed=seed).astype(np.float32)
         else:
             offsets = np.zeros((1, 2), np.float32)
-        self._ox = mi.Float(offsets[:, 0])
-        self._oy = mi.Float(offsets[:, 1])
+        self._ox = jit_array(mi.Float, offsets[:, 0])
+        self._oy = jit_array(mi.Float, offsets[:, 1])
         if reconstruction == "linear":
             # (K, pool, 3) lenslets and weights read at every aperture point of every lenslet; a dark lenslet
             # next to a lit one sends light too
             idx, w = array.interpolation(array.centres[:, None, :] + offsets[None].astype(np.float64))
             idx = np.where(w > 0, idx, np.arange(self.K)[:, None, None])
             carries = carries | carries[idx].any(axis=(1, 2))
-            self._blend_idx = mi.UInt32(idx.astype(np.uint32).ravel())
-            self._blend_w = mi.Float(w.astype(np.float32).ravel())
+            self._blend_idx = jit_array(mi.UInt32, idx.astype(np.uint32).ravel())
+            self._blend_w = jit_array(mi.Float, w.astype(np.float32).ravel())
         self.active_lenslets = np.flatnonzero(carries).astype(np.uint32)
-        self._active = mi.UInt32(self.active_lenslets)
+        self._active = jit_array(mi.UInt32, self.active_lenslets)
+        self._sends = jit_array(mi.UInt32, np.append(carries, False).astype(np.uint32))   # (K + 1,), K: none
 
     def may_light(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Which surface points can receive any light through the array at all (a cheap conservative test).
@@ -229,6 +270,156 @@ class LightFieldLight:
         side = points[:, 2] > 0 if self.side == "real" else points[:, 2] < 0
         facing = (np.einsum("nd,cnd->cn", normals, corners[:, None, :] - points[None]) > 0).any(axis=0)
         return side & facing
+
+    def _plane(self, points, directions, active):
+        """Where the rays (x, w) meet the array plane: (raster, meets, raster cell of q, u, v of d, distance)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        look = plane_lookup(self.lightfield.array, self.reconstruction)
+        sign = -1.0 if self.side == "real" else 1.0
+        p, w = points, directions
+        ok = mi.Bool(active) & (p.z * w.z < 0.0)
+        t = -p.z / dr.select(ok, w.z, 1.0)
+        fx = (p.x + t * w.x - look.x0) / look.cell
+        fy = (p.y + t * w.y - look.y0) / look.cell
+        ok &= (fx >= 0.0) & (fy >= 0.0) & (fx < look.nx) & (fy < look.ny)
+        cell = mi.UInt32(dr.floor(fy)) * look.nx + mi.UInt32(dr.floor(fx))
+        d = sign * w
+        u = d.x / dr.select(ok, d.z, 1.0)
+        v = d.y / dr.select(ok, d.z, 1.0)
+        return look, ok, cell, u, v, t
+
+    def incident(self, points, directions, active):
+        """Radiance that the area lenslets send to ``points`` from along ``directions`` (no occlusion test).
+
+        The ray from x along w meets the array plane at q; the light arriving is lenslet k(q)'s radiance in
+        direction d = w (synthetic side) or -w (real side), k(q) the lenslet whose aperture contains q
+        (``"box"``), or the blend of the three lenslets around q (``"linear"``): what ``illuminate`` integrates
+        over the apertures, given per direction, so that a caller can integrate it against a BSDF lobe (the fast
+        path's glossy reflection, :mod:`lftransfer.render.fast`). k(q) is found in a raster of the array plane
+        with cells of pitch / 64 (:func:`plane_lookup`).
+
+        Args:
+            points: mi.Point3f (N,) positions x, metres, on this light's side of the plane.
+            directions: mi.Vector3f (N,) unit directions w from x towards the array.
+            active: mi.Bool (N,).
+
+        Returns:
+            (radiance mi.Color3f (N,), W m^-2 sr^-1, zero where the ray misses the apertures or leaves the
+            lenslets' window |u|, |v| > a; lenslet k(q) mi.UInt32 (N,), K where none; density mi.Float (N,) per
+            steradian with which :meth:`reflect` draws this direction, r^2 / (A cos_p) where k(q) sends light,
+            else 0).
+
+        Raises:
+            ValueError: a ``"point"`` or ``"prefiltered"`` light (its lenslets are points, seen along no
+                direction in particular).
+        """
+        mi = mitsuba()
+        import drjit as dr
+
+        if self.model != "area":
+            raise ValueError(f"incident radiance along a direction needs the area lighting model, got {self.model!r}")
+        look, ok, cell, u, v, t = self._plane(points, directions, active)
+        radiance = mi.Color3f(0.0)
+        for j in range(look.terms):
+            weight = dr.gather(mi.Float, look.weights, cell * 3 + j, ok)
+            k = dr.gather(mi.UInt32, look.lenslets, cell * 3 + j, ok)
+            radiance += weight * self._bilinear(k, u, v, ok & (weight > 0.0))
+        own = dr.select(ok, dr.gather(mi.UInt32, look.own, cell, ok), self.K)
+        sends = ok & (dr.gather(mi.UInt32, self._sends, own, ok) != 0)
+        density = self.M * dr.square(t) / (self.area * dr.maximum(dr.abs(directions.z), 1e-8))
+        return dr.select(ok, radiance, 0.0), own, dr.select(sends, density, 0.0)
+
+    def reflect(self, si, active, ctx, visibility, lobe_samples: int = 0, seed: int = 0):
+        """Light from every lenslet reflected towards ``-si.wi`` by the BSDF components ``ctx`` enables, with
+        occlusion read from a cache instead of shadow rays (the fast path's glossy lobes).
+
+        Each lenslet that sends light is read at one point of its aperture (area model: a random point of the
+        stratified pool, per shading point; point and prefiltered models: its centre), as ``illuminate`` reads
+        it with one aperture sample, and weighted by ``visibility(k)``. With ``lobe_samples`` = n_b > 0 (area
+        model), the caller also draws n_b directions from the BSDF, and this sum takes the balance heuristic's
+        share p_l / (p_l + n_b p_b) of each direction (p_l = r^2 / (A cos_p), its density: one point per
+        aperture).
+
+        Args:
+            si: mi.SurfaceInteraction3f (N,) shading points (with their BSDF).
+            active: mi.Bool (N,).
+            ctx: mi.BSDFContext.
+            visibility: function of a lenslet index k (mi.UInt32, (N,)) -> mi.Float (N,), the fraction of lenslet
+                k's aperture seen from each shading point.
+            lobe_samples: n_b, the BSDF samples the caller adds (0: none).
+            seed: varies the aperture points between calls.
+
+        Returns:
+            mi.Color3f (N,) radiance.
+        """
+        mi = mitsuba()
+        import drjit as dr
+
+        result = mi.Color3f(0.0)
+        n_active = len(self.active_lenslets)
+        if n_active == 0:
+            return result
+        side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
+        active = mi.Bool(active) & side_ok
+        M, pool = self.M, self.pool
+        n = dr.width(si.p)
+        rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed + 7), dr.arange(mi.UInt64, n))
+        start = rng.next_uint32() % pool if pool > M else mi.UInt32(0)
+        n_total = dr.opaque(mi.UInt32, n_active * M)
+        bsdf = si.bsdf()
+        mis = lobe_samples > 0 and self.model == "area"
+
+        def cond(i, acc):
+            return active & (i < n_total)
+
+        def body(i, acc):
+            k = dr.gather(mi.UInt32, self._active, i // M)
+            m = (start + i % M + (i // M) * 7919) % pool
+            p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
+            seen = visibility(k)
+            lit = active & dr.any(radiance != 0.0) & (seen > 0.0)
+            wo = si.to_local(wn)
+            f = bsdf.eval(ctx, si, wo, lit)
+            g = dr.abs(wn.z) * (self.area / M) / r2       # 1 / density of this aperture point, sr
+            if mis:
+                p_b = bsdf.pdf(ctx, si, wo, lit)
+                g = g / (1.0 + lobe_samples * p_b * g)    # times the balance heuristic's weight
+            acc += dr.select(lit, f * radiance * (seen * g), 0.0)
+            return i + 1, acc
+
+        _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
+        return result
+
+    def _aperture_light(self, k, m, x, active):
+        """Aperture point m (of the pool; the centre for the point and prefiltered models) of lenslet k and the
+        light it sends to points x: (p mi.Point3f, unit direction x -> p, squared distance, radiance)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
+        p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
+                       dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
+        w = p - x
+        r2 = dr.squared_norm(w)
+        wn = w * dr.rsqrt(r2)
+        d = sign * wn
+        u = d.x / d.z
+        v = d.y / d.z
+        if self.model == "prefiltered":
+            # u = (x - p)_x / x_z, so an aperture of width sqrt(A) spans sqrt(A) / |x_z| in u (and v).
+            half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(x.z), 1e-6)
+            radiance = self._box(k, u, v, half, active)
+        elif self.reconstruction == "linear":
+            base = (k * self.pool + m) * 3
+            radiance = mi.Color3f(0.0)
+            for t in range(3):
+                j = dr.gather(mi.UInt32, self._blend_idx, base + t)
+                radiance += dr.gather(mi.Float, self._blend_w, base + t) * self._bilinear(j, u, v, active)
+        else:
+            radiance = self._bilinear(k, u, v, active)
+        return p, wn, r2, radiance
 
     # -- texture lookups ---------------------------------------------------------------------------------
     def _bilinear(self, k, u, v, active):
@@ -297,12 +488,12 @@ class LightFieldLight:
         return out
 
     # -- shading ----------------------------------------------------------------------------------------
-    def illuminate(self, scene, si, active, seed: int = 0, irradiance: bool = False):
+    def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
         """Light from every lenslet at the points ``si`` (mi.Color3f, (N,)).
 
-        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted), or with ``irradiance=True`` the
-        irradiance on the surface with normal ``si.n``. ``seed`` varies the random aperture points (area model
-        with jitter) between calls.
+        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted, the components ``ctx`` enables), or
+        with ``irradiance`` the (weighted) irradiance on the surface with normal ``si.n``. ``seed`` varies the
+        random aperture points (area model with jitter) between calls.
         """
         mi = mitsuba()
         import drjit as dr
@@ -314,7 +505,6 @@ class LightFieldLight:
         # Points on the wrong side of the interface cannot receive light through it.
         side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
         active = mi.Bool(active) & side_ok
-        sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
         M, pool = self.M, self.pool
         weight = self.area / M
@@ -331,34 +521,83 @@ class LightFieldLight:
         def body(i, acc):
             k = dr.gather(mi.UInt32, self._active, i // M)
             m = (start + i % M + (i // M) * 7919) % pool
-            p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
-                           dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
-            w = p - si.p
-            r2 = dr.squared_norm(w)
-            wn = w * dr.rsqrt(r2)
-            d = sign * wn
+            p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
             cos_p = dr.abs(wn.z)
-            u = d.x / d.z
-            v = d.y / d.z
-            if self.model == "prefiltered":
-                # u = (x - p)_x / x_z, so an aperture of width sqrt(A) spans sqrt(A) / |x_z| in u (and v).
-                half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(si.p.z), 1e-6)
-                radiance = self._box(k, u, v, half, active)
-            elif self.reconstruction == "linear":
-                base = (k * pool + m) * 3
-                radiance = mi.Color3f(0.0)
-                for t in range(3):
-                    j = dr.gather(mi.UInt32, self._blend_idx, base + t)
-                    radiance += dr.gather(mi.Float, self._blend_w, base + t) * self._bilinear(j, u, v, active)
-            else:
-                radiance = self._bilinear(k, u, v, active)
             lit = active & dr.any(radiance != 0.0)
-            if irradiance:   # no shadow ray towards lenslets behind the surface
+            if irradiance is not False:   # no shadow ray towards lenslets behind the surface
                 lit &= dr.dot(si.n, wn) > 0.0
             visible = lit & ~scene.ray_test(si.spawn_ray_to(p), lit)
-            f = _weight(si, wn, visible, irradiance)
+            f = _weight(si, wn, visible, irradiance, ctx)
             acc += dr.select(visible, f * radiance * (cos_p * weight / r2), 0.0)
             return i + 1, acc
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
+
+
+@dataclass(frozen=True)
+class PlaneLookup:
+    """A raster of the array plane: which lenslets send light from each cell, and with what weight.
+
+    Attributes:
+        x0, y0: corner of the raster (the array's extent), metres.
+        cell: cell size, metres (pitch / 64).
+        nx, ny: raster size.
+        terms: lenslets per cell, 1 (``"box"``) or 3 (``"linear"``).
+        lenslets: mi.UInt32 (ny * nx * 3,) lenslet indices per cell (row-major, y then x).
+        weights: mi.Float (ny * nx * 3,) their weights, zero outside every aperture.
+        own: mi.UInt32 (ny * nx,) the lenslet whose aperture contains the cell's centre, K outside every aperture.
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    nx: int
+    ny: int
+    terms: int
+    lenslets: object
+    weights: object
+    own: object
+
+
+PLANE_CELLS_PER_PITCH = 64
+
+
+def plane_lookup(array, reconstruction: Reconstruction = "box") -> PlaneLookup:
+    """The :class:`PlaneLookup` of a lens array, cached per array and reconstruction.
+
+    Each cell is read at its centre: ``"box"``, the lenslet whose aperture contains it
+    (:meth:`LensArray.lenslet_at` and :meth:`LensArray.in_aperture`); ``"linear"``, the three lenslets and
+    weights of :meth:`LensArray.interpolation` there (inside an aperture only). A point is therefore read as
+    the nearest cell centre reads it, at most pitch / 128 away.
+    """
+    if reconstruction not in RECONSTRUCTIONS:
+        raise ValueError(f"reconstruction must be one of {RECONSTRUCTIONS}, got {reconstruction!r}")
+    return _plane_lookup(array, reconstruction, mitsuba().variant())
+
+
+@functools.lru_cache(maxsize=8)
+def _plane_lookup(array, reconstruction: str, variant: str) -> PlaneLookup:
+    mi = mitsuba()
+    cell = array.pitch / PLANE_CELLS_PER_PITCH
+    xmin, xmax, ymin, ymax = array.extent()
+    nx, ny = int(np.ceil((xmax - xmin) / cell)), int(np.ceil((ymax - ymin) / cell))
+    gx = xmin + (np.arange(nx) + 0.5) * cell
+    gy = ymin + (np.arange(ny) + 0.5) * cell
+    centres = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)          # (ny * nx, 2), row-major
+    own = array.lenslet_at(centres)
+    inside = own >= 0
+    inside[inside] = array.in_aperture(centres[inside] - array.centres[own[inside]])
+    idx = np.zeros((len(centres), 3), np.int64)
+    w = np.zeros((len(centres), 3), np.float64)
+    if reconstruction == "box":
+        idx[inside, 0] = own[inside]
+        w[inside, 0] = 1.0
+    else:
+        idx[inside], w[inside] = array.interpolation(centres[inside])
+        w[idx < 0] = 0.0
+        idx[idx < 0] = 0
+    own = np.where(inside, own, array.K)
+    return PlaneLookup(float(xmin), float(ymin), float(cell), nx, ny, 1 if reconstruction == "box" else 3,
+                       jit_array(mi.UInt32, idx.astype(np.uint32).ravel()),
+                       jit_array(mi.Float, w.astype(np.float32).ravel()), jit_array(mi.UInt32, own.astype(np.uint32)))

@@ -26,7 +26,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 
-__all__ = ["board_shapes", "bsdf_dict", "emitter_dict", "lens_array_absorber", "shape_dict", "scene_dict", "object_keys",
+__all__ = ["albedo_dict", "board_shapes", "bsdf_dict", "emitter_dict", "lens_array_absorber", "shape_dict", "scene_dict", "object_keys",
            "mesh_cache_dir", "write_ply",
            "SPHERE_SUBDIVISIONS"]
 
@@ -41,9 +41,9 @@ def _rgb(value) -> dict:
 def bsdf_dict(material) -> dict:
     """Mitsuba BSDF dict of a material.
 
-    - diffuse -> ``diffuse`` with ``reflectance`` = albedo;
+    - diffuse -> ``diffuse`` with ``reflectance`` = albedo (times the texture, :func:`albedo_dict`);
     - glossy -> ``roughplastic`` (GGX, ``alpha`` = roughness), or ``plastic`` when roughness is 0, with
-      ``diffuse_reflectance`` = albedo and ``specular_reflectance`` = specular;
+      ``diffuse_reflectance`` = albedo (times the texture) and ``specular_reflectance`` = specular;
     - metal -> ``roughconductor`` (material ``none``, GGX, ``alpha`` = roughness), or ``conductor`` when
       roughness is 0, with ``specular_reflectance`` = specular;
     - emitter -> a black ``diffuse`` surface (its light is the shape's ``area`` emitter, :func:`emitter_dict`).
@@ -59,9 +59,9 @@ def bsdf_dict(material) -> dict:
     """
     kind = material.type
     if kind == "diffuse":
-        return {"type": "diffuse", "reflectance": _rgb(material.albedo)}
+        return {"type": "diffuse", "reflectance": albedo_dict(material)}
     if kind == "glossy":
-        d = {"type": "plastic", "diffuse_reflectance": _rgb(material.albedo),
+        d = {"type": "plastic", "diffuse_reflectance": albedo_dict(material),
              "specular_reflectance": _rgb(material.specular)}
         if material.roughness > 0:
             d.update(type="roughplastic", distribution="ggx", alpha=float(material.roughness))
@@ -74,6 +74,30 @@ def bsdf_dict(material) -> dict:
     if kind == "emitter":
         return {"type": "diffuse", "reflectance": _rgb([0.0, 0.0, 0.0])}
     raise ValueError(f"unknown material type {kind!r}")
+
+
+def albedo_dict(material) -> dict:
+    """Mitsuba texture dict of a material's diffuse albedo: ``rgb``, or with a ``texture`` a ``bitmap`` of the
+    image's linear colours times the albedo (``raw``: no further colour conversion; bilinear, repeating).
+
+    The image is stored upside down, so that Mitsuba's v = 0 (its first row) is the image's bottom row: the image
+    appears upright on a rectangle seen from its front (normal) side with its local +y axis up, u along local x
+    and v along local y.
+
+    Args:
+        material: ``DiffuseMaterial`` or ``GlossyMaterial``.
+
+    Returns:
+        A dict for ``mi.load_dict`` (inside a BSDF dict).
+    """
+    texture = getattr(material, "texture", None)
+    if texture is None:
+        return _rgb(material.albedo)
+    from lftransfer.scenes.format import read_texture
+
+    mi = mitsuba()
+    data = read_texture(texture)[::-1] * np.asarray(material.albedo, np.float32)
+    return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)), "raw": True}
 
 
 def emitter_dict(material) -> dict | None:

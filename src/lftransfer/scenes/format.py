@@ -57,6 +57,8 @@ __all__ = [
     "builtin_scenes",
     "with_overrides",
     "read_mesh",
+    "read_texture",
+    "TEXTURED_SHAPES",
 ]
 
 
@@ -218,15 +220,78 @@ class RenderConfig(_Model):
 # --------------------------------------------------------------------------------------------------------------
 # Materials
 
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+@functools.lru_cache(maxsize=16)
+def _read_texture(path: str, mtime_ns: int, size: int) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as image:
+        image.load()
+        rgb = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    if rgb.ndim != 3 or rgb.shape[0] < 1 or rgb.shape[1] < 1:
+        raise ValueError("the file holds no pixels")
+    data = _srgb_to_linear(rgb).astype(np.float32)
+    data.setflags(write=False)
+    return data
+
+
+def read_texture(path: str | Path) -> np.ndarray:
+    """Linear RGB colours of an image file (PNG, JPEG, BMP, TIFF, ...: what Pillow reads), cached by path, size
+    and modification time.
+
+    The file's values are taken as 8-bit sRGB-encoded colours (any alpha channel is ignored) and decoded with the
+    sRGB curve.
+
+    Args:
+        path: the file.
+
+    Returns:
+        (H, W, 3) float32 in [0, 1], row 0 the top of the image; read-only.
+    """
+    st = Path(path).stat()
+    return _read_texture(str(Path(path).resolve()), st.st_mtime_ns, st.st_size)
+
+
+def _texture_file(value: Any, info: ValidationInfo) -> Path | None:
+    """A material's ``texture``: an existing, readable image, relative to the scene file; stored absolute."""
+    if value is None:
+        return None
+    if not isinstance(value, (str, Path)):
+        raise ValueError(f"expected an image file path string, found {type(value).__name__} {value!r}")
+    path = Path(value).expanduser()
+    if not path.is_absolute():
+        base = (info.context or {}).get("base_dir")
+        path = Path(base) / path if base is not None else path
+    path = path.resolve()
+    if not path.is_file():
+        raise ValueError(f"texture file does not exist: {path}")
+    try:
+        read_texture(path)
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
+        raise ValueError(f"cannot read an image from texture file {path}: {exc}") from None
+    return path
+
+
 class DiffuseMaterial(_Model):
     """Lambertian reflector.
 
     Attributes:
         albedo: diffuse reflectance per RGB channel, in [0, 1].
+        texture: optional image file (relative to the scene file; stored absolute) whose linear colours multiply
+            ``albedo`` across the surface, mapped by the shape's texture coordinates (docs/scene-format.md).
     """
 
     type: Literal["diffuse"] = "diffuse"
     albedo: RGBUnit = Field(default_factory=lambda: [0.5, 0.5, 0.5])
+    texture: Path | None = None
+
+    @field_validator("texture", mode="plain")
+    @classmethod
+    def _texture(cls, value: Any, info: ValidationInfo) -> Path | None:
+        return _texture_file(value, info)
 
 
 class GlossyMaterial(_Model):
@@ -236,12 +301,19 @@ class GlossyMaterial(_Model):
         albedo: diffuse reflectance of the base, in [0, 1].
         specular: multiplier of the coating's Fresnel reflection, in [0, 1].
         roughness: GGX alpha in [0, 1]; 0 is a smooth coating.
+        texture: optional image file whose linear colours multiply ``albedo`` (as for a diffuse material).
     """
 
     type: Literal["glossy"] = "glossy"
     albedo: RGBUnit = Field(default_factory=lambda: [0.5, 0.5, 0.5])
     specular: RGBUnit = Field(default_factory=lambda: [1.0, 1.0, 1.0])
     roughness: Unit = 0.1
+    texture: Path | None = None
+
+    @field_validator("texture", mode="plain")
+    @classmethod
+    def _texture(cls, value: Any, info: ValidationInfo) -> Path | None:
+        return _texture_file(value, info)
 
 
 class MetalMaterial(_Model):
@@ -293,6 +365,7 @@ _SIZE_COMPONENTS = {"box": 3, "rectangle": 2}
 _NEEDS = {"sphere": {"radius"}, "box": {"size"}, "rectangle": {"size"}, "cylinder": {"radius", "height"},
           "mesh": {"file"}}
 CYLINDER_SECTIONS = 64          # facets around a cylinder's triangle mesh
+TEXTURED_SHAPES = ("rectangle", "box", "sphere")   # shapes with texture coordinates (docs/scene-format.md)
 
 
 @functools.lru_cache(maxsize=32)
@@ -474,6 +547,21 @@ class ObjectConfig(_Model):
     @classmethod
     def _scale(cls, value: Any) -> float | list[float]:
         return _positive_scale(value)
+
+    @field_validator("material")
+    @classmethod
+    def _texture_needs_coordinates(cls, value: Any, info: ValidationInfo) -> Any:
+        shape = info.data.get("shape")
+        if getattr(value, "texture", None) is None or shape is None:
+            return value
+        if shape not in TEXTURED_SHAPES:
+            raise ValueError(f"a texture needs a shape with texture coordinates ({', '.join(TEXTURED_SHAPES)}), "
+                             f"found a {shape}")
+        scale = np.broadcast_to(np.asarray(info.data.get("scale", 1.0), dtype=np.float64), (3,))
+        if shape == "sphere" and np.ptp(scale) > 1e-12 * scale.max():
+            raise ValueError(f"a texture needs a uniformly scaled sphere (an ellipsoid has no texture coordinates), "
+                             f"found scale = {info.data.get('scale')}")
+        return value
 
     @field_validator("keyframes")
     @classmethod

@@ -28,14 +28,19 @@ def _reflecting(scene) -> list:
 def resolve_renderer(scene, kind: str = "auto") -> str:
     """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene.
 
-    "auto" is the fast path where it renders the scene fully: diffuse materials and emitters, and at most one
-    object that reflects light (the fast path keeps one reflection inside the synthetic half-space, so light
-    exchanged between two reflecting synthetic objects would be lost); otherwise the exact path.
+    "auto" is the fast path where it renders the scene as the exact path does, within the exact path's own
+    Monte Carlo error: diffuse, glossy and metal materials (glossy and metal of roughness at least
+    ``fast.MIN_ROUGHNESS`` = 0.02, where the fast path's error against the converged exact path was measured to
+    be no larger than the exact path's at its default samples; below it neither path converges, and the exact
+    path stays the reference) and emitters, and at most one object that reflects light (the fast path keeps one
+    reflection inside the synthetic half-space, so light exchanged between two reflecting synthetic objects
+    would be lost); otherwise the exact path.
     """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
     if kind == "auto":
-        return "fast" if fast.supports(scene.synthetic) and len(_reflecting(scene)) <= 1 else "exact"
+        ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
+        return "fast" if ok and len(_reflecting(scene)) <= 1 else "exact"
     return kind
 
 
@@ -46,6 +51,20 @@ def approximations(scene, kind: str = "auto") -> list[str]:
         return []
     notes = [f"fast path: diffuse irradiance cached at the vertices of a {fast.DEFAULT_MAX_EDGE * 1000:.0f} mm "
              f"tessellation, linear across each triangle"]
+    glossy = [o for o in scene.synthetic if o.material.type in ("glossy", "metal")]
+    if glossy:
+        notes.append("fast path: glossy and metal lobes evaluated per ray, the light field's share by "
+                     f"{fast.DEFAULT_LOBE_SAMPLES} or more directions drawn from the lobe, its occlusion read from the "
+                     "cache (shadows of lenslets blurred across a cache triangle)")
+    rough = [o.name for o in glossy if 0 < o.material.roughness < fast.MIN_ROUGHNESS]
+    if rough:
+        notes.append(f"fast path: roughness below {fast.MIN_ROUGHNESS} ({', '.join(rough)}) is not verified against "
+                     f"the exact path (whose sampling does not converge there); point-light highlights on "
+                     f"tessellated spheres shift; --renderer exact is the reference")
+    smooth = [o.name for o in glossy if o.material.roughness == 0]
+    if smooth:
+        notes.append(f"fast path: smooth (roughness 0) surfaces ({', '.join(smooth)}) mirror the captured light "
+                     f"field, which the exact path (next-event estimation only) leaves black")
     n = len(_reflecting(scene))
     if n > 1:
         notes.append(f"fast path: the light the {n} reflecting synthetic objects exchange with each other is not "
