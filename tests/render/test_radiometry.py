@@ -159,3 +159,70 @@ def test_05_emitting_sphere_lights_a_plane(variant, renderer):
     np.testing.assert_allclose(seen[0], [L, 0.5 * L, 0.2 * L], rtol=1e-6)
     dark, _, _ = r.render_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, -1.0]]), [])
     np.testing.assert_array_equal(dark[0], 0.0)                         # no light given, no emission seen
+
+
+def test_incident_radiance_along_a_direction(variant):
+    """LightFieldLight.incident reads the lenslet whose aperture a ray meets, at the ray's direction: the disk's
+    radiance through the aperture, nothing beside it or beyond the window, and the density M r^2 / (A cos) of
+    the aperture points ``illuminate`` reads."""
+    import mitsuba as mi
+
+    L = 3.0
+    lf = _disk_lightfield(L)
+    light = LightFieldLight(lf, side="synthetic", model="area", aperture_samples=4)
+    x = np.array([[0.0, 0.0, -0.02]] * 4)
+    w = np.array([[0.1, 0.05, 1.0],          # through the aperture (meets the plane 2 mm from the centre)
+                  [0.6, 0.0, 1.0],           # meets the plane 12 mm out: beside the round aperture
+                  [0.0, 0.0, -1.0],          # away from the array
+                  [0.0, 0.0, 1.0]])
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    found = light.incident(mi.Point3f(*x.T.astype(np.float32)), mi.Vector3f(*w.T.astype(np.float32)), mi.Bool(True))
+    radiance = np.array(found.radiance).T
+    np.testing.assert_allclose(radiance[[0, 3]], L, rtol=1e-5)
+    np.testing.assert_array_equal(radiance[[1, 2]], 0.0)
+    np.testing.assert_array_equal(np.array(found.lenslet), [0, 1, 1, 0])      # K = 1: none
+    r = 0.02 / w[[0, 3], 2]
+    expected = 4 * r**2 / (lf.array.aperture_area * w[[0, 3], 2])
+    np.testing.assert_allclose(np.array(found.density)[[0, 3]], expected, rtol=1e-5)
+    with pytest.raises(ValueError, match="area"):
+        LightFieldLight(lf, side="synthetic", model="point").incident(
+            mi.Point3f(*x.T.astype(np.float32)), mi.Vector3f(*w.T.astype(np.float32)), mi.Bool(True))
+
+
+def test_plane_lookup_follows_the_lens_array(variant):
+    """The raster behind ``incident`` reads each cell as LensArray.lenslet_at / interpolation read its centre, so
+    any point is read within pitch / 128 of where it is: box lenslets agree away from cell edges, linear weights
+    within the weights' slope over that distance."""
+    from lftransfer.render.lights import PLANE_CELLS_PER_PITCH, plane_lookup
+
+    array = LensArray(lattice="hex", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
+    xmin, xmax, ymin, ymax = array.extent()
+    points = np.random.default_rng(0).uniform([xmin, ymin], [xmax, ymax], (2000, 2))
+    for reconstruction in ("box", "linear"):
+        look = plane_lookup(array, reconstruction)
+        cell = ((points[:, 1] - look.y0) // look.cell).astype(int) * look.nx + \
+            ((points[:, 0] - look.x0) // look.cell).astype(int)
+        idx = np.array(look.lenslets).reshape(-1, 3)[cell]
+        wts = np.array(look.weights).reshape(-1, 3)[cell]
+        # points farther than a raster cell from every lattice cell edge (where the reading may jump)
+        own = array.lenslet_at(points)
+        far = own >= 0
+        for step in ([look.cell, 0], [-look.cell, 0], [0, look.cell], [0, -look.cell]):
+            far &= array.lenslet_at(points + step) == own
+        assert far.sum() > 1500
+        if reconstruction == "box":
+            np.testing.assert_array_equal(idx[far, 0], own[far])
+            np.testing.assert_array_equal(wts[far, 0], 1.0)
+        else:
+            ref_idx, ref_w = array.interpolation(points)
+            rows = np.arange(len(points))[:, None]
+            dense, ours = np.zeros((len(points), array.K)), np.zeros((len(points), array.K))
+            np.add.at(dense, (rows, np.where(ref_w > 0, ref_idx, 0)), ref_w)
+            np.add.at(ours, (rows, idx), wts)
+            # a hat function falls from 1 to 0 over a lattice row, pitch sqrt(3) / 2, and the cell centre is at
+            # most cell / sqrt(2) away
+            slope = 1.0 / (array.pitch * np.sqrt(3) / 2)
+            hull = far & ((ref_w > 0).sum(1) == 3) & ((wts > 0).sum(1) == 3)   # the outer half cells read
+            assert hull.sum() > 500                                           # their own lenslet: a jump
+            assert np.abs(ours - dense)[hull].max() <= 2 * slope * look.cell / np.sqrt(2)     # margin 2
+    assert PLANE_CELLS_PER_PITCH == 64

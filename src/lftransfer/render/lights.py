@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Callable, Literal, Union
+from typing import Callable, Literal, NamedTuple, Union
 
 import numpy as np
 
@@ -63,6 +63,20 @@ def jit_array(kind, values: np.ndarray):
     aligned = buf[start:start + len(flat)]
     aligned[:] = flat
     return kind(aligned)
+
+
+class Incident(NamedTuple):
+    """What :meth:`LightFieldLight.incident` finds along rays (all (N,) Dr.Jit arrays).
+
+    Attributes:
+        radiance: mi.Color3f, W m^-2 sr^-1 arriving along each ray.
+        lenslet: mi.UInt32, the lenslet whose aperture the ray meets, K where none.
+        density: mi.Float, per steradian, with which :meth:`LightFieldLight.reflect` draws the ray's direction.
+    """
+
+    radiance: object
+    lenslet: object
+    density: object
 
 
 def to_numpy(color) -> np.ndarray:
@@ -306,10 +320,9 @@ class LightFieldLight:
             active: mi.Bool (N,).
 
         Returns:
-            (radiance mi.Color3f (N,), W m^-2 sr^-1, zero where the ray misses the apertures or leaves the
-            lenslets' window |u|, |v| > a; lenslet k(q) mi.UInt32 (N,), K where none; density mi.Float (N,) per
-            steradian with which :meth:`reflect` draws this direction, r^2 / (A cos_p) where k(q) sends light,
-            else 0).
+            :class:`Incident`: the radiance (zero where the ray misses the apertures or leaves the lenslets'
+            window |u|, |v| > a), the lenslet k(q) (K where none) and the density with which :meth:`reflect`
+            draws this direction, M r^2 / (A cos_p) where k(q) sends light, else 0.
 
         Raises:
             ValueError: a ``"point"`` or ``"prefiltered"`` light (its lenslets are points, seen along no
@@ -329,18 +342,18 @@ class LightFieldLight:
         own = dr.select(ok, dr.gather(mi.UInt32, look.own, cell, ok), self.K)
         sends = ok & (dr.gather(mi.UInt32, self._sends, own, ok) != 0)
         density = self.M * dr.square(t) / (self.area * dr.maximum(dr.abs(directions.z), 1e-8))
-        return dr.select(ok, radiance, 0.0), own, dr.select(sends, density, 0.0)
+        return Incident(dr.select(ok, radiance, 0.0), own, dr.select(sends, density, 0.0))
 
     def reflect(self, si, active, ctx, visibility, lobe_samples: int = 0, seed: int = 0):
         """Light from every lenslet reflected towards ``-si.wi`` by the BSDF components ``ctx`` enables, with
         occlusion read from a cache instead of shadow rays (the fast path's glossy lobes).
 
-        Each lenslet that sends light is read at one point of its aperture (area model: a random point of the
-        stratified pool, per shading point; point and prefiltered models: its centre), as ``illuminate`` reads
-        it with one aperture sample, and weighted by ``visibility(k)``. With ``lobe_samples`` = n_b > 0 (area
-        model), the caller also draws n_b directions from the BSDF, and this sum takes the balance heuristic's
-        share p_l / (p_l + n_b p_b) of each direction (p_l = r^2 / (A cos_p), its density: one point per
-        aperture).
+        Each lenslet that sends light is read at the points of its aperture that ``illuminate`` reads (area
+        model: M points of the stratified pool from a random start per shading point; point and prefiltered
+        models: its centre), each weighted by ``visibility(k)`` instead of a shadow ray. With ``lobe_samples`` =
+        n_b > 0 (area model), the caller also draws n_b directions from the BSDF, and this sum takes the balance
+        heuristic's share p_l / (p_l + n_b p_b) of each direction (p_l = M r^2 / (A cos_p), the density of its
+        aperture points).
 
         Args:
             si: mi.SurfaceInteraction3f (N,) shading points (with their BSDF).
