@@ -23,6 +23,12 @@ How the light field is read between lenslet centres (the area model's ``reconstr
 
 All lenslets are summed at every shading point (not one picked at random), inside one Dr.Jit loop over the
 lenslets that carry light. Shapes of inputs are written as (N,) for N shading points.
+
+For the fast path's glossy lobes (:mod:`lftransfer.render.fast`) the light field light also answers what
+arrives along a given direction (:meth:`LightFieldLight.incident`, the area lenslets read where the ray meets
+the array plane, through :func:`plane_lookup`) and sums its lenslets with occlusion from a cache instead of
+shadow rays (:meth:`LightFieldLight.reflect`); ``illuminate`` takes a BSDF context (only some lobes) and a
+weighted irradiance (:data:`Irradiance`) for the same purpose.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ import numpy as np
 from lftransfer.backend import mitsuba
 from lftransfer.lightfield import LightField
 
-SAMPLING_POOL = 1024        # aperture points of a jittered area model
+SAMPLING_POOL = 1024        # aperture points of a jittered area model (a stratified pool)
 LightingModel = Literal["point", "area", "prefiltered"]
 LIGHTING_MODELS: tuple[str, ...] = ("point", "area", "prefiltered")
 Reconstruction = Literal["box", "linear"]
