@@ -8,22 +8,30 @@ import json
 import math
 import re
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from lftransfer.calibration.light import LightFit
 from lftransfer.calibration.rig import CalibrationFileError, load_calibration
 from lftransfer.scenes import load_scene
 from tests.app.small import nominal_calibration, write_tiny_scene
 from tests.mutations import mutated as mutated_file
 
 
+LIGHT = LightFit(position=(0.3012, 0.1189, 0.0021), start=(0.30, 0.12, 0.0), intensity_albedo=(1.6, 1.61, 1.59),
+                 dark_ratio=0.2502, residual_rms=0.0012, std_mm=(0.005, 0.005, float("nan")), pixels=13000, boards=4)
+
+
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    """A tiny scene and a valid calibration file for it (its JSON data)."""
+    """A tiny scene and a valid calibration file for it (its JSON data), with a measured point light."""
     d = tmp_path_factory.mktemp("calfile")
     scene = load_scene(write_tiny_scene(d / "tiny.toml"))
-    path = nominal_calibration(scene).write(d / "calibration.json")
+    cal = nominal_calibration(scene)
+    cal.light = LIGHT
+    path = cal.write(d / "calibration.json")
     return scene, json.loads(path.read_text())
 
 
@@ -74,6 +82,11 @@ def test_02_bom_is_accepted_and_non_utf8_is_named(setup, tmp_path):
     (lambda d: d["projector"]["lenslets"].pop(), "projector.lenslets", "11 lenslet cameras"),
     (lambda d: d["radiometry"]["vignetting"].__setitem__("shape", [60, 80]), "radiometry.vignetting.shape",
      "LF camera is 120 x 160"),
+    (lambda d: d["light"].pop("position_m"), "light.position_m", "required field is missing"),
+    (lambda d: d["light"].__setitem__("position_m", [0.3, 0.1]), "light.position_m", "at least 3 items"),
+    (lambda d: d["light"]["position_m"].__setitem__(2, "z"), "light.position_m[2]", "valid number"),
+    (lambda d: d["light"].__setitem__("colour", 1), "light.colour", "unknown key"),
+    (lambda d: d["light"].__setitem__("pixels", -1), "light.pixels", "greater than or equal to 0"),
 ])
 def test_03_errors_name_the_file_and_the_field(setup, tmp_path, mutate, field, words):
     scene, data = setup
@@ -103,7 +116,7 @@ _json_value = st.recursive(_json_leaf, lambda inner: st.one_of(st.lists(inner, m
 
 
 _FILE_LEVEL = ("<json>", "<encoding>", "<calibration>", "format", "lens_array", "pose", "lf_camera", "projector",
-               "radiometry", "lenslet_centres", "distortion", "projector_mapping")
+               "radiometry", "lenslet_centres", "distortion", "projector_mapping", "light")
 
 
 def _check(message: str, name: str, data=None) -> None:
@@ -161,3 +174,23 @@ def test_07_truncated_and_corrupted_bytes(setup, tmp_path, cut, flip):
             load_calibration(path, scene)
         except CalibrationFileError as exc:
             _check(str(exc), str(path))
+
+
+def test_08_the_light_section_is_optional(setup, tmp_path):
+    """The measured point light reads back exactly (NaN measurements as null); a file without the section (written
+    before the step existed, or for a scene without a light) loads, and the scene file's light then stands."""
+    scene, data = setup
+    assert data["light"]["std_mm"][2] is None
+    cal = load_calibration(_write(tmp_path, data), scene)
+    np.testing.assert_array_equal(cal.light.position, LIGHT.position)
+    assert cal.light.boards == 4 and cal.light.pixels == 13000 and math.isnan(cal.light.std_mm[2])
+    assert cal.light.residual_rms == LIGHT.residual_rms and cal.light.shift_mm == pytest.approx(LIGHT.shift_mm)
+    assert cal.light_position(scene) == tuple(LIGHT.position.tolist())
+    again = json.loads(cal.write(tmp_path / "again.json").read_text())
+    assert again["light"] == data["light"]
+    old = {k: v for k, v in data.items() if k != "light"}
+    cal = load_calibration(_write(tmp_path, old, "old.json"), scene)
+    assert cal.light is None and "light" not in cal.to_json()
+    assert cal.light_position(scene) == tuple(scene.light.position)
+    minimal = {**old, "light": {"position_m": [0.31, 0.12, 0.0]}}
+    assert load_calibration(_write(tmp_path, minimal, "minimal.json"), scene).light_position(scene) == (0.31, 0.12, 0.0)

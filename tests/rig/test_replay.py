@@ -411,7 +411,7 @@ _setups = st.one_of(
     st.builds(partial, st.just(Collimator), direction=st.tuples(_coord, _coord, _pos)),
     st.builds(partial, st.just(Board), centre=st.tuples(_coord, _coord, _pos), normal=st.tuples(_coord, _coord, _pos),
               size=st.tuples(_pos, _pos), albedo=st.floats(0.0, 1.0),
-              chart=st.none() | st.tuples(st.integers(2, 20), st.integers(2, 20), _pos)))
+              chart=st.none() | st.tuples(st.integers(2, 20), st.integers(2, 20), _pos), point_light=st.booleans()))
 _requests = st.one_of(
     st.builds(LFCapture, exposure_scale=st.floats(1e-3, 1e3), frames=st.integers(1, 64)),
     st.builds(ViewCapture, frames=st.integers(1, 64), quality=st.none() | st.integers(1, 4096)))
@@ -480,3 +480,43 @@ def test_13_killed_process_leaves_a_readable_recording(tmp_path):
         got = replay.capture_lf() if i % 2 == 0 else replay.capture_view()
         assert _same(got, want), i
     assert replay.remaining() == 0
+
+
+def test_14_a_board_lit_by_the_point_light_records_and_replays(tmp_path):
+    """The point light step's request (a board with the point light on, photographed with the projector black
+    and white) is recorded and replayed bit for bit, apart from the same board with the light off; a board with
+    the light off is described as before the field existed, so older recordings keep their keys."""
+    lit = Board(centre=(0.0, 0.0, 0.08), normal=(0.4, 0.16, -0.9), size=(0.198, 0.154), chart=(7, 5, 0.022),
+                point_light=True)
+    dark = Board(centre=lit.centre, normal=lit.normal, size=lit.size, chart=lit.chart)
+    assert "point_light" not in describe(dark) and describe(lit)["point_light"] is True
+    assert setup_from_json(describe(lit)) == lit and setup_from_json(describe(dark)) == dark
+    assert json.loads(request_key(dark, None, ViewCapture()))["setup"] == {
+        "kind": "board", "centre": [0.0, 0.0, 0.08], "normal": list(dark.normal), "size": [0.198, 0.154],
+        "albedo": 0.8, "chart": [7, 5, 0.022]}
+    assert "point light ON" in lit.prompt() and "point light off" in dark.prompt()
+    with pytest.raises(ValueError, match="point_light must be True or False"):
+        Board(centre=(0.0, 0.0, 0.08), normal=(0.0, 0.0, 1.0), point_light="yes")
+
+    def session(rig):
+        out = []
+        for board in (lit, dark):
+            rig.setup(board)
+            for value in (0, 255):
+                rig.project(np.full((INFO.projector[1], INFO.projector[0], 3), value, np.uint8))
+                out.append(rig.capture_view(ViewCapture(quality=16)))
+        return out
+
+    rig = RecordingRig(FakeRig(), tmp_path / "rec")
+    recorded = session(rig)
+    rig.close()
+    setups = [e["setup"] for e in json.loads((tmp_path / "rec" / "manifest.json").read_text())["events"]
+              if e["event"] == "setup"]
+    assert [s.get("point_light", False) for s in setups] == [True, False]
+    replay = ReplayRig(tmp_path / "rec", strict=True)
+    assert all(_same(a, b) for a, b in zip(recorded, session(replay)))
+    assert not _same(recorded[0], recorded[2])                      # the light on and off are different requests
+    replay = ReplayRig(tmp_path / "rec")
+    replay.setup(Board(centre=lit.centre, normal=(0.0, 0.0, 1.0), point_light=True))
+    with pytest.raises(ReplayError, match="not in the recording"):
+        replay.capture_view(ViewCapture(quality=16))

@@ -8,12 +8,13 @@ stands; the scene file's position is a measurement by hand. This step measures i
    clear of the array, its chessboard well inside the view (:func:`light_board_poses`). They are chosen among a
    grid of candidates (centres in front of the array, normals turned up to 50 degrees from the direction to the
    light) greedily, by the error of the light's position that a linearised fit predicts from them: pixel noise
-   (:data:`DESIGN_PIXEL_NOISE`) and each board's pose error as the chessboard measures it
-   (:data:`DESIGN_BOARD_ERROR_M`, :data:`DESIGN_BOARD_ERROR_DEG`), which moves the light with it.
+   (:data:`DESIGN_PIXEL_NOISE`) and each board's pose error as its chessboard measures it (corners good to
+   :data:`DESIGN_CORNER_NOISE_PX`: mostly an error of depth along the view ray), which moves the light with it.
 2. **Photographs.** Each board is held there (by hand: a few millimetres and about a degree off) lit by the
-   real point light alone (:class:`~lftransfer.rig.requests.Board` with ``point_light=True``, projector black);
-   the view camera photographs it. Its printed chessboard gives where it really stands
-   (:func:`~lftransfer.calibration.pose.chart_pose`).
+   real point light (:class:`~lftransfer.rig.requests.Board` with ``point_light=True``), and the view camera
+   photographs it with the projector black, then white; the difference times the calibrated black level over
+   white (:func:`black_share`) is the light the projector sends at black, which is taken out. Its printed
+   chessboard gives where it really stands (:func:`~lftransfer.calibration.pose.chart_pose`).
 3. **Fit.** Every view pixel on the board (away from its edges and from the chessboard's square edges by a
    couple of pixel footprints) is a world point X on the measured plane (normal n) with a measured radiance.
    A Lambertian board lit by a point light at p of intensity I (W/sr) has the radiance
@@ -28,8 +29,8 @@ stands; the scene file's position is a measurement by hand. This step measures i
    simulated rig) are not modelled. One board fixes the light only weakly along its normal, where the light's
    distance trades against its intensity; boards turned different ways fix it.
 
-Everything is in the scene file's world (the view camera's frame, the frame of the rig file); nothing depends on
-the lens array's calibration.
+Everything is in the scene file's world (the view camera's frame, the frame of the rig file); of the calibration
+so far only the projector's black level and cross-talk are used.
 """
 
 from __future__ import annotations
@@ -58,8 +59,10 @@ LIGHT_SPP = 16                            # view camera quality of the photograp
 DARK_RATIO = 0.25                         # the chart's dark squares' albedo / the board's (the fit's start)
 MAX_SHIFT_M = 0.05                        # a fit farther than this from the scene file's position is refused
 MIN_PIXELS = 200                          # view pixels per board the fit needs
+MIN_BRIGHTNESS = 0.2                      # a board lit by the light: at least this (at most 1 / this) of the
+                                          # brightness the scene file's light would give it
 DESIGN_PIXEL_NOISE = 0.02                 # relative noise per view pixel the pose design assumes
-DESIGN_CORNER_NOISE_PX = 0.1             # noise of the chessboard's corners (view pixels) the pose design assumes
+DESIGN_CORNER_NOISE_PX = 0.1              # noise of the chessboard's corners (view pixels) the pose design assumes
 CLEARANCE_M = 0.015                       # the boards' corners stay this far in front of the array's plane
 LIGHT_MIN_COS = 0.5                       # a board faces the light at least this much (cosine at its centre)
 VIEW_MIN_COS = 0.5                        # ... and the view camera
@@ -379,12 +382,13 @@ def _predicted_cov(terms: list) -> np.ndarray:
 def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, chart=LIGHT_CHART) -> list[Board]:
     """Where to ask for the boards that measure the point light (module docstring, step 1).
 
-    Candidates: centres on a grid in front of the array (within its extent, 6 to 12 cm from it), normals turned
-    from the direction to the scene file's light by up to 50 degrees about two axes. A candidate is kept when the
-    board faces the light (cosine >= 0.5, at least 5 cm from it) and the view camera (cosine >= 0.5), its corners
-    stay :data:`CLEARANCE_M` in front of the array and its chessboard, one square wider each way, lies inside
-    the view with 4 % to spare. ``count`` of them are chosen one by one, each the one that most lowers the
-    predicted error of the light's position (:func:`_predicted_cov`'s trace).
+    Candidates: centres on a grid in front of the array (:data:`GRID_XY` per axis over :data:`GRID_SPAN` of its
+    half extent, at :data:`GRID_DEPTHS_M`), normals turned from the direction to the scene file's light by
+    :data:`GRID_TURNS_DEG` about two axes. A candidate is kept when the board faces the light (cosine at its
+    centre >= :data:`LIGHT_MIN_COS`, its plane at least 5 cm from the light) and the view camera (cosine >=
+    :data:`VIEW_MIN_COS`), its corners stay :data:`CLEARANCE_M` in front of the array's plane and its chessboard,
+    one square wider each way, lies inside the view with 4 % to spare. ``count`` of them are chosen one by one,
+    each the one that most lowers the predicted error of the light's position (:func:`_predicted_cov`'s trace).
 
     Args:
         scene: the synthetic part of the scene (its light, view camera and rig file).
@@ -503,8 +507,9 @@ def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: 
         (LightFit, diagnostics: per board the asked and the measured pose, for reports).
 
     Raises:
-        LightError: a board's chessboard not found, a board too dark or too little of it in view, or a fit that
-            lands implausibly far (:data:`MAX_SHIFT_M`) from the scene file's position.
+        LightError: a board's chessboard not found, too little of a board in view, a board far darker or brighter
+            than the scene file's light would make it (:data:`MIN_BRIGHTNESS`), or a fit that lands implausibly far
+            (:data:`MAX_SHIFT_M`) from the scene file's position.
     """
     say = progress or (lambda msg: None)
     poses = light_board_poses(scene, boards)
@@ -534,6 +539,15 @@ def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: 
         if len(s.points) < MIN_PIXELS:
             raise LightError(f"{where}: only {len(s.points)} view camera pixels on the board are lit and usable "
                              f"(at least {MIN_PIXELS} needed); is the point light on and the board in view?")
+        # as bright as the scene file's light would make it (its intensity, the board's albedo), within a factor
+        g, _, _ = _log_model(start, s.points, s.normal)
+        expected = np.exp(g)[:, None] * np.asarray(scene.light.intensity) * LIGHT_BOARD_ALBEDO / np.pi \
+            * np.where(s.dark, DARK_RATIO, 1.0)[:, None]
+        brightness = float(np.median(s.radiance.sum(1) / np.maximum(expected.sum(1), 1e-30)))
+        if not MIN_BRIGHTNESS <= brightness <= 1 / MIN_BRIGHTNESS:
+            raise LightError(f"{where}: the board is {brightness:.3g} times as bright as the scene file's light "
+                             f"(intensity {tuple(scene.light.intensity)} W/sr) would make it; is the point light on, "
+                             "and the only light?")
         samples.append(s)
         per_board.append({"asked_centre_m": list(asked.centre), "asked_normal": list(asked.normal),
                           "centre_m": m[:3, 3].tolist(), "normal": m[:3, 2].tolist(), "chart_rms_px": chart_rms,

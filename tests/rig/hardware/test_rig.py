@@ -70,8 +70,11 @@ def test_01_end_to_end(tmp_path, display):
         board = Board(centre=(0.0, 0.0, 0.08), normal=(0.0, 0.0, 1.0))
         rig.setup(board)
         rig.setup(Board(centre=(0.0, 0.0, 0.08), normal=(0.0, 0.0, 1.0)))
+        lit = Board(centre=(0.0, 0.0, 0.08), normal=(0.0, 0.0, 1.0), point_light=True)    # the same board, light on
+        rig.setup(lit)
         rig.setup(RealScene())
-        assert prompts == [WhiteField().prompt(), board.prompt(), RealScene().prompt()]
+        assert prompts == [WhiteField().prompt(), board.prompt(), lit.prompt(), RealScene().prompt()]
+        assert "switch the point light ON" in prompts[2] and "point light off" in prompts[1]
 
         image = np.random.default_rng(0).integers(0, 256, (SCREEN[1], SCREEN[0], 3), dtype=np.uint8)
         rig.project(image)

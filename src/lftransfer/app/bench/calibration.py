@@ -44,6 +44,7 @@ OTHERS = {
     "camera_gain_rel_rms": ("", "LF camera exposure x vignetting per pixel (relative RMS)"),
     "board_depth_mm": ("mm", "pose board: measured off the asked-for plane (operator's hand error)"),
     "board_tilt_deg": ("deg", "pose board: measured tilt from the asked-for plane"),
+    "light_residual_rms": ("relative", "point light: the fit's residual, RMS"),
 }
 
 
@@ -71,6 +72,8 @@ def calibration_seeds(scene, seeds: Sequence[int], *, progress: Callable[[str], 
         placement = cal.diagnostics["pose"]["board_placement"]
         errors["board_depth_mm"] = placement["depth_mm"]
         errors["board_tilt_deg"] = placement["tilt_deg"]
+        if cal.light is not None:
+            errors["light_residual_rms"] = cal.light.residual_rms
         errors["calibration_s"] = round(time.perf_counter() - t, 1)
         per_seed[str(seed)] = errors
     summary = {}
