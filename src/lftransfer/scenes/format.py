@@ -255,24 +255,30 @@ def read_texture(path: str | Path) -> np.ndarray:
     return _read_texture(str(Path(path).resolve()), st.st_mtime_ns, st.st_size)
 
 
-def _texture_file(value: Any, info: ValidationInfo) -> Path | None:
-    """A material's ``texture``: an existing, readable image, relative to the scene file; stored absolute."""
-    if value is None:
-        return None
-    if not isinstance(value, (str, Path)):
-        raise ValueError(f"expected an image file path string, found {type(value).__name__} {value!r}")
+def _scene_file(value: Any, info: ValidationInfo, what: str, read, cannot: str) -> Path:
+    """A file a scene names (a mesh, a texture): relative to the scene file's folder, resolved, existing and
+    readable by ``read``; stored absolute. ``what`` and ``cannot`` word the errors."""
     path = Path(value).expanduser()
     if not path.is_absolute():
         base = (info.context or {}).get("base_dir")
         path = Path(base) / path if base is not None else path
     path = path.resolve()
     if not path.is_file():
-        raise ValueError(f"texture file does not exist: {path}")
+        raise ValueError(f"{what} does not exist: {path}")
     try:
-        read_texture(path)
+        read(path)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
-        raise ValueError(f"cannot read an image from texture file {path}: {exc}") from None
+        raise ValueError(f"{cannot} {path}: {exc}") from None
     return path
+
+
+def _texture_file(value: Any, info: ValidationInfo) -> Path | None:
+    """A material's ``texture``: an existing, readable image, relative to the scene file; stored absolute."""
+    if value is None:
+        return None
+    if not isinstance(value, (str, Path)):
+        raise ValueError(f"expected an image file path string, found {type(value).__name__} {value!r}")
+    return _scene_file(value, info, "texture file", read_texture, "cannot read an image from texture file")
 
 
 class DiffuseMaterial(_Model):
@@ -530,18 +536,7 @@ class ObjectConfig(_Model):
         cls._check_presence("file", value, info)
         if value is None:
             return None
-        path = Path(value).expanduser()
-        if not path.is_absolute():
-            base = (info.context or {}).get("base_dir")
-            path = Path(base) / path if base is not None else path
-        path = path.resolve()
-        if not path.is_file():
-            raise ValueError(f"mesh file does not exist: {path}")
-        try:
-            read_mesh(path)
-        except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file
-            raise ValueError(f"cannot read a triangle mesh from {path}: {exc}") from None
-        return path
+        return _scene_file(value, info, "mesh file", read_mesh, "cannot read a triangle mesh from")
 
     @field_validator("scale", mode="plain")
     @classmethod
