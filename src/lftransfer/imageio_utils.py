@@ -120,6 +120,21 @@ def write_exr(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
+def write_figure(path: str | Path, figure, *, dpi: int = 120) -> Path:
+    """Write a matplotlib figure (the format from the suffix: .png, .svg, .pdf), atomically, and close it."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        figure.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".") or "png", bbox_inches="tight")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+        plt.close(figure)
+    return path
+
+
 def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Path:
     """Write 8-bit (H, W, 3) frames as an H.264 MP4 (imageio's ffmpeg), atomically.
 

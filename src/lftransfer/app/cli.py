@@ -481,6 +481,7 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
 
         try:
             report = render_sequence(scene, out, options, seq, bounces=bounces, progress=progress, step=step)
+            effect = _sequence_effect(scene, out, options, report, step)
         except KeyboardInterrupt:
             bar.stop()
             fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
@@ -499,11 +500,25 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
     if "psnr_objects_db_min" in summary:
         _row(table, "psnr over the objects (verified frames)",
              f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
+    if effect is not None:
+        for name, worst in effect.worst_relative_error().items():
+            trend = effect.trend()[name]
+            _row(table, f"effect: {name.replace('_', ' ')} against ground truth",
+                 "undefined" if worst is None else f"worst {100 * worst:.0f} % off"
+                 + ("" if trend is None else f", same trend in {100 * trend:.0f} % of steps"))
+        _row(table, "effect curve", f"{out / 'effect.png'}")
     _row(table, "rig model", report["rig_model"])
     for note in report["approximations"]:
         _row(table, "approximation", note)
     _row(table, "videos", f"{out / 'composite.mp4'}, {out / 'bounces.mp4'}")
     Console().print(table)
+
+
+def _sequence_effect(scene, out: Path, options, report: dict, step):
+    """The scene's [effect] over the verified frames of a rendered sequence (effect.json, effect.png), or None."""
+    from lftransfer.app.effects import measure_sequence_effect
+
+    return measure_sequence_effect(scene, out, options, report, step=step)
 
 
 @app.command(cls=_Command)

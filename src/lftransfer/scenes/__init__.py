@@ -9,6 +9,7 @@ Example:
 
 from lftransfer.scenes.format import (
     DiffuseMaterial,
+    EffectConfig,
     EmitterMaterial,
     GlossyMaterial,
     LightConfig,
@@ -31,6 +32,7 @@ from lftransfer.scenes.format import (
 
 __all__ = [
     "DiffuseMaterial",
+    "EffectConfig",
     "EmitterMaterial",
     "GlossyMaterial",
     "LightConfig",

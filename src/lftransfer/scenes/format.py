@@ -42,6 +42,7 @@ __all__ = [
     "RigConfig",
     "ViewConfig",
     "LightConfig",
+    "EffectConfig",
     "RenderConfig",
     "DiffuseMaterial",
     "GlossyMaterial",
@@ -464,6 +465,23 @@ class AnimationConfig(_Model):
         return frame_times(self.duration_s, self.fps)
 
 
+class EffectConfig(_Model):
+    """The effect a scene shows, measured per verified frame against the ground truth (``[effect]``,
+    docs/scene-format.md): the light that a moving synthetic object ``by`` adds to, or takes from, a real object
+    ``on``, seen by the view camera, against the distance between the two.
+
+    Attributes:
+        kind: ``"shadow"``: the shadow ``by`` casts on ``on`` (its contrast and penumbra width, Fig. 5) |
+            ``"reflection"``: the light of ``by`` that ``on`` reflects (the mean radiance it adds, Fig. 6).
+        on: name of the real object measured.
+        by: name of the synthetic object whose effect it is (usually a keyframed one).
+    """
+
+    kind: Literal["shadow", "reflection"]
+    on: str
+    by: str
+
+
 class ObjectConfig(_Model):
     """One object of a half-space: a primitive or a mesh, a transform and a material.
 
@@ -774,10 +792,13 @@ class SceneConfig(_SceneBase):
     Attributes:
         real: objects of the real half-space (bounding boxes in z > 0).
         synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        effect: the effect measured per verified frame (``[effect]``), or None; verification data, like the
+            real objects, so the pipeline's part of the scene does not hold it.
     """
 
     real: list[RealObject] = Field(default_factory=list)
     synthetic: list[SyntheticObject] = Field(default_factory=list, validate_default=True)
+    effect: EffectConfig | None = None
 
     @field_validator("synthetic")
     @classmethod
@@ -786,6 +807,23 @@ class SceneConfig(_SceneBase):
         if real is not None and not real and not value:
             raise ValueError("a scene needs at least one [[real]] or [[synthetic]] object, found none")
         return value
+
+    @model_validator(mode="after")
+    def _effect_names_objects(self):
+        e = self.effect
+        if e is None:
+            return self
+        real, synthetic = [o.name for o in self.real], [o.name for o in self.synthetic]
+        if real.count(e.on) != 1:
+            raise ValueError(f"effect.on: expected the name of one [[real]] object ({', '.join(map(repr, real))}), "
+                             f"found {e.on!r}" + (" (more than one object has it)" if e.on in real else ""))
+        if synthetic.count(e.by) != 1:
+            raise ValueError(f"effect.by: expected the name of one [[synthetic]] object "
+                             f"({', '.join(map(repr, synthetic))}), found {e.by!r}"
+                             + (" (more than one object has it)" if e.by in synthetic else ""))
+        if e.kind == "shadow" and self.light is None and len(self.emitters) == 1 and self.emitters[0].name == e.by:
+            raise ValueError(f"effect.by: {e.by!r} is the only light of the scene: it cannot shadow anything")
+        return self
 
     def synthetic_part(self) -> SyntheticScene:
         """The part of the scene the pipeline is given (everything but the real objects)."""
