@@ -95,3 +95,35 @@ def test_06_keyframes_need_an_animation_table(tmp_path):
                     '\n[animation]\nduration_s = 0.5\nfps = 4\n')
     scene = load_scene(path)
     assert scene.moving and scene.at(0.5).synthetic[0].translate == pytest.approx([0.0, 0.0, -0.1])
+
+
+@pytest.mark.parametrize("table, message", [
+    ('kind = "shadow"\non = "green cube"\nby = "red block"', r"effect\.on: expected the name of one \[\[real\]\] "
+                                                             r"object \('red block'\), found 'green cube'"),
+    ('kind = "reflection"\non = "red block"\nby = "sun"', r"effect\.by: .*found 'sun'"),
+    ('kind = "glow"\non = "red block"\nby = "green cube"', r"effect\.kind"),
+    ('kind = "shadow"\non = "red block"', r"effect\.by"),
+])
+def test_07_effect_table_names_objects(tmp_path, table, message):
+    """[effect] names one real object (on) and one synthetic object (by); errors name the field."""
+    path = tmp_path / "effect.toml"
+    path.write_text(builtin_scene("fig4").read_text() + f"\n[effect]\n{table}\n")
+    with pytest.raises(SceneError, match=r"effect\.toml: .*" + message):
+        load_scene(path)
+    path.write_text(builtin_scene("fig4").read_text() + '\n[effect]\nkind = "reflection"\non = "red block"\n'
+                    'by = "green cube"\n')
+    scene = load_scene(path)
+    assert scene.effect.on == "red block" and not hasattr(scene.synthetic_part(), "effect")
+
+
+def test_08_paper_scenes_load_and_move():
+    """fig5, fig6 and fig1b load (meshes and textures ship with the package) and their effect objects move."""
+    for name, kind in (("fig5", "shadow"), ("fig6", "reflection"), ("fig1b", None)):
+        scene = load_scene(builtin_scene(name))
+        assert scene.moving and scene.animation is not None
+        if kind is None:
+            assert scene.effect is None
+            continue
+        by = next(o for o in scene.synthetic if o.name == scene.effect.by)
+        assert scene.effect.kind == kind and by.moves
+        assert by.at(0.0).translate != by.at(scene.animation.duration_s).translate

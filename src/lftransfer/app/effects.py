@@ -75,10 +75,16 @@ class EffectCurve:
                 for n in names}
 
     def worst_relative_error(self) -> dict[str, float | None]:
-        """Measure name -> the largest |transfer - truth| / |truth| over the points (None: no defined point)."""
+        """Measure name -> the largest |transfer - truth| / |truth| over the points (None: no defined point).
+
+        A shadow's contrast is compared where the ground truth's shadow takes at least
+        :data:`~lftransfer.sim.effects.MIN_CONTRAST` of the light (a fainter one is mostly noise, and its
+        relative error says nothing); its penumbra is defined only there anyway."""
+        from lftransfer.sim.effects import MIN_CONTRAST
+
         out: dict[str, float | None] = {}
         for name, (lft, gt) in self.values().items():
-            ok = np.isfinite(lft) & np.isfinite(gt) & (np.abs(gt) > 0)
+            ok = np.isfinite(lft) & np.isfinite(gt) & (np.abs(gt) > (MIN_CONTRAST if name == "contrast" else 0))
             out[name] = float(np.max(np.abs(lft[ok] - gt[ok]) / np.abs(gt[ok]))) if ok.any() else None
         return out
 

@@ -11,7 +11,8 @@ two curves against the distance between the objects can be compared.
   averaged over 3 x 3 metric pixels so that noise does not make a shadow; its contrast is the largest ``s`` over
   ``on``'s lit pixels, and its penumbra width the difference of the
   radii of the areas (on ``on``'s surface, m^2) where ``s`` exceeds 10 % and 90 % of the contrast: for a round
-  shadow, how far the edge takes to go from 10 % to 90 % of its depth, in metres.
+  shadow, how far the edge takes to go from 10 % to 90 % of its depth, in metres (none for a shadow that takes
+  less than a quarter of the light).
 
 The pixels and their surface areas come from the real geometry, so this is verification code (it lives in the
 simulator's package); both sides of the comparison use the same pixels.
@@ -31,13 +32,14 @@ from lftransfer.render.camera import sensor_dict, view_rays
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.verify import downsample, metric_factor
 
-__all__ = ["EffectMeasure", "ObjectPixels", "measure_effect", "object_distance", "object_pixels"]
+__all__ = ["MIN_CONTRAST", "EffectMeasure", "ObjectPixels", "measure_effect", "object_distance", "object_pixels"]
 
 VIEW_SPP = 4                 # rays per view pixel that find the object's pixels (a 2 x 2 grid)
 FULL_COVERAGE = 0.999        # a metric pixel belongs to the object when this fraction of its rays see it
 LIT_FRACTION = 0.05          # shadow: pixels darker than this fraction of the brightest one are not measured
 SMOOTHING = 3                # shadow: the light taken is averaged over this many metric pixels square
 PENUMBRA_LEVELS = (0.1, 0.9)  # shadow: the edge runs between these fractions of the contrast
+MIN_CONTRAST = 0.25          # shadow: a fainter shadow has no penumbra worth the name (and noise could make one)
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,8 @@ class EffectMeasure:
         kind: ``"reflection"`` or ``"shadow"``.
         added_radiance: reflection: mean radiance added over the object's pixels, W m^-2 sr^-1.
         contrast: shadow: the light taken from the shadow's darkest part, fraction in [0, 1].
-        penumbra_m: shadow: width of the shadow's edge on the surface, m (None without a measurable shadow).
+        penumbra_m: shadow: width of the shadow's edge on the surface, m (None for a shadow fainter than
+            :data:`MIN_CONTRAST`).
         pixels: metric pixels measured.
     """
 
@@ -153,7 +156,7 @@ def measure_effect(kind: str, image: np.ndarray, without: np.ndarray, pixels: Ob
         smooth = np.where(lit, uniform_filter(taken, SMOOTHING) / weight, 0.0)
     contrast = float(smooth[lit].max())
     penumbra = None
-    if contrast > 0:
+    if contrast >= MIN_CONTRAST:
         lo, hi = (float(pixels.area_m2[lit & (smooth >= level * contrast)].sum()) for level in PENUMBRA_LEVELS)
         penumbra = float(np.sqrt(lo / np.pi) - np.sqrt(hi / np.pi))
     return EffectMeasure(kind="shadow", contrast=contrast, penumbra_m=penumbra, pixels=int(lit.sum()))

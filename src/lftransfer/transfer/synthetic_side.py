@@ -34,10 +34,13 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
     be no larger than the exact path's at its default samples; below it neither path converges, and the exact
     path stays the reference) and emitters, and at most one object that reflects light (the fast path keeps one
     reflection inside the synthetic half-space, so light exchanged between two reflecting synthetic objects
-    would be lost); otherwise the exact path.
+    would be lost); otherwise the exact path. A half-space where nothing reflects light (no objects, or emitters
+    only) always takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters.
     """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
+    if not _reflecting(scene):
+        return "exact"
     if kind == "auto":
         ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
         return "fast" if ok and len(_reflecting(scene)) <= 1 else "exact"
