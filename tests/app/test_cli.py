@@ -54,3 +54,14 @@ def test_05_rig_spec_errors(tmp_path):
     result = runner.invoke(app, ["run", str(builtin_scene("fig4")), "--rig", f"replay:{tmp_path}",
                                  "--rig-model", "oracle", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
+
+
+def test_builtin_scene_by_name():
+    """A built-in scene's name stands for its file; an unknown name lists the built-in scenes."""
+    from pathlib import Path
+
+    from lftransfer.app.cli import _load
+
+    assert _load(Path("fig6"), quick=True).effect.on == "bowl"
+    result = runner.invoke(app, ["render", "fig7", "--quick"])
+    assert result.exit_code != 0 and "fig7: no such file (built-in scenes: fig1b, fig4, fig5, fig6)" in _text(result)

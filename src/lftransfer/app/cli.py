@@ -74,6 +74,7 @@ _EXACT_HELP = "Build the simulated rig exactly as the rig file says (no hidden d
 _MODEL_HELP = "What the pipeline knows of the rig: calibrated (calibrate first) | nominal (rig file) | oracle."
 _CAL_HELP = "Use this calibration file (from `lft calibrate`) instead of calibrating."
 _RIG_HELP = "Which rig: sim (simulated, default) | hardware:RIG.toml (a physical rig) | replay:DIR (a recording)."
+_SCENE_HELP = "Scene TOML file, or a built-in scene by name (fig4, fig5, fig6, fig1b)."
 _QUICK_HELP = ("Quarter resolution: every device at a quarter of its size, a third of the angular samples (at "
                "least 8), a quarter of the ground-truth samples (at least 16).")
 _MEMORY_HELP = ("Largest memory the run may need, e.g. 64G (default: what the machine has available now). The "
@@ -151,12 +152,15 @@ def _operator(bar: Progress | None = None):
 
 
 def _load(path: Optional[Path], quick: bool):
-    """The scene (the built-in Fig. 4 scene for None), at quarter size with ``quick``; sizes checked."""
+    """The scene (the built-in Fig. 4 scene for None; a built-in scene's name, e.g. ``fig6``, for a path that does
+    not exist and has no suffix), at quarter size with ``quick``; sizes checked."""
     from lftransfer.app.pipeline import check_resolution, quick_scene
-    from lftransfer.scenes import builtin_scene, load_scene
+    from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene
 
     if path is not None and not path.exists():
-        fail(f"{path}: no such file")
+        if path.suffix or str(path) not in builtin_scenes():
+            fail(f"{path}: no such file (built-in scenes: {', '.join(builtin_scenes())})")
+        path = builtin_scene(str(path))
     scene = load_scene(path if path is not None else builtin_scene("fig4"))    # SceneError: one line, code 2
     if quick:
         return quick_scene(scene)
@@ -315,7 +319,7 @@ def demo(out: Path = typer.Option(Path("out/demo"), metavar="DIR", help="Output 
 
 
 @app.command(cls=_Command)
-def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE_HELP),
         bounces: int = _bounces_option(),
         out: Path = typer.Option(Path("out/run"), metavar="DIR", help="Output folder (made if missing)."),
         lighting_model: Optional[str] = typer.Option(None, metavar="area|point|prefiltered",
@@ -353,7 +357,7 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene
 
 
 @app.command(cls=_Command)
-def record(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+def record(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE_HELP),
            out: Path = typer.Option(..., "--out", metavar="DIR",
                                     help="Session folder: the recording, and the run's outputs in run/."),
            rig: str = typer.Option("sim", metavar="SPEC", help="Which rig to record: sim | hardware:RIG.toml."),
@@ -384,7 +388,7 @@ def record(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Sc
 
 
 @app.command("live", cls=_Command)
-def live(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+def live(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE_HELP),
          rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
          port: int = typer.Option(8080, min=1, max=65535, metavar="PORT", help="Port of the page on localhost."),
          out: Path = typer.Option(Path("out/live"), metavar="DIR", help="Where 'save' writes frames and scenes."),
@@ -417,7 +421,7 @@ def live(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scen
 
 
 @app.command("render", cls=_Command)
-def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help="Scene TOML file."),
+def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE_HELP),
                out: Path = typer.Option(Path("out/render"), metavar="DIR", help="Output folder (made if missing)."),
                frames: Optional[int] = typer.Option(None, min=1, metavar="N", help=(
                    "Frames to render (default: every frame of the scene's [animation]; a still scene: 8 live "
