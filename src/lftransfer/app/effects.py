@@ -7,7 +7,8 @@ over the pixels of the object ``on``; x is the distance between the two objects.
 ``effect.png`` (matplotlib: each measure against the distance, transfer and ground truth side by side).
 
 The transfer without ``by`` is a converged N-bounce transfer at the frame's time in both modes: in live mode
-it stands for what the live loop without ``by`` converges to (the object ``by`` is the one that moves).
+it stands for what the live loop without ``by`` converges to (the object ``by`` is the one that moves). The live
+loop's first N frames are not measured: it starts with a black projector and needs N frames to bring N bounces.
 """
 
 from __future__ import annotations
@@ -130,7 +131,8 @@ def measure_sequence_effect(scene, out: str | Path, options: RunOptions, report:
     from lftransfer.sim.verify import render_ground_truth
 
     effect = scene.effect
-    verified = [f for f in report.get("frames", []) if f.get("metrics")]
+    warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0
+    verified = [f for f in report.get("frames", []) if f.get("metrics") and int(f["index"]) >= warmup]
     if effect is None or not verified:
         return None
     out = Path(out)
