@@ -67,4 +67,4 @@ def test_03_curve_errors_and_trend():
                                 point(3, 0.05, (0.6, 0.005), (0.75, 0.004))])
     worst = curve.worst_relative_error()
     assert worst["contrast"] == pytest.approx(0.2) and worst["penumbra_m"] == pytest.approx(0.25)
-    assert curve.trend() == {"contrast": 1.0, "penumbra_m": 1.0}
+    assert curve.trend() == {"contrast": 1.0, "penumbra_m": 1.0, "area_m2": None}    # no area given

@@ -49,6 +49,8 @@ def test_02_shadow_contrast_and_penumbra_of_a_round_shadow():
         m = measure_effect("shadow", image, without, _flat(np.ones((H, W), bool)))
         assert m.contrast == pytest.approx(contrast, rel=1e-6)
         assert m.penumbra_m * 1000 == pytest.approx(0.8 * (r2 - r1), abs=0.6)
+        half = r2 - 0.5 / contrast * (r2 - r1) if contrast >= 0.5 else 0.0   # s = 0.5 there
+        assert m.area_m2 == pytest.approx(np.pi * half ** 2 * PIXEL_AREA, rel=0.03, abs=PIXEL_AREA)
 
 
 def test_03_sharper_shadow_has_a_narrower_penumbra_and_noise_makes_no_shadow():

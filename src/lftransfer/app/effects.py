@@ -70,7 +70,7 @@ class EffectCurve:
 
     def values(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Measure name -> ((P,) transfer values, (P,) ground-truth values), NaN where undefined."""
-        names = ("added_radiance",) if self.kind == "reflection" else ("contrast", "penumbra_m")
+        names = ("added_radiance",) if self.kind == "reflection" else ("contrast", "penumbra_m", "area_m2")
         get = lambda m, n: np.nan if getattr(m, n) is None else float(getattr(m, n))  # noqa: E731
         return {n: (np.array([get(p.transfer, n) for p in self.points]), np.array([get(p.truth, n) for p in self.points]))
                 for n in names}
@@ -168,7 +168,8 @@ def measure_sequence_effect(scene, out: str | Path, options: RunOptions, report:
 
 _LABELS = {"added_radiance": ("radiance added to {on} by {by}", "W m$^{{-2}}$ sr$^{{-1}}$", 1.0),
            "contrast": ("shadow of {by} on {on}: contrast", "fraction of the light", 1.0),
-           "penumbra_m": ("shadow of {by} on {on}: penumbra width", "mm", 1000.0)}
+           "penumbra_m": ("shadow of {by} on {on}: penumbra width", "mm", 1000.0),
+           "area_m2": ("shadow of {by} on {on}: area taking half the light", "cm$^2$", 1e4)}
 
 
 def plot_effect(curve: EffectCurve, path: str | Path, *, title: str | None = None) -> Path:

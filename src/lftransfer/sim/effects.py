@@ -12,7 +12,7 @@ two curves against the distance between the objects can be compared.
   ``on``'s lit pixels, and its penumbra width the difference of the
   radii of the areas (on ``on``'s surface, m^2) where ``s`` exceeds 10 % and 90 % of the contrast: for a round
   shadow, how far the edge takes to go from 10 % to 90 % of its depth, in metres (none for a shadow that takes
-  less than a quarter of the light).
+  less than a quarter of the light); its area is the surface area (m^2) where it takes at least half the light.
 
 The pixels and their surface areas come from the real geometry, so this is verification code (it lives in the
 simulator's package); both sides of the comparison use the same pixels.
@@ -39,6 +39,7 @@ FULL_COVERAGE = 0.999        # a metric pixel belongs to the object when this fr
 LIT_FRACTION = 0.05          # shadow: pixels darker than this fraction of the brightest one are not measured
 SMOOTHING = 3                # shadow: the light taken is averaged over this many metric pixels square
 PENUMBRA_LEVELS = (0.1, 0.9)  # shadow: the edge runs between these fractions of the contrast
+HALF_SHADOW = 0.5            # shadow: its area is where it takes at least this fraction of the light
 MIN_CONTRAST = 0.25          # shadow: a fainter shadow has no penumbra worth the name (and noise could make one)
 
 
@@ -67,6 +68,8 @@ class EffectMeasure:
         contrast: shadow: the light taken from the shadow's darkest part, fraction in [0, 1].
         penumbra_m: shadow: width of the shadow's edge on the surface, m (None for a shadow fainter than
             :data:`MIN_CONTRAST`).
+        area_m2: shadow: the surface area where the shadow takes at least half of the light, m^2 (its size:
+            contrast and penumbra describe its darkest point and its edge, not how much of ``on`` it covers).
         pixels: metric pixels measured.
     """
 
@@ -74,6 +77,7 @@ class EffectMeasure:
     added_radiance: float | None = None
     contrast: float | None = None
     penumbra_m: float | None = None
+    area_m2: float | None = None
     pixels: int = 0
 
     def to_json(self) -> dict:
@@ -159,7 +163,8 @@ def measure_effect(kind: str, image: np.ndarray, without: np.ndarray, pixels: Ob
     if contrast >= MIN_CONTRAST:
         lo, hi = (float(pixels.area_m2[lit & (smooth >= level * contrast)].sum()) for level in PENUMBRA_LEVELS)
         penumbra = float(np.sqrt(lo / np.pi) - np.sqrt(hi / np.pi))
-    return EffectMeasure(kind="shadow", contrast=contrast, penumbra_m=penumbra, pixels=int(lit.sum()))
+    area = float(pixels.area_m2[lit & (smooth >= HALF_SHADOW)].sum())
+    return EffectMeasure(kind="shadow", contrast=contrast, penumbra_m=penumbra, area_m2=area, pixels=int(lit.sum()))
 
 
 def object_distance(scene, a: str, b: str) -> float:
