@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from lftransfer.app.effects import EffectCurve, EffectPoint, measure_sequence_effect
+from lftransfer.app.effects import EffectCurve, EffectPoint, verify_exchange
 from lftransfer.app.pipeline import RunOptions, quick_scene
 from lftransfer.app.sequence import SequenceOptions, render_sequence
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
@@ -36,7 +36,8 @@ def test_01_reflection_curve_against_ground_truth(variant, tmp_path):
     out = tmp_path / "seq"
     options = RunOptions(rig_model="oracle", truth_seed=None)
     report = render_sequence(scene, out, options, SequenceOptions(mode="converged", frames=3, verify_every=2))
-    curve = measure_sequence_effect(scene, out, options, report)
+    check = verify_exchange(scene, out, options, report)
+    curve = check.effect
     assert [p.index for p in curve.points] == [0, 2]
     lft, gt = curve.values()["added_radiance"]
     assert np.all(gt > 0) and np.all(lft > 0)
@@ -47,11 +48,16 @@ def test_01_reflection_curve_against_ground_truth(variant, tmp_path):
     assert saved["kind"] == "reflection" and len(saved["points"]) == 2
     assert saved["worst_relative_error"]["added_radiance"] == pytest.approx(np.max(np.abs(lft - gt) / gt))
     assert (out / "effect.png").stat().st_size > 10_000
+    # each verified frame gets its cross error in report.json (the transfer is close: 0 < error < 0.5)
+    saved = json.loads((out / "report.json").read_text())
+    errors = {f["index"]: f["metrics"]["cross_transfer_rel_error"] for f in saved["frames"] if f["metrics"]}
+    assert errors == check.cross_errors and all(0 < e < 0.5 for e in errors.values())
+    assert saved["summary"]["cross_transfer_rel_error_max"] == max(errors.values())
 
 
-def test_02_no_effect_or_no_verified_frame_measures_nothing(tmp_path):
+def test_02_no_verified_frame_checks_nothing(tmp_path):
     scene = load_scene(builtin_scene("fig4"))
-    assert measure_sequence_effect(scene, tmp_path, RunOptions(), {"frames": [{"index": 0, "metrics": None}]}) is None
+    assert verify_exchange(scene, tmp_path, RunOptions(), {"frames": [{"index": 0, "metrics": None}]}) is None
 
 
 def test_03_curve_errors_and_trend():

@@ -134,3 +134,27 @@ def test_06_negative_control_margins_and_verdict():
     undefined = negative_control(run(0.9), run(0.4), empty, "nominal (rig file)")
     assert not undefined.measurably_worse and undefined.psnr_objects_margin_db is None
     assert "undefined" in undefined.message()
+
+
+def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
+    """The cross error of two composites (a live frame and the no-exchange composite) is evaluate's figure for
+    the same images, 0 for a transfer that adds exactly the ground truth's cross term; None without one."""
+    from lftransfer.composite import composite
+    from lftransfer.sim.verify import cross_transfer_error
+
+    rng = np.random.default_rng(3)
+    real, syn = (rng.random((H, W, 3)).astype(np.float32) for _ in range(2))
+    alpha = (rng.random((H, W)) > 0.5).astype(np.float32)
+    syn *= alpha[..., None]
+    extra = 0.1 * rng.random((H, W, 3)).astype(np.float32)
+    none = composite(syn, alpha, real)
+    gt = _gt(none + extra, real, syn, 1 - alpha, alpha)
+    lit = real + 0.8 * extra
+    view = SimpleNamespace(rgb=syn, alpha=alpha)
+    result = SimpleNamespace(real_view=lit, real_view_direct=real, synthetic_view=view,
+                             bounces=[SimpleNamespace(synthetic_view=view)])
+    expected = evaluate(result, gt)["cross_transfer_rel_error"]
+    assert cross_transfer_error(composite(syn, alpha, lit), none, gt) == pytest.approx(expected, rel=1e-6)
+    assert expected > 0.1
+    assert cross_transfer_error(none + extra, none, gt) == pytest.approx(0.0, abs=1e-6)
+    assert cross_transfer_error(none + extra, none, _gt(none, real, syn, 1 - alpha, alpha)) is None

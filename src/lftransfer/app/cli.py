@@ -485,7 +485,7 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
 
         try:
             report = render_sequence(scene, out, options, seq, bounces=bounces, progress=progress, step=step)
-            effect = _sequence_effect(scene, out, options, report, step)
+            check = _check_exchange(scene, out, options, report, step)
         except KeyboardInterrupt:
             bar.stop()
             fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
@@ -504,6 +504,10 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
     if "psnr_objects_db_min" in summary:
         _row(table, "psnr over the objects (verified frames)",
              f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
+    if "cross_transfer_rel_error_min" in summary:
+        _row(table, "cross-transfer error (verified frames)",
+             f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}")
+    effect = check.effect if check is not None else None
     if effect is not None:
         for name, worst in effect.worst_relative_error().items():
             trend = effect.trend()[name]
@@ -518,11 +522,11 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
     Console().print(table)
 
 
-def _sequence_effect(scene, out: Path, options, report: dict, step):
-    """The scene's [effect] over the verified frames of a rendered sequence (effect.json, effect.png), or None."""
-    from lftransfer.app.effects import measure_sequence_effect
+def _check_exchange(scene, out: Path, options, report: dict, step):
+    """The cross errors and the [effect] of a rendered sequence's verified frames (app/effects.py), or None."""
+    from lftransfer.app.effects import verify_exchange
 
-    return measure_sequence_effect(scene, out, options, report, step=step)
+    return verify_exchange(scene, out, options, report, step=step)
 
 
 @app.command(cls=_Command)

@@ -1,10 +1,15 @@
-"""A sequence's effect curve: the scene's ``[effect]`` measured on every verified frame, beside the ground truth.
+"""The light exchange of a rendered sequence, checked against the ground truth at every verified frame.
 
-After ``lft render --verify-every K`` has written its frames, :func:`measure_sequence_effect` measures the
-effect (:mod:`lftransfer.sim.effects`) at each verified frame: light field transfer's composite (the frame's EXR)
-against the same transfer without the object ``by``, and the ground truth against the ground truth without it,
-over the pixels of the object ``on``; x is the distance between the two objects. It writes ``effect.json`` and
-``effect.png`` (matplotlib: each measure against the distance, transfer and ground truth side by side).
+After ``lft render --verify-every K`` has written its frames, :func:`verify_exchange` measures each verified
+frame's cross-transfer error (what the two sides add to each other's appearance, against the ground truth's) and,
+for a scene with an ``[effect]``, the effect (:mod:`lftransfer.sim.effects`): light field transfer's composite
+(the frame's EXR) against the same transfer without the object ``by``, and the ground truth against the ground
+truth without it, over the pixels of the object ``on``; x is the distance between the two objects. It writes the
+cross errors into ``report.json``, and ``effect.json`` and ``effect.png`` (matplotlib: each measure against the
+distance, transfer and ground truth side by side).
+
+The cross error of a live frame is measured against the composite without exchange at the same time (a transfer
+of no bounces: the projector black), for converged frames too (the same measure as ``lft run``'s).
 
 The transfer without ``by`` is a converged N-bounce transfer at the frame's time in both modes: in live mode
 it stands for what the live loop without ``by`` converges to (the object ``by`` is the one that moves). The live
@@ -24,7 +29,7 @@ from lftransfer.composite import composite
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 
-__all__ = ["EffectPoint", "EffectCurve", "measure_sequence_effect", "plot_effect"]
+__all__ = ["EffectCurve", "EffectPoint", "ExchangeCheck", "plot_effect", "verify_exchange"]
 
 EFFECT_JSON = "effect.json"
 EFFECT_PLOT = "effect.png"
@@ -110,60 +115,95 @@ def _without(scene, name: str):
     return scene.model_copy(update={"synthetic": [o for o in scene.synthetic if o.name != name]})
 
 
-def measure_sequence_effect(scene, out: str | Path, options: RunOptions, report: dict, *,
-                            step: Callable[[str], None] | None = None) -> EffectCurve | None:
-    """Measure the scene's effect at every verified frame of a rendered sequence; write effect.json/.png.
+@dataclass
+class ExchangeCheck:
+    """What the verification of a sequence's light exchange found.
+
+    Attributes:
+        cross_errors: frame index -> the frame's cross-transfer error
+            (:func:`~lftransfer.sim.verify.cross_transfer_error`; None where the ground truth has no cross term).
+        effect: the scene's effect curve, or None when it has no ``[effect]``.
+    """
+
+    cross_errors: dict[int, float | None] = field(default_factory=dict)
+    effect: EffectCurve | None = None
+
+
+def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *,
+                    step: Callable[[str], None] | None = None) -> ExchangeCheck | None:
+    """Check the light exchange at every verified frame of a rendered sequence, against the ground truth.
+
+    For each verified frame (after the live loop's first N frames): its cross-transfer error (the frame's
+    composite against the composite without any exchange, the projector black, at the same time), written into the
+    frame's metrics in ``report.json`` as ``cross_transfer_rel_error`` (and its range into the summary); and, for
+    a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png.
 
     Args:
-        scene: the ``SceneConfig`` the sequence was rendered from (its ``effect``; None: nothing to do).
+        scene: the ``SceneConfig`` the sequence was rendered from.
         out: the sequence's folder (its ``frames/NNNN.exr`` and ``report.json``).
         options: the sequence's :class:`RunOptions` (the simulated rig, its truth seed, ground-truth samples).
         report: the sequence's report (the frames with metrics are the verified ones; ``key.settings`` the
-            transfer settings). The rig model is the sequence's: its calibration file, ``out/calibration.json``,
-            the oracle or the nominal model (:func:`~lftransfer.app.sequence.acquire_model`).
-        step: called with a message before each measured frame.
+            transfer settings); updated and rewritten. The rig model is the sequence's: its calibration file,
+            ``out/calibration.json``, the oracle or the nominal model
+            (:func:`~lftransfer.app.sequence.acquire_model`).
+        step: called with a message before each frame.
 
     Returns:
-        The :class:`EffectCurve`, or None when the scene has no ``[effect]`` or no frame was verified.
+        The :class:`ExchangeCheck`, or None when no frame was verified (or the rig has no ground truth).
     """
     from lftransfer.app.sequence import acquire_model
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
-    from lftransfer.sim.verify import render_ground_truth
+    from lftransfer.sim.verify import cross_transfer_error, render_ground_truth
 
     effect = scene.effect
     warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0
     verified = [f for f in report.get("frames", []) if f.get("metrics") and int(f["index"]) >= warmup]
-    if effect is None or not verified:
+    if not verified:
         return None
     out = Path(out)
     step = step or (lambda _msg: None)
     settings = TransferSettings(**{**report["key"]["settings"], "bounce_views": False})
-    ps = _without(scene.synthetic_part(), effect.by)
-    curve = EffectCurve(kind=effect.kind, on=effect.on, by=effect.by)
+    direct = TransferSettings(**{**report["key"]["settings"], "bounce_views": False, "bounces": 0})
+    ps = scene.synthetic_part()
+    check = ExchangeCheck(effect=EffectCurve(kind=effect.kind, on=effect.on, by=effect.by) if effect else None)
+    spp = options.gt_spp or scene.render.gt_spp
     opened = open_rig(scene, options)
     try:
+        if opened.world is None:
+            return None
         model, _ = acquire_model(opened, scene, options, out, True, step)
         for f in verified:
             i, t = int(f["index"]), float(f["time_s"])
-            step(f"effect: frame {i}")
+            step(f"check the exchange: frame {i}")
             world = opened.world.at(t)
-            spp = options.gt_spp or scene.render.gt_spp
-            truth = render_ground_truth(world, spp=spp, use_cache=options.use_cache).image
-            truth_without = render_ground_truth(_without(world, effect.by), spp=spp,
-                                                use_cache=options.use_cache).image
-            result = run_transfer(opened.rig, model, ps, settings, time_s=t)
+            frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
+            gt = render_ground_truth(world, spp=spp, use_cache=options.use_cache)
+            alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
+            no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
+                                    alone.real_view_direct)
+            check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross_transfer_error(frame, no_exchange,
+                                                                                                 gt)
+            if effect is None:
+                continue
+            truth_without = render_ground_truth(_without(world, effect.by), spp=spp, use_cache=options.use_cache).image
+            result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t)
             transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
             pixels = object_pixels(world, effect.on)
-            curve.points.append(EffectPoint(
+            check.effect.points.append(EffectPoint(
                 index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
-                transfer=measure_effect(effect.kind, read_exr(out / "frames" / f"{i:04d}.exr")[..., :3],
-                                        transfer_without, pixels),
-                truth=measure_effect(effect.kind, truth, truth_without, pixels)))
+                transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
+                truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
     finally:
         opened.rig.close()
-    write_json(out / EFFECT_JSON, curve.to_json())
-    plot_effect(curve, out / EFFECT_PLOT, title=scene.source.stem if scene.source else None)
-    return curve
+    values = [v for v in check.cross_errors.values() if v is not None]
+    if values and isinstance(report.get("summary"), dict):
+        report["summary"]["cross_transfer_rel_error_min"] = min(values)
+        report["summary"]["cross_transfer_rel_error_max"] = max(values)
+    write_json(out / "report.json", report)
+    if check.effect is not None:
+        write_json(out / EFFECT_JSON, check.effect.to_json())
+        plot_effect(check.effect, out / EFFECT_PLOT, title=scene.source.stem if scene.source else None)
+    return check
 
 
 _LABELS = {"added_radiance": ("radiance added to {on} by {by}", "W m$^{{-2}}$ sr$^{{-1}}$", 1.0),

@@ -26,9 +26,9 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "downsample",
-           "evaluate", "gt_noise_verdict", "metric_factor", "negative_control", "object_mask", "psnr",
-           "render_ground_truth", "single_seed"]
+__all__ = ["GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "cross_term_truth",
+           "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control",
+           "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -191,6 +191,37 @@ NO_PIXELS = "no pixel of the view shows an object"
 IDENTICAL = "the images are identical (PSNR is infinite)"
 
 
+def cross_term_truth(gt: GroundTruth, factor: int) -> list[np.ndarray]:
+    """The ground truth's cross term of each seed, C = union - composite(real alone, synthetic alone): what the
+    objects add to each other's appearance; two (h, w, 3) images box-downsampled by ``factor``."""
+    return [downsample(gt.union[i] - composite(gt.synthetic[i], gt.alpha_synthetic, gt.real[i]), factor)
+            for i in range(2)]
+
+
+def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: GroundTruth, *,
+                         target_width: int = 256) -> float | None:
+    """The cross-transfer error of any composite (:func:`evaluate`'s ``cross_transfer_rel_error``).
+
+    Args:
+        composite_n: (H, W, 3) the composite after the exchange (a converged result or a live frame).
+        composite_0: (H, W, 3) the composite without any exchange (the projector black, the synthetic objects
+            lit by the virtual point light and emitters only).
+        gt: the ground truth at the same view resolution.
+        target_width: the metrics' width.
+
+    Returns:
+        ||C_transfer - C_truth|| / ||C_truth|| over the objects' pixels, or None without a cross term.
+    """
+    f = metric_factor(composite_n.shape[1], target_width)
+    pair = cross_term_truth(gt, f)
+    c_gt = 0.5 * (pair[0] + pair[1])
+    mask = object_mask(gt, f)
+    c_norm = float(np.sqrt(np.sum(c_gt[mask] ** 2)))
+    if not mask.any() or not c_norm > 0:
+        return None
+    return float(np.sqrt(np.sum((downsample(composite_n - composite_0, f) - c_gt)[mask] ** 2))) / c_norm
+
+
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     """Metrics of a transfer result against the ground truth (DESIGN.md section 6).
 
@@ -218,7 +249,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
     union = ds(gt.image)
     peak = float(union.max())
     # Cross-transfer terms: what the objects add to each other's appearance.
-    c_gt_pair = [ds(gt.union[i] - composite(gt.synthetic[i], gt.alpha_synthetic, gt.real[i])) for i in range(2)]
+    c_gt_pair = cross_term_truth(gt, f)
     c_gt = 0.5 * (c_gt_pair[0] + c_gt_pair[1])
     c_lft = ds(comp_n - comp_0)
     mask = object_mask(gt, f)
