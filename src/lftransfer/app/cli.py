@@ -506,7 +506,9 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
              f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
     if "cross_transfer_rel_error_min" in summary:
         _row(table, "cross-transfer error (verified frames)",
-             f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}")
+             f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}"
+             + (f" (ground truth's own noise on it: up to {summary['cross_gt_noise_rel_max']:.3f})"
+                if summary.get("cross_gt_noise_rel_max") is not None else ""))
     effect = check.effect if check is not None else None
     if effect is not None:
         for name, worst in effect.worst_relative_error().items():

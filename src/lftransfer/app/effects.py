@@ -121,7 +121,8 @@ class ExchangeCheck:
 
     Attributes:
         cross_errors: frame index -> the frame's cross-transfer error
-            (:func:`~lftransfer.sim.verify.cross_transfer_error`; None where the ground truth has no cross term).
+            (:func:`~lftransfer.sim.verify.cross_transfer_error`; None where the ground truth has no cross term);
+            report.json also gets the ground truth's own noise on it (``cross_gt_noise_rel``).
         effect: the scene's effect curve, or None when it has no ``[effect]``.
     """
 
@@ -135,7 +136,8 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
 
     For each verified frame (after the live loop's first N frames): its cross-transfer error (the frame's
     composite against the composite without any exchange, the projector black, at the same time), written into the
-    frame's metrics in ``report.json`` as ``cross_transfer_rel_error`` (and its range into the summary); and, for
+    frame's metrics in ``report.json`` as ``cross_transfer_rel_error`` beside the ground truth's own noise on it,
+    ``cross_gt_noise_rel`` (and the error's range into the summary); and, for
     a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png.
 
     Args:
@@ -181,8 +183,9 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
             alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
             no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
                                     alone.real_view_direct)
-            check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross_transfer_error(frame, no_exchange,
-                                                                                                 gt)
+            cross = cross_transfer_error(frame, no_exchange, gt)
+            check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
+            f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
             if effect is None:
                 continue
             truth_without = render_ground_truth(_without(world, effect.by), spp=spp, use_cache=options.use_cache).image
@@ -196,9 +199,11 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     finally:
         opened.rig.close()
     values = [v for v in check.cross_errors.values() if v is not None]
+    noise = [f["metrics"]["cross_gt_noise_rel"] for f in verified if f["metrics"].get("cross_gt_noise_rel") is not None]
     if values and isinstance(report.get("summary"), dict):
         report["summary"]["cross_transfer_rel_error_min"] = min(values)
         report["summary"]["cross_transfer_rel_error_max"] = max(values)
+        report["summary"]["cross_gt_noise_rel_max"] = max(noise) if noise else None
     write_json(out / "report.json", report)
     if check.effect is not None:
         write_json(out / EFFECT_JSON, check.effect.to_json())

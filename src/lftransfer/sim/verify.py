@@ -26,7 +26,7 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "cross_term_truth",
+__all__ = ["CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "cross_term_truth",
            "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control",
            "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
@@ -198,9 +198,24 @@ def cross_term_truth(gt: GroundTruth, factor: int) -> list[np.ndarray]:
             for i in range(2)]
 
 
+@dataclass(frozen=True)
+class CrossCheck:
+    """The cross-transfer error of a composite and the ground truth's own noise on it.
+
+    Attributes:
+        error: ||C_transfer - C_truth|| / ||C_truth|| over the objects' pixels (None without a cross term).
+        gt_noise: ||C_truth,1 - C_truth,2|| / ||C_truth||: the two ground-truth seeds' cross terms against each
+            other; an error not well above it is the ground truth's noise, not the transfer's.
+    """
+
+    error: float | None
+    gt_noise: float | None
+
+
 def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: GroundTruth, *,
-                         target_width: int = 256) -> float | None:
-    """The cross-transfer error of any composite (:func:`evaluate`'s ``cross_transfer_rel_error``).
+                         target_width: int = 256) -> CrossCheck:
+    """The cross-transfer error of any composite (:func:`evaluate`'s ``cross_transfer_rel_error`` and
+    ``cross_gt_noise_rel``).
 
     Args:
         composite_n: (H, W, 3) the composite after the exchange (a converged result or a live frame).
@@ -210,16 +225,17 @@ def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: G
         target_width: the metrics' width.
 
     Returns:
-        ||C_transfer - C_truth|| / ||C_truth|| over the objects' pixels, or None without a cross term.
+        :class:`CrossCheck` over the objects' pixels.
     """
     f = metric_factor(composite_n.shape[1], target_width)
     pair = cross_term_truth(gt, f)
     c_gt = 0.5 * (pair[0] + pair[1])
     mask = object_mask(gt, f)
-    c_norm = float(np.sqrt(np.sum(c_gt[mask] ** 2)))
+    norm = lambda x: float(np.sqrt(np.sum(x[mask] ** 2)))  # noqa: E731
+    c_norm = norm(c_gt)
     if not mask.any() or not c_norm > 0:
-        return None
-    return float(np.sqrt(np.sum((downsample(composite_n - composite_0, f) - c_gt)[mask] ** 2))) / c_norm
+        return CrossCheck(None, None)
+    return CrossCheck(norm(downsample(composite_n - composite_0, f) - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm)
 
 
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
