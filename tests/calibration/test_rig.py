@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from lftransfer.calibration.targets import target
 from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
 from lftransfer.app.pipeline import quick_scene
 from lftransfer.calibration.light import LIGHT_BOARDS
@@ -41,15 +42,15 @@ def test_01_recovers_the_hidden_rig(calibrated):
     scene, rig, cal, messages = calibrated
     e = calibration_errors(cal, rig.truth, true_light=true_light_scene(scene, 3).light.position)
     assert e["lenslets_found"] == 120
-    assert e["lenslet_centre_rms_px"] <= 0.1
-    assert e["projector_mapping_rms_px"] <= 0.5
+    for key in ("lenslet_centre_rms_px", "projector_mapping_rms_px", "camera_response_error",
+                "projector_response_error", "light_position_error_mm"):     # met at this resolution too
+        assert target(key).met(e[key]), key
     assert e["pose_position_rms_mm"] <= 0.7 and e["pose_rotation_deg"] <= 0.35
     assert abs(e["pitch_rel_error"]) < 0.005
     assert isinstance(rig._setup, RealScene)             # calibration leaves the rig in the real scene
     # brightness, exposure, pose and point light boards
     assert len(rig.boards_held) == 2 + POSE_ROUNDS * len(POSE_DEPTHS) + LIGHT_BOARDS
-    assert e["light_position_error_mm"] <= 1.0 and cal.light.residual_rms < 0.005
-    assert e["camera_response_error"] <= 0.01 and e["projector_response_error"] <= 0.01
+    assert cal.light.residual_rms < 0.005
     assert e["ray_direction_rms_deg"] < 0.5 and e["lenslet_assignment_agreement"] > 0.999
     assert abs(e["exposure_rel_error"]) < 0.005 and e["projector_mixing_rel_error"] < 0.01
     assert len(messages) == count_calibration_steps(scene)
