@@ -607,7 +607,8 @@ def _errors_table(errors: dict) -> str:
             continue
         verdict = "pass" if target.met(value) else "fail"
         rows.append(f"<tr><td>{_esc(label)}</td><td class=\"num\">{shown}</td><td>{_esc(unit)}</td>"
-                    f"<td class=\"num\">&le; {target.bound * factor:.4g}</td><td class=\"{verdict}\">{verdict}</td></tr>")
+                    f"<td class=\"num\">&le; {target.bound * factor:.4g}</td>"
+                    f"<td class=\"{verdict}\">{verdict}</td></tr>")
     header = "".join(f"<th>{_esc(h)}</th>" for h in head)
     return f"<table>\n<tr>{header}</tr>\n" + "\n".join(rows) + "\n</table>"
 

@@ -77,8 +77,8 @@ class EffectCurve:
         """Measure name -> ((P,) transfer values, (P,) ground-truth values), NaN where undefined."""
         names = ("added_radiance",) if self.kind == "reflection" else ("contrast", "penumbra_m", "area_m2")
         get = lambda m, n: np.nan if getattr(m, n) is None else float(getattr(m, n))  # noqa: E731
-        return {n: (np.array([get(p.transfer, n) for p in self.points]), np.array([get(p.truth, n) for p in self.points]))
-                for n in names}
+        return {n: (np.array([get(p.transfer, n) for p in self.points]),
+                    np.array([get(p.truth, n) for p in self.points])) for n in names}
 
     def worst_relative_error(self) -> dict[str, float | None]:
         """Measure name -> the largest |transfer - truth| / |truth| over the points (None: no defined point).

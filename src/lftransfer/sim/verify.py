@@ -26,9 +26,9 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors", "cross_term_truth",
-           "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control",
-           "object_mask", "psnr", "render_ground_truth", "single_seed"]
+__all__ = ["CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
+           "cross_term_truth", "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor",
+           "negative_control", "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
