@@ -65,3 +65,13 @@ def test_builtin_scene_by_name():
     assert _load(Path("fig6"), quick=True).effect.on == "bowl"
     result = runner.invoke(app, ["render", "fig7", "--quick"])
     assert result.exit_code != 0 and "fig7: no such file (built-in scenes: fig1b, fig4, fig5, fig6)" in _text(result)
+
+
+def test_06_cluster_option_errors(tmp_path):
+    """--cluster is checked before any work: its form, --workers without it, and the live loop (sequential)."""
+    for args, words in ((["--mode", "converged", "--cluster", "slurm"], "expected 'auto', 'local' or 'ray://HOST:PORT'"),
+                        (["--mode", "converged", "--workers", "2"], "--workers: needs --cluster"),
+                        (["--cluster", "local"], "needs --mode converged: the live loop is sequential")):
+        result = runner.invoke(app, ["render", "fig4", "--quick", "--out", str(tmp_path / "o"), *args])
+        assert result.exit_code == 2 and words in _text(result), _text(result)
+        assert not (tmp_path / "o").exists()

@@ -102,6 +102,31 @@ def _bounces_option():
     return typer.Option(2, min=0, max=MAX_BOUNCES, metavar="N", help=_BOUNCES_HELP)
 
 
+def _cluster_option():
+    return typer.Option(None, metavar="auto|local|ray://HOST:PORT", help=(
+        "Spread the work over a Ray cluster (pip install 'lftransfer[cluster]'): auto (the cluster `ray start` "
+        "made here, else a local one) | local (one started for this job) | ray://HOST:PORT. Results are "
+        "bit-identical to one process."))
+
+
+def _workers_option():
+    return typer.Option(None, min=1, metavar="N", help="Cluster workers (default: one per GPU, else per CPU core).")
+
+
+def _cluster_spec(cluster: Optional[str], workers: Optional[int]):
+    """``--cluster`` and ``--workers`` -> ClusterSpec, or None for one process (a usage error names the option)."""
+    from lftransfer.app.cluster import ClusterSpec
+
+    if cluster is None:
+        if workers is not None:
+            fail("--workers: needs --cluster")
+        return None
+    try:
+        return ClusterSpec.parse(cluster, workers)
+    except ValueError as exc:
+        fail(str(exc))
+
+
 def _rig_spec(rig: str):
     from lftransfer.app.pipeline import RigSpec
 
@@ -442,9 +467,12 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
                rig_model: str = typer.Option("calibrated", metavar="calibrated|nominal|oracle", help=_MODEL_HELP),
                calibration: Optional[Path] = typer.Option(None, metavar="FILE", help=_CAL_HELP),
                rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
+               cluster: Optional[str] = _cluster_option(),
+               workers: Optional[int] = _workers_option(),
                max_memory: Optional[str] = _memory_option()) -> None:
     """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
     report with per-frame timings (and metrics with --verify-every)."""
+    from lftransfer.app.cluster import ClusterError
     from lftransfer.app.pipeline import CalibrationFailedError, RunOptions
     from lftransfer.app.sequence import MODES, SequenceError, SequenceOptions, render_sequence
     from lftransfer.calibration.rig import CalibrationFileError
@@ -457,7 +485,11 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, compare_models=(), gt_spp=gt_spp, use_cache=not no_cache,
                          renderer=renderer, **rig_opts)
-    seq = SequenceOptions(mode=mode, frames=frames, resume=resume, verify_every=verify_every)
+    try:
+        seq = SequenceOptions(mode=mode, frames=frames, resume=resume, verify_every=verify_every,
+                              cluster=_cluster_spec(cluster, workers))
+    except SequenceError as exc:
+        fail(str(exc))
     if resume and not (out / "report.json").is_file():
         fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
     _check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
@@ -492,7 +524,7 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
         except (SequenceError, CalibrationFileError) as exc:
             bar.stop()
             fail(str(exc))
-        except (RigError, CalibrationFailedError) as exc:
+        except (RigError, CalibrationFailedError, ClusterError) as exc:
             bar.stop()
             fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
     summary = report["summary"]
@@ -500,6 +532,9 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
     table.add_column("")
     table.add_column("value", justify="right")
     _row(table, "frames", str(summary["frames"]))
+    if report.get("cluster"):
+        c = report["cluster"]
+        _row(table, "cluster", f"{c['workers']} workers on {c['address']} ({c['cpus']:g} CPUs, {c['gpus']:g} GPUs)")
     _row(table, "median frame time", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
     if "psnr_objects_db_min" in summary:
         _row(table, "psnr over the objects (verified frames)",

@@ -348,6 +348,14 @@ class OpenedRig:
     world: object | None = None
     truth_seed: int | None = None
 
+    def start_frame(self, index: int) -> None:
+        """Begin frame ``index`` of a sequence of independent frames: the simulated rig draws the frame's sensor
+        noise from its seed and the index alone (:meth:`lftransfer.sim.SimRig.start_frame`), so the frame is the
+        same whichever process renders it and whatever it rendered before. Other rigs have no seed to set."""
+        start = getattr(self.rig, "start_frame", None)
+        if start is not None:
+            start(index)
+
 
 def open_rig(scene, options: RunOptions, *, operator: Operator | None = None) -> OpenedRig:
     """Open the rig a run asks for (:class:`RigSpec`), wrapped in a recorder when ``options.record`` is set.

@@ -18,13 +18,14 @@ from __future__ import annotations
 
 import shutil
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Callable, Iterable, Iterator, Literal
 
 import numpy as np
 
-from lftransfer.app.pipeline import NOMINAL, RunOptions, calibrate, open_rig, write_calibration
+from lftransfer.app.cluster import ClusterSpec, Worker
+from lftransfer.app.pipeline import NOMINAL, OpenedRig, RunOptions, calibrate, open_rig, write_calibration
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
@@ -32,13 +33,13 @@ from lftransfer.composite import composite
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
 from lftransfer.rig.model import nominal_rig
-from lftransfer.transfer.bounce import TransferSettings, run_transfer
+from lftransfer.transfer.bounce import TransferResult, TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
-__all__ = ["FrameRecord", "SequenceError", "SequenceOptions", "acquire_model", "frame_metrics", "render_sequence",
-           "sequence_times"]
+__all__ = ["ConvergedFrame", "FrameRecord", "FrameWorker", "SequenceError", "SequenceOptions", "acquire_model",
+           "converged_frame", "frame_ground_truth", "frame_metrics", "render_sequence", "sequence_times"]
 
 MODES = ("live", "converged")
 STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
@@ -62,16 +63,22 @@ class SequenceOptions:
         resume: continue after the last finished frame of the folder's sequence.
         verify_every: render the path-traced ground truth of every k-th frame (0: none; simulated rig only) and
             report its metrics.
+        cluster: spread the frames and their ground truths over a Ray cluster (:mod:`lftransfer.app.cluster`;
+            converged mode, simulated rig); None: in this process. The frames are bit-identical either way.
     """
 
     mode: Literal["live", "converged"] = "live"
     frames: int | None = None
     resume: bool = False
     verify_every: int = 0
+    cluster: ClusterSpec | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise SequenceError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.cluster is not None and self.mode != "converged":
+            raise SequenceError("--cluster needs --mode converged: the live loop is sequential (each frame is lit "
+                                "by the one before), only independent frames can be spread over workers")
         if self.frames is not None and not (isinstance(self.frames, int) and self.frames >= 1):
             raise SequenceError(f"frames must be an integer >= 1, got {self.frames!r}")
         if not (isinstance(self.verify_every, int) and self.verify_every >= 0):
@@ -167,10 +174,89 @@ def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool, s
     return nominal_rig(scene.rig), NOMINAL
 
 
+@dataclass
+class ConvergedFrame:
+    """One converged frame as a worker hands it back (the same in one process and on a cluster).
+
+    Attributes:
+        index: frame number.
+        time_s: scene time, seconds.
+        result: its N-bounce transfer (the LF camera's raw image left out: it stays with the worker).
+        ground_truth: its path-traced ground truth (``lftransfer.sim.verify.GroundTruth``), or None.
+        seconds: wall time of the transfer and the ground truth, s.
+    """
+
+    index: int
+    time_s: float
+    result: TransferResult
+    ground_truth: object | None
+    seconds: float
+
+
+def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float
+                    ) -> tuple[TransferResult, float]:
+    """Frame ``index`` of a converged sequence: an independent N-bounce transfer at ``time_s``, its random numbers
+    drawn from the frame's index (:meth:`OpenedRig.start_frame`), whatever the rig did before.
+
+    Args:
+        opened: the rig.
+        model: the rig model.
+        scene: the synthetic part of the scene.
+        settings: the transfer's settings.
+
+    Returns:
+        (the transfer without its LF camera raw image, seconds).
+    """
+    t0 = time.perf_counter()
+    opened.start_frame(index)
+    result = run_transfer(opened.rig, model, scene, settings, time_s=time_s)
+    return replace(result, captured_raw=None), time.perf_counter() - t0
+
+
+def frame_ground_truth(world, time_s: float, spp: int, use_cache: bool):
+    """(the path-traced ground truth of the simulated world at ``time_s``, seconds)
+    (:func:`lftransfer.sim.verify.render_ground_truth`; cached)."""
+    from lftransfer.sim.verify import render_ground_truth
+
+    t0 = time.perf_counter()
+    gt = render_ground_truth(world.at(time_s), spp=spp, use_cache=use_cache)
+    return gt, time.perf_counter() - t0
+
+
+class FrameWorker(Worker):
+    """A cluster worker of converged sequences (:class:`lftransfer.app.cluster.WorkerPool`): its own simulated rig,
+    warm between frames.
+
+    Args:
+        scene: the whole scene (the simulated rig's hidden world).
+        options: the run's options (the rig, its truth seed, the ground truth's samples).
+        model: the rig model the driver calibrated or chose.
+        settings: the transfer's settings.
+        threads: Dr.Jit threads (:class:`lftransfer.app.cluster.Worker`).
+    """
+
+    def __init__(self, scene, options: RunOptions, model, settings: TransferSettings, threads: int | None = None):
+        super().__init__(threads)
+        self.opened = open_rig(scene, options)
+        self.model, self.settings, self.scene = model, settings, scene.synthetic_part()
+
+    def transfer(self, index: int, time_s: float, spp: int | None, use_cache: bool) -> ConvergedFrame:
+        """:func:`converged_frame` and, where ``spp`` is given, :func:`frame_ground_truth`."""
+        result, seconds = converged_frame(self.opened, self.model, self.scene, self.settings, index, time_s)
+        gt = None
+        if spp is not None:
+            gt, gt_seconds = frame_ground_truth(self.opened.world, time_s, spp, use_cache)
+            seconds += gt_seconds
+        return ConvergedFrame(index, time_s, result, gt, seconds)
+
+
 def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), seq: SequenceOptions = SequenceOptions(),
                     *, bounces: int = 2, progress: FrameProgress | None = None,
                     step: Callable[[str], None] | None = None) -> dict:
     """Render a sequence (module docstring) and write it into ``out``.
+
+    Every frame is written as soon as it is finished; converged frames may finish in any order (on a cluster),
+    and a resumed converged sequence renders only the frames that are missing.
 
     Args:
         scene: ``SceneConfig`` (the simulated rig takes its real objects and their keyframes).
@@ -195,6 +281,9 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                                 reconstruction=render.reconstruction if render.lighting_model == "area" else "box",
                                 lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer,
                                 bounce_views=seq.mode == "converged")
+    if seq.cluster is not None and options.rig.kind != "sim":
+        raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "
+                            f"recording is one device whose frames come one after another")
     key = _settings_key(scene, options, seq, settings, n)
     report_path = out / "report.json"
     done: list[dict] = []
@@ -209,7 +298,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             raise SequenceError(f"--resume: {out} holds a sequence with other settings ({old.get('key')}); "
                                 f"run without --resume to start again")
         done = [f for f in old.get("frames", []) if (out / "frames" / f"{f['index']:04d}.exr").is_file()]
-        done = done[:next((i for i, f in enumerate(done) if f["index"] != i), len(done))]
+        if seq.mode == "live":       # the live loop continues after its last unbroken frame
+            done = done[:next((i for i, f in enumerate(done) if f["index"] != i), len(done))]
         scale = old.get("display_scale")
     else:
         for sub in ("frames", "state"):
@@ -225,58 +315,27 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             opened = open_rig(scene, options)
             model, rig_model = acquire_model(opened, scene, options, out, seq.resume, step)
             ps = scene.synthetic_part()
-            verify = seq.verify_every > 0 and opened.world is not None
-            state = out / STATE_FILE
-            live = None
-            if seq.mode == "live":
-                projected = None
-                if done and state.is_file():
-                    with np.load(state) as z:
-                        projected = LightField(z["data"], model.array)
-                elif done:
-                    raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
-                live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
-                                    time_s=float(times[len(done)]) if len(done) < n else 0.0)
-                live.index = len(done)
             report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
                       "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "approximations": approximations(ps, settings.renderer)}
-            for i in range(len(done), n):
-                t0 = time.perf_counter()
-                t = float(times[i])
-                gt = None
-                if verify and i % seq.verify_every == 0:
-                    from lftransfer.sim.verify import render_ground_truth
-
-                    gt = render_ground_truth(opened.world.at(t), spp=options.gt_spp or render.gt_spp,
-                                             use_cache=options.use_cache)
-                if live is not None:
-                    frame = live.step(t)
-                    comp, timings, clipped = frame.composite, frame.timings_s, frame.clipped_fraction
+            writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
+            verify = seq.verify_every > 0 and opened.world is not None
+            gt_spp = options.gt_spp or render.gt_spp
+            if seq.mode == "live":
+                _live_frames(writer, opened, model, ps, settings, times, done, out, scene,
+                             lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache)
+            else:
+                finished = {f["index"] for f in done}
+                todo = [(i, float(times[i]), gt_spp if verify and i % seq.verify_every == 0 else None,
+                         options.use_cache) for i in range(n) if i not in finished]
+                if seq.cluster is None:
+                    worker = _InProcess(opened, model, ps, settings)
+                    frames = (worker.transfer(*item) for item in todo)
+                    writer.converged(frames)
                 else:
-                    result = run_transfer(opened.rig, model, ps, settings, time_s=t)
-                    comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
-                    timings, clipped = result.timings_s, result.clipped_fraction
-                if scale is None:
-                    scale = display_scale(comp, ceiling=emitter_ceiling(ps))
-                    report["display_scale"] = scale
-                if live is not None:
-                    panel = live_panel(frame, gt.image if gt is not None else None, scale,
-                                       camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
-                else:
-                    panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=emitter_ceiling(ps))
-                write_exr(out / "frames" / f"{i:04d}.exr", comp)
-                write_png(out / "frames" / f"{i:04d}.png", to_display(comp, scale))
-                write_png(out / "frames" / f"panel_{i:04d}.png", panel)
-                if live is not None:
-                    _write_state(state, live.projected)
-                record = FrameRecord(index=i, time_s=t, seconds=time.perf_counter() - t0, timings_s=dict(timings),
-                                     clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
-                report["frames"].append(record.to_json())
-                write_json(report_path, report)
-                if progress:
-                    progress(record, i + 1, n)
+                    report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, settings,
+                                                              todo, step)
             step("write the videos")
             report["summary"] = _summary(report["frames"])
             _write_videos(out, n, report["fps"])
@@ -285,6 +344,104 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             if opened is not None:
                 opened.rig.close()
     return report
+
+
+class _InProcess(FrameWorker):
+    """A :class:`FrameWorker` on the rig the driver opened (no cluster)."""
+
+    def __init__(self, opened: OpenedRig, model, scene, settings: TransferSettings) -> None:
+        self.opened, self.model, self.scene, self.settings = opened, model, scene, settings
+
+
+def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, options: RunOptions, model,
+                          settings: TransferSettings, todo: list[tuple], step: Callable[[str], None]) -> dict:
+    """The converged frames ``todo`` on a Ray cluster, written as they finish; returns what the report keeps of
+    the cluster (where, how many workers)."""
+    from lftransfer.app.cluster import WorkerPool, connect
+
+    step(f"start the cluster ({spec})")
+    with connect(spec) as info:
+        step("start the workers")
+        pool = WorkerPool(FrameWorker, (scene, options, model, settings), info, spec.workers)
+        step(f"frames on {len(pool.actors)} workers")
+        writer.converged(frame for _, frame in pool.map("transfer", todo))
+        return {"address": info.address, "workers": len(pool.actors), "cpus": info.cpus, "gpus": info.gpus}
+
+
+class _FrameWriter:
+    """Writes each finished frame at once (EXR, PNG, panel, its record in ``report.json``) and calls the progress
+    callback. The PNGs share frame 0's display scale, so a frame finished before frame 0 (on a cluster) keeps its
+    PNG back until frame 0 is written."""
+
+    def __init__(self, out: Path, report: dict, report_path: Path, *, ceiling: float | None,
+                 progress: FrameProgress | None, total: int) -> None:
+        self.out, self.report, self.report_path = out, report, report_path
+        self.ceiling, self.progress, self.total = ceiling, progress, total
+        self.held: dict[int, np.ndarray] = {}
+
+    @property
+    def scale(self) -> float | None:
+        return self.report["display_scale"]
+
+    def converged(self, frames: Iterable[ConvergedFrame]) -> None:
+        """Write converged frames as they come (any order)."""
+        for f in frames:
+            t0 = time.perf_counter()
+            result, gt = f.result, f.ground_truth
+            comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+            if f.index == 0 and self.scale is None:
+                self.report["display_scale"] = display_scale(comp, ceiling=self.ceiling)
+            panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=self.ceiling)
+            self.frame(f.index, f.time_s, comp, panel, result.timings_s, result.clipped_fraction, gt,
+                       f.seconds + time.perf_counter() - t0)
+
+    def frame(self, index: int, time_s: float, comp: np.ndarray, panel: np.ndarray, timings: dict, clipped: float,
+              gt, seconds: float) -> None:
+        """Write one frame and its record."""
+        frames = self.out / "frames"
+        write_exr(frames / f"{index:04d}.exr", comp)
+        write_png(frames / f"panel_{index:04d}.png", panel)
+        self.held[index] = comp
+        if self.scale is not None:
+            for i, held in sorted(self.held.items()):
+                write_png(frames / f"{i:04d}.png", to_display(held, self.scale))
+            self.held.clear()
+        record = FrameRecord(index=index, time_s=time_s, seconds=seconds, timings_s=dict(timings),
+                             clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
+        self.report["frames"].append(record.to_json())
+        self.report["frames"].sort(key=lambda r: r["index"])
+        write_json(self.report_path, self.report)
+        if self.progress:
+            self.progress(record, len(self.report["frames"]), self.total)
+
+
+def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: TransferSettings, times: np.ndarray,
+                 done: list[dict], out: Path, scene, verified: Callable[[int], bool], gt_spp: int,
+                 use_cache: bool) -> None:
+    """The live loop over the frames after ``done``, each written as it is finished."""
+    state = out / STATE_FILE
+    n = len(times)
+    projected = None
+    if done and state.is_file():
+        with np.load(state) as z:
+            projected = LightField(z["data"], model.array)
+    elif done:
+        raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
+    live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
+                        time_s=float(times[len(done)]) if len(done) < n else 0.0)
+    live.index = len(done)
+    for i in range(len(done), n):
+        t0 = time.perf_counter()
+        t = float(times[i])
+        gt = frame_ground_truth(opened.world, t, gt_spp, use_cache)[0] if verified(i) else None
+        frame = live.step(t)
+        if writer.scale is None:
+            writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)
+        panel = live_panel(frame, gt.image if gt is not None else None, writer.scale,
+                           camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
+        _write_state(state, live.projected)
+        writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
+                     time.perf_counter() - t0)
 
 
 def _variant() -> str:

@@ -147,6 +147,19 @@ class SimRig:
             raise TypeError(f"SimRig.setup: not a set-up request: {request!r}")
         self._setup = request
 
+    def start_frame(self, index: int) -> None:
+        """Begin frame ``index`` of a sequence whose frames are independent (``lft render --mode converged``): the
+        sensor noise of the frame's captures is drawn from the rig's seed and the frame's index alone, not from
+        the captures made before, so a frame rendered by any worker of a cluster, in any order, is bit-identical
+        to the same frame rendered in one process.
+
+        Args:
+            index: the frame's number in its sequence (>= 0).
+        """
+        if not (isinstance(index, (int, np.integer)) and index >= 0):
+            raise ValueError(f"SimRig.start_frame: frame index must be an integer >= 0, got {index!r}")
+        self._rng = np.random.default_rng([self._seed, 7, int(index)])
+
     def place_real(self, objects) -> None:
         """Put the real objects somewhere else (the interactive viewer's hand on the simulated world).
 

@@ -1,0 +1,95 @@
+"""Sequences on a Ray cluster (``lft render --mode converged --cluster``): the same frames as in one process, and a
+worker killed in the middle of a job is replaced without the job noticing."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lftransfer.app.cluster import ClusterSpec
+from lftransfer.app.pipeline import RigSpec, RunOptions
+from lftransfer.app.sequence import SequenceError, SequenceOptions, render_sequence
+from lftransfer.imageio_utils import read_exr
+
+from tests.app.test_sequence import _moving_scene
+
+
+def test_01_cluster_spec():
+    assert ClusterSpec.parse("auto") == ClusterSpec("auto")
+    assert ClusterSpec.parse("local", workers=2) == ClusterSpec("local", None, 2)
+    spec = ClusterSpec.parse("ray://head.example:10001")
+    assert (spec.kind, spec.address, str(spec)) == ("ray", "ray://head.example:10001", "ray://head.example:10001")
+    for bad in ("ray://nohost", "ray://h:port", "ray://h:70000", "slurm", ""):
+        with pytest.raises(ValueError, match="expected 'auto', 'local' or 'ray://HOST:PORT'"):
+            ClusterSpec.parse(bad)
+    with pytest.raises(ValueError, match="--workers"):
+        ClusterSpec.parse("local", workers=0)
+
+
+def test_02_only_independent_frames_of_the_simulated_rig(tmp_path):
+    """The live loop is sequential and a physical rig or a recording is one device: both refuse a cluster."""
+    with pytest.raises(SequenceError, match="needs --mode converged"):
+        SequenceOptions(mode="live", cluster=ClusterSpec("local"))
+    seq = SequenceOptions(mode="converged", cluster=ClusterSpec("local"))
+    options = RunOptions(rig=RigSpec("replay", tmp_path), rig_model="nominal")
+    with pytest.raises(SequenceError, match="needs the simulated rig"):
+        render_sequence(_moving_scene(), tmp_path / "out", options, seq)
+
+
+def _busy_workers() -> list[int]:
+    """Process ids of the cluster's frame workers that are running a frame now (Ray names a worker's process after
+    the task it runs)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cmd = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if cmd.startswith(b"ray::FrameWorker.transfer"):
+                pids.append(int(entry.name))
+    return pids
+
+
+@pytest.mark.slow
+def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(variant, tmp_path):
+    """A 4-frame converged sequence with its ground truth, on a local cluster of 2 workers, is bit-identical to the
+    same sequence in one process (frames, metrics); one worker is killed while it renders a frame, and Ray's
+    replacement renders it again."""
+    pytest.importorskip("ray")
+    if not Path("/proc/self/cmdline").is_file():
+        pytest.skip("needs /proc to find a busy worker")
+    scene = _moving_scene()
+    options = RunOptions(rig_model="oracle", truth_seed=3, use_cache=False, gt_spp=16)
+    one = render_sequence(scene, tmp_path / "one", options, SequenceOptions(mode="converged", frames=4, verify_every=1))
+
+    killed = []
+
+    def kill_one(record, done, total):
+        if not killed:
+            busy = _busy_workers()
+            if busy:
+                os.kill(busy[0], signal.SIGKILL)
+                killed.append(busy[0])
+
+    seq = SequenceOptions(mode="converged", frames=4, verify_every=1, cluster=ClusterSpec("local", workers=2))
+    many = render_sequence(scene, tmp_path / "many", options, seq, progress=kill_one)
+    assert killed, "no worker was busy after the first frame: nothing was killed"
+    assert many["cluster"]["workers"] == 2
+    assert [f["index"] for f in many["frames"]] == [0, 1, 2, 3]
+    for i in range(4):
+        a = read_exr(tmp_path / "one" / "frames" / f"{i:04d}.exr")
+        b = read_exr(tmp_path / "many" / "frames" / f"{i:04d}.exr")
+        assert np.array_equal(a, b), f"frame {i} differs between the cluster and one process"
+        assert many["frames"][i]["metrics"] == one["frames"][i]["metrics"]
+        assert many["frames"][i]["metrics"]["psnr_objects_db"] is not None
+    # the frames differ from each other (the cube moves): equality above is not equality of empty images
+    assert not np.array_equal(read_exr(tmp_path / "one" / "frames" / "0000.exr"),
+                              read_exr(tmp_path / "one" / "frames" / "0003.exr"))
+    assert json.loads((tmp_path / "many" / "status.json").read_text())["state"] == "complete"
+    assert (tmp_path / "many" / "composite.mp4").stat().st_size > 0
