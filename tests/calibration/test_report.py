@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import re
+import xml.etree.ElementTree as ET
 from dataclasses import replace
 from html.parser import HTMLParser
 
@@ -11,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, _heatmap_table, _nice_ticks, _svg_line_plot,
-                                           _Series, render_calibration_report, write_calibration_report)
+from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, _environment, render_calibration_report,
+                                               write_calibration_report)
 from lftransfer.calibration.rig import calibrate_rig, load_calibration
 from lftransfer.calibration.targets import TARGETS
 from lftransfer.app.pipeline import quick_scene
@@ -48,12 +49,14 @@ def _check_well_formed(text: str) -> None:
     checker.feed(text)
     checker.close()
     assert checker.problems == [] and checker.stack == []
-    assert text.count("<svg") == text.count("</svg>")
 
 
-def _png_images(text: str) -> list[np.ndarray]:
-    return [cv2.imdecode(np.frombuffer(base64.b64decode(b64), np.uint8), cv2.IMREAD_UNCHANGED)
-            for b64 in re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)]
+def _embedded(text: str) -> list[tuple[str, bytes]]:
+    """Every ``<img>``'s (type, decoded data); an image that is not a base64 data URI fails."""
+    sources = re.findall(r'<img src="([^"]*)"', text)
+    found = [re.fullmatch(r"data:image/(png|svg\+xml);base64,([A-Za-z0-9+/=]+)", s) for s in sources]
+    assert all(found), [s[:40] for s, f in zip(sources, found) if not f]
+    return [(f.group(1), base64.b64decode(f.group(2))) for f in found]
 
 
 @pytest.fixture(scope="module")
@@ -67,21 +70,31 @@ def calibrated(variant, tmp_path_factory):
     return scene, cal, errors, path
 
 
+
 def test_01_sections_pictures_and_structure(calibrated):
-    """One HTML file with every section, its pictures (PNG data URIs, at most ~1000 px wide) and SVG plots."""
+    """One HTML file with every section and its figures, all embedded as data URIs; nothing external."""
     _, _, _, path = calibrated
     assert path.name == REPORT_NAME and path.is_file()
     assert not [p for p in path.parent.iterdir() if p != path]              # no temporary file left behind
     text = path.read_text(encoding="utf-8")
     for i, name in enumerate(SECTIONS, 1):
-        assert f"<h2>{i}. {name}</h2>" in text
+        assert f'<section id="s{i}">\n<h2>{i}. {name}</h2>' in text and f'href="#s{i}"' in text
     assert "Against the simulator's hidden truth" in text
-    assert text.count("<img") >= 6 and text.count("<svg") >= 8
     _check_well_formed(text)
-    images = _png_images(text)
-    assert len(images) == text.count("<img")
-    assert all(img is not None and img.shape[1] <= 1000 for img in images)
-    assert "http://" not in text.replace('xmlns="http://www.w3.org/2000/svg"', "")   # self-contained
+    images = _embedded(text)
+    kinds = [k for k, _ in images]
+    # lenslets (2), k1 and k2 histograms, k1 map, two responses, vignetting, flood-lit board, fringe phase
+    assert len(images) == 10 and kinds.count("png") >= 4 and kinds.count("svg+xml") >= 5
+    for kind, data in images:
+        if kind == "png":
+            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+            assert img is not None and 300 <= img.shape[1] <= 1100
+        else:
+            assert ET.fromstring(data).tag == "{http://www.w3.org/2000/svg}svg"
+            links = re.findall(rb'href="([^"]*)"', data)
+            assert all(h.startswith((b"#", b"data:")) for h in links)      # nothing fetched from within
+    outside = re.sub(r'"data:image/[^"]*"', '""', text)                   # self-contained: no URL, no script
+    assert "//" not in outside and "url(" not in outside and "<script" not in text and "<svg" not in text
     assert path.stat().st_size < 2_000_000
     assert "left out" not in text and "not available" not in text           # every picture was drawn
 
@@ -110,6 +123,7 @@ def test_03_truth_table_marks_each_target(calibrated):
     passes = sum(t.met(errors[t.key]) for t in measured)
     assert text.count('class="pass"') == passes
     assert text.count('class="fail"') == len(measured) - passes
+    assert f"{passes} of\n{len(measured)} targets met" in text
     worse = render_calibration_report(cal, {**errors, "lenslet_centre_rms_px": 0.5})
     assert worse.count('class="fail"') == len(measured) - passes + 1
     assert "hidden truth" not in render_calibration_report(cal)
@@ -127,6 +141,7 @@ def test_04_loaded_from_file_still_renders(calibrated, tmp_path):
     for i, name in enumerate(SECTIONS, 1):
         assert f"<h2>{i}. {name}</h2>" in text
     assert f"{loaded.model.array.pitch * 1e3:.4f}" in text
+    assert "left out" not in text
     _check_well_formed(text)
     # the same with every fit and diagnostic dropped from the calibration in memory
     bare = replace(cal, lattice=None, distortion=None, projector_fit=None, diagnostics={})
@@ -143,20 +158,36 @@ def test_05_missing_or_malformed_diagnostics_skip_pictures(calibrated):
                                                                   "vignetting_fit": "?"}))
     text = render_calibration_report(odd)
     _check_well_formed(text)
-    assert "left out" in text
+    for what in ("collimated image", "corners", "camera response"):
+        assert f"{what}: left out (" in text
+    assert text.count("left out") == 3
     for i, name in enumerate(SECTIONS, 1):
         assert f"<h2>{i}. {name}</h2>" in text
+    # a calibration whose section cannot be computed at all: that section says so, the others stand
+    broken = replace(cal, pose=None)
+    text = render_calibration_report(broken)
+    _check_well_formed(text)
+    assert "section Global pose: left out (AttributeError" in text and "<h2>6. Global pose</h2>" in text
 
 
-def test_06_plot_helpers():
-    """Round ticks; a line plot and a heat-map table that are well formed."""
-    assert _nice_ticks(0.0, 1.0) == [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
-    assert _nice_ticks(-0.06, -0.02, 4) == [-0.06, -0.05, -0.04, -0.03, -0.02]
-    x = np.linspace(0, 1, 11)
-    svg = _svg_line_plot([_Series(x, x ** 2, "#d62728", "a & b", "line"), _Series(x, x, "#1f77b4", None, "dots")],
-                         xlabel="x", ylabel="y < 1", title="t")
-    _check_well_formed(svg)
-    assert "a &amp; b" in svg and "y &lt; 1" in svg and svg.count("<circle") == 11
-    table = _heatmap_table(np.eye(3), ["r0", "r1", "r2"], ["c0", "c1", "c2"])
-    _check_well_formed(table)
-    assert table.count("1.0000") == 3 and table.count("<td") == 9
+def test_06_autoescaped(calibrated):
+    """Text from the data is escaped by the template (a script in an error's name stays text)."""
+    _, cal, errors, _ = calibrated
+    text = render_calibration_report(cal, {**errors, "<script>alert('x')</script> & more": 1.5})
+    assert "<script" not in text
+    assert "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; more" in text
+    _check_well_formed(text)
+    env = _environment()
+    assert env.autoescape("calibration_report.html") and env.autoescape("base.html")
+
+
+def test_07_base_template_serves_other_reports():
+    """The shared layout (base.html) and building blocks (macros.html) make another report's page."""
+    page = _environment().from_string(
+        '{% extends "base.html" %}{% import "macros.html" as m %}{% block content %}'
+        '{% call m.section(1, "Runs", {}) %}{{ m.table(("a", "b"), rows, numeric=(1,)) }}'
+        '{{ m.figure({"note": "<b>none</b>"}) }}{% endcall %}{% endblock %}'
+    ).render(title="Run <report>", sections=("Runs",), rows=[("x < y", "1.5")])
+    _check_well_formed(page)
+    assert "<title>Run &lt;report&gt;</title>" in page and '<td class="num">1.5</td>' in page
+    assert "<td>x &lt; y</td>" in page and "&lt;b&gt;none&lt;/b&gt;" in page and '<a href="#s1">' in page
