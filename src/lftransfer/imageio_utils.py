@@ -51,6 +51,19 @@ def write_text(path: str | Path, text: str) -> Path:
     return path
 
 
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write a binary file (an encoded PNG, ...) atomically, like :func:`write_text`."""
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
 def strict_json(value):
     """``value`` as plain, strict JSON data: numpy scalars and arrays as Python numbers and lists, tuples as
     lists, paths as strings, and every non-finite float (NaN, infinity) as None, which JSON can hold (``NaN`` is

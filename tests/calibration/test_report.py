@@ -12,8 +12,9 @@ import cv2
 import numpy as np
 import pytest
 
-from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, _environment, render_calibration_report,
+from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, render_calibration_report,
                                                write_calibration_report)
+from lftransfer.app.templating import environment
 from lftransfer.calibration.rig import calibrate_rig, load_calibration
 from lftransfer.calibration.targets import TARGETS
 from lftransfer.app.pipeline import quick_scene
@@ -177,13 +178,13 @@ def test_06_autoescaped(calibrated):
     assert "<script" not in text
     assert "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; more" in text
     _check_well_formed(text)
-    env = _environment()
+    env = environment()
     assert env.autoescape("calibration_report.html") and env.autoescape("base.html")
 
 
 def test_07_base_template_serves_other_reports():
     """The shared layout (base.html) and building blocks (macros.html) make another report's page."""
-    page = _environment().from_string(
+    page = environment().from_string(
         '{% extends "base.html" %}{% import "macros.html" as m %}{% block content %}'
         '{% call m.section(1, "Runs", {}) %}{{ m.table(("a", "b"), rows, numeric=(1,)) }}'
         '{{ m.figure({"note": "<b>none</b>"}) }}{% endcall %}{% endblock %}'

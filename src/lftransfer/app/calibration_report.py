@@ -17,11 +17,9 @@ diagnostic leaves its picture out (a malformed calibration its section); it neve
 
 from __future__ import annotations
 
-import functools
 import math
 from pathlib import Path
 
-import jinja2
 import matplotlib
 import numpy as np
 from matplotlib.colors import to_hex
@@ -29,6 +27,7 @@ from matplotlib.patches import Rectangle
 
 from lftransfer.app import figures
 from lftransfer.app.figures import CHANNEL_COLOURS, embed
+from lftransfer.app.templating import _num, _vec, environment
 from lftransfer.calibration.targets import TARGETS as CALIBRATION_TARGETS
 from lftransfer.imageio_utils import to_display, write_text
 
@@ -113,23 +112,13 @@ def render_calibration_report(calibration, errors: dict | None = None) -> str:
     cal = calibration
     diag = cal.diagnostics if isinstance(cal.diagnostics, dict) else {}
     a, cam, prj = cal.model.array, cal.model.camera.device, cal.model.projector.device
-    return _environment().get_template("calibration_report.html").render(
+    return environment().get_template("calibration_report.html").render(
         title="Light field transfer rig: calibration report", sections=SECTIONS, not_available=NOT_AVAILABLE,
         subtitle=f"{a.rows} x {a.cols} {a.lattice} lens array; LF camera {cam.width} x {cam.height} px, "
                  f"projector {prj.width} x {prj.height} px",
         summary=_attempt(_summary, cal, errors), lenslets=_attempt(_lenslets, cal, diag),
         distortion=_attempt(_distortion, cal), projector=_attempt(_projector, cal),
         radiometry=_attempt(_radiometry, cal, diag), pose=_attempt(_pose, cal, diag))
-
-
-@functools.cache
-def _environment() -> jinja2.Environment:
-    """The reports' templates (``app/templates``), autoescaped, with the filters ``num`` and ``vec``."""
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]), trim_blocks=True,
-                             lstrip_blocks=True)
-    env.filters.update(num=_num, vec=_vec)
-    return env
 
 
 # ---- sections: each returns the values its part of the template shows ------------------------------------------
@@ -458,17 +447,3 @@ def _attempt(build, *args, what: str | None = None) -> dict:
     except _SKIPPED as exc:
         why = f"{type(exc).__name__}: {exc}"
         return {"note": f"{what}: left out ({why})."} if what else {"error": why}
-
-
-def _num(v, fmt: str) -> str:
-    """A number formatted, or "n/a" for NaN, None or anything not a number (the templates' ``num`` filter)."""
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return "n/a"
-    return format(v, fmt) if math.isfinite(v) else "n/a"
-
-
-def _vec(values, fmt: str) -> str:
-    """Numbers formatted as ``(a, b, c)`` (the templates' ``vec`` filter)."""
-    return "(" + ", ".join(_num(v, fmt) for v in np.ravel(values)) + ")"

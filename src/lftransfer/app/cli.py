@@ -566,6 +566,56 @@ def _check_exchange(scene, out: Path, options, report: dict, step):
     return verify_exchange(scene, out, options, report, step=step)
 
 
+@app.command("study", cls=_Command)
+def study_cmd(study_file: Path = typer.Argument(..., metavar="STUDY.toml", help=(
+                  "Study file: [study] (scenes, truth_seeds, rig_model, bounces, quick, gt_spp) and [[setting]] "
+                  "tables (name, render = {...}); see docs/architecture.md, 'Scale-out'.")),
+              out: Path = typer.Option(Path("out/study"), metavar="DIR", help="Output folder (made if missing)."),
+              resume: bool = _flag("--resume", "Keep the cells a previous run of the same study wrote into DIR."),
+              no_cache: bool = _flag("--no-cache", "Render the ground truths again (do not read or write the cache)."),
+              cluster: Optional[str] = _cluster_option(),
+              workers: Optional[int] = _workers_option(),
+              max_memory: Optional[str] = _memory_option()) -> None:
+    """Scenes x hidden truths x settings -> one table: each cell a converged transfer on the simulated rig, measured
+    against its ground truth (study.json, study.md, study.png, study.html)."""
+    from lftransfer.app.cluster import ClusterError
+    from lftransfer.app.study import StudyError, load_study, run_study
+
+    spec = _cluster_spec(cluster, workers)
+    if not study_file.is_file():
+        fail(f"{study_file}: no such file")
+    try:
+        study = load_study(study_file)
+    except StudyError as exc:
+        fail(str(exc))
+    for scene in study.scenes.values():
+        _check_before_work(scene, out_dir=out, cache=not no_cache, max_memory=max_memory,
+                           calibrate=study.config.rig_model == "calibrated")
+    c = study.config
+    total = len(c.scenes) * len(c.truth_seeds) * len(c.setting)
+    with Progress(TextColumn("[bold]{task.description:<50}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("set-up", total=total)
+        try:
+            result = run_study(study, out, cluster=spec, resume=resume, use_cache=not no_cache,
+                               progress=lambda msg, done, n: bar.update(task, completed=done,
+                                                                        description=escape(msg[:50])))
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; the finished cells are in {out / 'cells'}; --resume continues", INTERRUPTED)
+        except StudyError as exc:
+            bar.stop()
+            fail(str(exc))
+        except ClusterError as exc:
+            bar.stop()
+            fail(f"{exc} (the finished cells are in {out / 'cells'}; --resume continues)", FAILED)
+    Console().print(escape(f"# {result.title}"))
+    Console().print(escape(result.markdown()), soft_wrap=True)
+    Console().print(escape(f"wrote {out / 'study.html'}, study.json, study.md, study.png ({result.seconds:.0f} s"
+                           + (f" on {result.cluster['workers']} workers" if result.cluster else "") + ")"),
+                    soft_wrap=True)
+
+
 @app.command(cls=_Command)
 def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SCENE.toml",
                                                     help="Scene TOML (default: Fig. 4)."),
@@ -835,6 +885,8 @@ def calibrate_seeds_cmd(seeds: str = typer.Option("1,2,3,4,5", metavar="N,N,..."
                                                                   help="Scene TOML (default: Fig. 4)."),
                         quick: bool = _flag("--quick", _QUICK_HELP),
                         out: Path = typer.Option(Path("out/calibration"), metavar="DIR", help="Output folder."),
+                        cluster: Optional[str] = _cluster_option(),
+                        workers: Optional[int] = _workers_option(),
                         max_memory: Optional[str] = _memory_option()) -> None:
     """Calibration accuracy over several hidden truths (writes calibration_errors.json and a Markdown table)."""
     from lftransfer.app.bench.calibration import calibration_seeds, markdown_table
@@ -842,12 +894,19 @@ def calibrate_seeds_cmd(seeds: str = typer.Option("1,2,3,4,5", metavar="N,N,..."
     from lftransfer.calibration.rig import count_calibration_steps
     from lftransfer.imageio_utils import write_text
 
+    from lftransfer.app.cluster import ClusterError
+
     seed_list = _parse_seeds(seeds)
+    spec = _cluster_spec(cluster, workers)
     scene = _load(scene_file, quick)
     _check_before_work(scene, out_dir=out, max_memory=max_memory)
-    with _step_bar(count_calibration_steps(scene) * len(seed_list)) as progress:
-        result = calibration_seeds(scene, seed_list, progress=progress)
-    write_json(out / "calibration_errors.json", result)
+    steps = len(seed_list) if spec is not None else count_calibration_steps(scene) * len(seed_list)
+    with _step_bar(steps) as progress:
+        try:
+            result = calibration_seeds(scene, seed_list, progress=progress, cluster=spec)
+        except ClusterError as exc:
+            fail(str(exc), FAILED)
+    write_json(out / "calibration_errors.json", result.to_json())
     table = markdown_table(result)
     write_text(out / "calibration_errors.md", table)
     Console().print(escape(table))

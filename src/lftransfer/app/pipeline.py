@@ -21,7 +21,7 @@ from lftransfer.app.report import emitter_ceiling, write_json, write_outputs
 from lftransfer.app.run_folder import clear_run_folder, tracked_run, write_status
 from lftransfer.render.lights import RECONSTRUCTIONS
 from lftransfer.rig.base import Rig
-from lftransfer.rig.model import nominal_rig
+from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 
@@ -402,6 +402,65 @@ def open_rig(scene, options: RunOptions, *, operator: Operator | None = None) ->
     return opened
 
 
+@dataclass(frozen=True)
+class Knowledge:
+    """What the pipeline knows of a rig before a transfer.
+
+    Attributes:
+        model: the rig model (calibrated, nominal or the simulated rig's truth).
+        scene: the synthetic part of the scene, its point light where the calibration measured the real one (where
+            it really stands for the oracle; the scene file's position for the nominal model).
+        calibration: the calibration the model came from, or None.
+        rig_model: how the model was had, for reports (``"calibrated"``, ``"true (oracle)"``, :data:`NOMINAL`).
+    """
+
+    model: RigModel
+    scene: object
+    calibration: object | None
+    rig_model: str
+
+
+def _true_light(opened: OpenedRig):
+    return None if opened.world is None or opened.world.light is None else opened.world.light.position
+
+
+def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
+              progress: Callable[[str], None] | None = None) -> Knowledge:
+    """The rig model and synthetic scene a transfer works with (shared by ``lft run`` and ``lft study``).
+
+    Args:
+        opened: the rig.
+        scene: the whole scene (only its synthetic part is used).
+        rig_model: ``"calibrated"`` (calibrate through the rig now, unless ``calibration`` is given),
+            ``"nominal"`` or ``"oracle"`` (:class:`RunOptions`).
+        calibration: a calibration already made or loaded (it wins over ``rig_model``).
+        progress: called with a message per calibration step.
+
+    Raises:
+        ValueError: the oracle on a rig without a known truth.
+        CalibrationFailedError: the calibration could not measure the rig.
+    """
+    ps = scene.synthetic_part()
+    label = "calibrated"
+    if calibration is None and rig_model == "calibrated":
+        calibration = calibrate(opened.rig, ps, progress=progress)
+    if calibration is not None:
+        model = calibration.model
+    elif rig_model == "oracle":
+        if opened.truth is None:
+            raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
+        model, label = opened.truth, "true (oracle)"
+    else:
+        model, label = nominal_rig(scene.rig), NOMINAL
+    light_at = calibration.light_position(ps) if calibration is not None else \
+        _true_light(opened) if rig_model == "oracle" else None
+    if light_at is not None:
+        from lftransfer.scenes import with_overrides
+
+        ps = with_overrides(ps, light={"position": [float(v) for v in light_at]})
+    return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label)
+
+
 def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
               progress: Progress | None = None, operator: Operator | None = None,
               warn: Warn | None = None) -> dict:
@@ -491,34 +550,25 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     if options.rig_model == "oracle" and opened.truth is None:
         raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
     rig = opened.rig
-    pipeline_scene = scene.synthetic_part()            # what the pipeline may know: no real objects
+    nominal_scene = scene.synthetic_part()         # what the pipeline may know: no real objects, nothing measured
     timings["setup"] = time.perf_counter() - t0
-    calibration, calibration_errors_ = None, None
+    calibration_errors_ = None
+    t = time.perf_counter()
+    known = knowledge(opened, scene, options.rig_model, progress=step,
+                      calibration=None if options.calibration is None else
+                      load_calibration(options.calibration, nominal_scene))
     if options.calibration is not None:
-        calibration = load_calibration(options.calibration, pipeline_scene)
-        model, rig_model = calibration.model, f"calibration file {options.calibration}"
-    elif options.rig_model == "calibrated":
-        t = time.perf_counter()
-        calibration = calibrate(rig, pipeline_scene, progress=step)
-        timings["calibration"] = time.perf_counter() - t
-        model, rig_model = calibration.model, "calibrated"
-    elif options.rig_model == "oracle":
-        model, rig_model = opened.truth, "true (oracle)"
+        rig_model = f"calibration file {options.calibration}"
     else:
-        model, rig_model = nominal_rig(scene.rig), NOMINAL
-    true_light = None if opened.world is None or opened.world.light is None else opened.world.light.position
+        rig_model = known.rig_model
+        if known.calibration is not None:
+            timings["calibration"] = time.perf_counter() - t
+    model, pipeline_scene, calibration = known.model, known.scene, known.calibration
+    true_light = _true_light(opened)
     if calibration is not None:
         step("calibration report")
         calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth,
                                                 source=options.calibration, true_light=true_light)
-    # the synthetic side's point light: where the calibration measured the real one, the truth for the oracle
-    nominal_scene = pipeline_scene                      # the negative control knows nothing measured
-    light_at = calibration.light_position(pipeline_scene) if calibration is not None else \
-        true_light if options.rig_model == "oracle" else None
-    if light_at is not None:
-        from lftransfer.scenes import with_overrides
-
-        pipeline_scene = with_overrides(pipeline_scene, light={"position": [float(v) for v in light_at]})
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,

@@ -1,0 +1,432 @@
+"""Studies: scenes x hidden truths x settings -> one table (``lft study STUDY.toml``).
+
+A study file names scenes (built-in names or scene files), hidden-truth seeds of the simulated rig, and settings
+(each a name and changes to the scenes' ``[render]`` table, e.g. ``reconstruction = "box"``). Every cell is one
+converged N-bounce transfer of a scene on the simulated rig of a seed with a setting, measured against its
+path-traced ground truth (:func:`lftransfer.sim.verify.evaluate`). Example::
+
+    [study]
+    title = "Reconstruction across scenes"
+    scenes = ["fig4", "spheres.toml"]        # paths are relative to the study file
+    truth_seeds = [1, 2]
+    rig_model = "oracle"                     # calibrated | nominal | oracle
+    bounces = 2
+    quick = true                             # every scene at a quarter of its resolution (lft run --quick)
+
+    [[setting]]
+    name = "box"
+    render = { reconstruction = "box" }
+
+    [[setting]]
+    name = "linear"
+    render = { reconstruction = "linear" }
+
+The work comes in two rounds: first each (scene, seed) pair gets its rig model (calibrated, if asked, once for
+every setting) and its ground truth (rendered once, kept in the ground-truth cache); then every cell. Both rounds
+run in this process or as tasks on a Ray cluster (:mod:`lftransfer.app.cluster`), with the same results. Each
+finished cell is written at once (``cells/*.json``), so an interrupted study resumes without redoing it. The
+output folder gets ``study.json``, ``study.md`` (the table), ``study.png`` (a plot) and ``study.html``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Literal, Optional
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from lftransfer.app.cluster import ClusterSpec, Worker
+from lftransfer.app.run_folder import tracked_run, write_status
+from lftransfer.imageio_utils import write_json, write_text
+from lftransfer.scenes import SceneError, builtin_scene, builtin_scenes, load_scene, with_overrides
+from lftransfer.validation import read_json, read_toml, validation_message
+
+__all__ = ["METRICS", "Study", "StudyCell", "StudyConfig", "StudyError", "StudyResult", "StudySetting", "cell_key",
+           "load_study", "run_study", "write_study_outputs"]
+
+# metric -> (label, unit, lower is better); the cells' columns (lftransfer.sim.verify.evaluate)
+METRICS = {
+    "cross_transfer_rel_error": ("cross-transfer error", "relative", True),
+    "cross_gt_noise_rel": ("ground truth's own noise on it", "relative", True),
+    "psnr_objects_db": ("PSNR over the objects", "dB", False),
+    "psnr_objects_db_direct_only": ("PSNR over the objects, direct light only", "dB", False),
+    "psnr_db": ("PSNR, every pixel", "dB", False),
+}
+CELLS = "cells"
+
+
+class StudyError(ValueError):
+    """A study file that cannot be used, or a folder that cannot be resumed; the message names the file and field."""
+
+
+class StudySetting(BaseModel):
+    """One setting of a study: a name and changes to every scene's ``[render]`` table."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = Field(min_length=1, max_length=40, pattern=r"^[A-Za-z0-9_.+-]+$")
+    render: dict[str, object] = Field(default_factory=dict)
+
+
+class StudyConfig(BaseModel):
+    """A study file (module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+    title: str = "study"
+    scenes: list[str] = Field(min_length=1)
+    truth_seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
+    rig_model: Literal["calibrated", "nominal", "oracle"] = "oracle"
+    bounces: int = Field(default=2, ge=0, le=8)
+    quick: bool = False
+    gt_spp: Optional[int] = Field(default=None, ge=1)
+    setting: list[StudySetting] = Field(min_length=1)
+
+    @field_validator("truth_seeds")
+    @classmethod
+    def _seeds(cls, v: list[int]) -> list[int]:
+        if any(s < 0 for s in v) or len(set(v)) != len(v):
+            raise ValueError(f"expected distinct integers >= 0, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _unique(self) -> "StudyConfig":
+        names = [s.name for s in self.setting]
+        if len(set(names)) != len(names):
+            raise ValueError(f"setting names must differ, got {names}")
+        if len(set(self.scenes)) != len(self.scenes):
+            raise ValueError(f"scenes must differ, got {self.scenes}")
+        return self
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study: its file, its configuration and its scenes (loaded, ``quick`` applied).
+
+    Attributes:
+        path: the study file.
+        config: :class:`StudyConfig`.
+        scenes: scene label (as the study file names it) -> ``SceneConfig``.
+        digest: SHA-256 of the study file and the scene files (what a resumed study must match).
+    """
+
+    path: Path
+    config: StudyConfig
+    scenes: dict[str, object]
+    digest: str
+
+    def scene(self, label: str, setting: StudySetting | None = None):
+        """The scene ``label``, with ``setting``'s changes to its ``[render]`` table."""
+        scene = self.scenes[label]
+        return scene if setting is None or not setting.render else with_overrides(scene, render=setting.render)
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and validate a study file: its fields, its scenes (loaded) and each setting on each scene.
+
+    Raises:
+        StudyError: one line naming the file and the field (``study.scenes[1]``, ``setting[0].render``).
+    """
+    from lftransfer.app.pipeline import quick_scene
+
+    path = Path(path)
+    data = read_toml(path, "study file", StudyError)
+    if set(data) - {"study", "setting"}:
+        raise StudyError(f"{path}: {sorted(set(data) - {'study', 'setting'})[0]}: unknown table (expected [study] "
+                         f"and [[setting]])")
+    try:
+        config = StudyConfig.model_validate({**data.get("study", {}), "setting": data.get("setting", [])})
+    except ValidationError as exc:
+        msg = validation_message(str(path), exc, root="<study>")
+        raise StudyError(msg.replace(": scenes", ": study.scenes").replace(": truth_seeds", ": study.truth_seeds")
+                         ) from None
+    scenes, digest = {}, hashlib.sha256(path.read_bytes())
+    for i, label in enumerate(config.scenes):
+        file = Path(label) if label.endswith(".toml") else None
+        if file is None and label not in builtin_scenes():
+            raise StudyError(f"{path}: study.scenes[{i}]: {label!r} is neither a built-in scene "
+                             f"({', '.join(builtin_scenes())}) nor a .toml file")
+        file = builtin_scene(label) if file is None else (file if file.is_absolute() else path.parent / file)
+        if not file.is_file():
+            raise StudyError(f"{path}: study.scenes[{i}]: {file}: no such file")
+        try:
+            scene = load_scene(file)
+        except SceneError as exc:
+            raise StudyError(f"{path}: study.scenes[{i}]: {exc}") from None
+        scenes[label] = quick_scene(scene) if config.quick else scene
+        digest.update(file.read_bytes())
+    study = Study(path=path, config=config, scenes=scenes, digest=digest.hexdigest())
+    for j, setting in enumerate(config.setting):
+        for label in config.scenes:
+            try:
+                study.scene(label, setting)
+            except SceneError as exc:
+                raise StudyError(f"{path}: setting[{j}].render ({setting.name}) on {label}: {exc}") from None
+    return study
+
+
+@dataclass(frozen=True)
+class StudyCell:
+    """One cell: a scene on the simulated rig of one hidden truth, with one setting, against its ground truth.
+
+    Attributes:
+        scene: the scene's label in the study file.
+        seed: the hidden truth's seed.
+        setting: the setting's name.
+        metrics: :data:`METRICS` key -> value (None where the scene leaves it undefined).
+        seconds: wall time of the transfer, s (the ground truth and calibration are not in it).
+    """
+
+    scene: str
+    seed: int
+    setting: str
+    metrics: dict[str, float | None]
+    seconds: float
+
+    @property
+    def key(self) -> str:
+        """The cell's file name, without ``.json``."""
+        return cell_key(self.scene, self.seed, self.setting)
+
+
+def cell_key(scene: str, seed: int, setting: str) -> str:
+    """A file name for a cell (the scene label made safe)."""
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(scene).stem if scene.endswith(".toml")) \
+        if scene.endswith(".toml") else scene
+    return f"{safe}-seed{seed}-{setting}"
+
+
+@dataclass
+class StudyResult:
+    """A finished (or partly finished) study.
+
+    Attributes:
+        title: the study's title.
+        scenes, seeds, settings: the axes, in the study file's order.
+        cells: every finished cell.
+        rig_model: what the pipeline knew of each rig.
+        bounces: N.
+        cluster: where it ran (None: in one process).
+        seconds: wall time of the whole study, s.
+    """
+
+    title: str
+    scenes: list[str]
+    seeds: list[int]
+    settings: list[str]
+    rig_model: str
+    bounces: int
+    cells: list[StudyCell] = field(default_factory=list)
+    cluster: dict | None = None
+    seconds: float = 0.0
+
+    def cell(self, scene: str, seed: int, setting: str) -> StudyCell | None:
+        return next((c for c in self.cells if (c.scene, c.seed, c.setting) == (scene, seed, setting)), None)
+
+    def summary(self, metric: str) -> list[dict]:
+        """Per scene and setting: the metric's mean over the seeds (None where a seed lacks it), and its range.
+
+        Returns:
+            Rows ``{"scene", "setting", "mean", "min", "max", "n"}`` in the study's order.
+        """
+        rows = []
+        for scene in self.scenes:
+            for setting in self.settings:
+                values = [c.metrics.get(metric) for c in self.cells if (c.scene, c.setting) == (scene, setting)]
+                finite = [v for v in values if v is not None and math.isfinite(v)]
+                rows.append({"scene": scene, "setting": setting, "n": len(finite),
+                             "mean": float(np.mean(finite)) if finite else None,
+                             "min": float(min(finite)) if finite else None,
+                             "max": float(max(finite)) if finite else None})
+        return rows
+
+    def to_json(self) -> dict:
+        return {**{k: v for k, v in asdict(self).items() if k != "cells"},
+                "cells": [asdict(c) for c in self.cells],
+                "summary": {m: self.summary(m) for m in METRICS}}
+
+    def markdown(self) -> str:
+        """The table: one row per scene and setting, the mean over the seeds of each metric (range in brackets
+        where there are several seeds)."""
+        head = "| scene | setting | " + " | ".join(f"{METRICS[m][0]} ({METRICS[m][1]})" for m in METRICS) + " |"
+        rows = [head, "|" + "---|" * (len(METRICS) + 2)]
+        tables = {m: {(r["scene"], r["setting"]): r for r in self.summary(m)} for m in METRICS}
+        for scene in self.scenes:
+            for setting in self.settings:
+                cells = []
+                for m in METRICS:
+                    r = tables[m][(scene, setting)]
+                    fmt = "{:.2f}" if METRICS[m][1] == "dB" else "{:.3f}"
+                    if r["mean"] is None:
+                        cells.append("n/a")
+                    elif r["n"] > 1:
+                        cells.append(f"{fmt.format(r['mean'])} ({fmt.format(r['min'])}..{fmt.format(r['max'])})")
+                    else:
+                        cells.append(fmt.format(r["mean"]))
+                rows.append(f"| {scene} | {setting} | " + " | ".join(cells) + " |")
+        return "\n".join(rows) + "\n"
+
+
+class StudyWorker(Worker):
+    """A worker of a study: keeps each (scene, seed) rig it has opened; every method is one task of a round.
+
+    Args:
+        study: :class:`Study`.
+        threads: Dr.Jit threads (:class:`lftransfer.app.cluster.Worker`).
+    """
+
+    def __init__(self, study: Study, threads: int | None = None) -> None:
+        super().__init__(threads)
+        self.study = study
+        self._rigs: dict[tuple[str, int], object] = {}
+
+    def _opened(self, label: str, seed: int):
+        from lftransfer.app.pipeline import RunOptions, open_rig
+
+        if (label, seed) not in self._rigs:
+            self._rigs[(label, seed)] = open_rig(self.study.scene(label), RunOptions(truth_seed=seed))
+        return self._rigs[(label, seed)]
+
+    def prepare(self, label: str, seed: int, use_cache: bool):
+        """Round 1 of a (scene, seed) pair: its rig model and synthetic scene, and its ground truth rendered into
+        the cache. Returns (model, pipeline scene)."""
+        from lftransfer.sim.verify import render_ground_truth
+
+        from lftransfer.app.pipeline import knowledge
+
+        opened = self._opened(label, seed)
+        scene = self.study.scene(label)
+        known = knowledge(opened, scene, self.study.config.rig_model)
+        render_ground_truth(opened.world, spp=self.study.config.gt_spp or scene.render.gt_spp, use_cache=use_cache)
+        return known.model, known.scene
+
+    def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
+        """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared)."""
+        from lftransfer.sim.verify import evaluate, render_ground_truth
+        from lftransfer.transfer.bounce import TransferSettings, run_transfer
+
+        setting = next(s for s in self.study.config.setting if s.name == setting_name)
+        scene = self.study.scene(label, setting)
+        ps = with_overrides(ps, render=setting.render) if setting.render else ps
+        opened = self._opened(label, seed)
+        r = scene.render
+        settings = TransferSettings(bounces=self.study.config.bounces, angular_samples=scene.rig.angular_samples,
+                                    lighting_model=r.lighting_model, aperture_samples=r.aperture_samples,
+                                    reconstruction=r.reconstruction if r.lighting_model == "area" else "box",
+                                    lf_spp=r.spp, view_spp=r.spp)
+        t0 = time.perf_counter()
+        opened.start_frame(0)
+        result = run_transfer(opened.rig, model, ps, settings)
+        seconds = time.perf_counter() - t0
+        base = self.study.scene(label).render.gt_spp
+        gt = render_ground_truth(opened.world, spp=self.study.config.gt_spp or base, use_cache=use_cache)
+        metrics = evaluate(result, gt)
+        return StudyCell(scene=label, seed=int(seed), setting=setting_name,
+                         metrics={m: metrics.get(m) for m in METRICS}, seconds=seconds)
+
+
+def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = None, resume: bool = False,
+              use_cache: bool = True, progress: Callable[[str, int, int], None] | None = None) -> StudyResult:
+    """Run every cell of a study (module docstring) and write the outputs into ``out``.
+
+    Args:
+        study: from :func:`load_study`.
+        out: output folder (made).
+        cluster: where to run (None: in this process).
+        resume: keep the cells a previous run of the same study wrote into ``out``.
+        use_cache: read and write the ground-truth cache.
+        progress: called with a message, the cells done and the total after each cell.
+
+    Returns:
+        :class:`StudyResult` (also ``study.json``).
+
+    Raises:
+        StudyError: ``resume`` on a folder of another study.
+    """
+    out = Path(out)
+    c = study.config
+    pairs = [(label, seed) for label in c.scenes for seed in c.truth_seeds]
+    total = len(pairs) * len(c.setting)
+    result = StudyResult(title=c.title, scenes=list(c.scenes), seeds=list(c.truth_seeds),
+                         settings=[s.name for s in c.setting], rig_model=c.rig_model, bounces=c.bounces)
+    cells_dir = out / CELLS
+    marker = out / "study_key.json"
+    if resume and marker.is_file():
+        key = read_json(marker, "study key", StudyError)
+        if key.get("digest") != study.digest:
+            raise StudyError(f"--resume: {out} holds another study (or the study or its scenes changed); run "
+                             f"without --resume to start again")
+        for path in sorted(cells_dir.glob("*.json")):
+            data = read_json(path, "study cell", StudyError)
+            result.cells.append(StudyCell(**data))
+    else:
+        if cells_dir.is_dir():
+            for path in cells_dir.glob("*.json"):
+                path.unlink()
+        for name in ("study.json", "study.md", "study.png", "study.html"):
+            (out / name).unlink(missing_ok=True)
+    cells_dir.mkdir(parents=True, exist_ok=True)
+    write_json(marker, {"digest": study.digest, "study": str(study.path)})
+    finished = {c_.key for c_ in result.cells}
+    todo = [(label, seed, s.name) for label, seed in pairs for s in c.setting
+            if cell_key(label, seed, s.name) not in finished]
+    need = sorted({(label, seed) for label, seed, _ in todo}, key=pairs.index)
+    say = progress or (lambda msg, done, n: None)
+    t0 = time.perf_counter()
+    write_status(out, "running", rig="sim")
+    with tracked_run(out, "sim", interrupted="interrupted (Ctrl-C); --resume continues"):
+
+        def keep(cell: StudyCell) -> None:
+            write_json(cells_dir / f"{cell.key}.json", asdict(cell))
+            result.cells.append(cell)
+            say(f"{cell.scene}, seed {cell.seed}, {cell.setting}", len(result.cells), total)
+
+        if cluster is None:
+            worker = _LocalStudyWorker(study)
+            prepared = {}
+            for label, seed in need:
+                say(f"{label}, seed {seed}: rig model and ground truth", len(result.cells), total)
+                prepared[(label, seed)] = worker.prepare(label, seed, use_cache)
+            for label, seed, name in todo:
+                keep(worker.cell(label, seed, name, *prepared[(label, seed)], use_cache))
+        else:
+            from lftransfer.app.cluster import WorkerPool, connect
+
+            with connect(cluster) as info:
+                pool = WorkerPool(StudyWorker, (study,), info, cluster.workers)
+                prepared = {}
+                for (label, seed, _), prep in pool.map("prepare", [(label, seed, use_cache) for label, seed in need]):
+                    prepared[(label, seed)] = prep
+                    say(f"{label}, seed {seed}: rig model and ground truth ready", len(result.cells), total)
+                items = [(label, seed, name, *prepared[(label, seed)], use_cache) for label, seed, name in todo]
+                for _, cell in pool.map("cell", items):
+                    keep(cell)
+                result.cluster = {"address": info.address, "workers": len(pool.actors), "cpus": info.cpus,
+                                  "gpus": info.gpus}
+        order = {(label, seed, s): i for i, (label, seed, s) in
+                 enumerate((label, seed, s.name) for label, seed in pairs for s in c.setting)}
+        result.cells.sort(key=lambda x: order[(x.scene, x.seed, x.setting)])
+        result.seconds = time.perf_counter() - t0
+        write_study_outputs(out, result)
+    return result
+
+
+class _LocalStudyWorker(StudyWorker):
+    """A :class:`StudyWorker` in this process (no cluster)."""
+
+    def __init__(self, study: Study) -> None:
+        self.study = study
+        self._rigs = {}
+
+
+def write_study_outputs(out: Path, result: StudyResult) -> None:
+    """``study.json``, ``study.md``, ``study.png`` (the cross-transfer error and the PSNR over the objects per scene,
+    a bar per setting) and ``study.html`` (:mod:`lftransfer.app.study_report`)."""
+    from lftransfer.app.study_report import write_study_report
+
+    write_json(out / "study.json", result.to_json())
+    write_text(out / "study.md", f"# {result.title}\n\n" + result.markdown())
+    write_study_report(out, result)
