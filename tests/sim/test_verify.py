@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lftransfer.imageio_utils import strict_json
-from lftransfer.sim.verify import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, GroundTruth, evaluate,
+from lftransfer.sim.verify import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, Evaluation, GroundTruth, evaluate,
                                    gt_noise_verdict, negative_control, object_mask)
 
 H, W = 12, 16
@@ -28,8 +28,8 @@ def _gt(union, real, synthetic, alpha_real, alpha_synthetic):
                        alpha_synthetic=alpha_synthetic)
 
 
-def _strict(metrics: dict) -> dict:
-    text = json.dumps(strict_json(metrics), allow_nan=False)
+def _strict(metrics) -> dict:
+    text = json.dumps(strict_json(metrics.to_json()), allow_nan=False)
     return json.loads(text)
 
 
@@ -38,9 +38,9 @@ def test_01_black_scene_every_metric_is_null_with_a_reason():
     m = evaluate(_result(zero, zero, ones), _gt(zero, zero, zero, ones, ones))
     for key in ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
                 "gt_noise_psnr_db", "cross_transfer_rel_error", "cross_gt_noise_rel", "cross_term_rel_size"):
-        assert m[key] is None and m["undefined"][key], key
-    assert m["undefined"]["psnr_db"] == NO_LIGHT and m["undefined"]["cross_transfer_rel_error"] == NO_CROSS
-    assert m["undefined"]["psnr_objects_db"] == NO_LIGHT
+        assert getattr(m, key) is None and m.undefined[key], key
+    assert m.undefined["psnr_db"] == NO_LIGHT and m.undefined["cross_transfer_rel_error"] == NO_CROSS
+    assert m.undefined["psnr_objects_db"] == NO_LIGHT
     assert _strict(m)["psnr_db"] is None
 
 
@@ -51,19 +51,24 @@ def test_02_no_cross_term_synthetic_objects_only():
     alpha = np.ones((H, W), np.float32)
     noisy = syn + 0.01
     m = evaluate(_result(zero, noisy, alpha), _gt(syn, zero, syn, np.zeros((H, W), np.float32), alpha))
-    assert m["psnr_db"] is not None and np.isfinite(m["psnr_db"])
-    assert m["cross_transfer_rel_error"] is None and m["undefined"]["cross_transfer_rel_error"] == NO_CROSS
-    assert m["undefined"]["gt_noise_psnr_db"] == IDENTICAL       # two identical ground truths
+    assert m.psnr_db is not None and np.isfinite(m.psnr_db)
+    assert m.cross_transfer_rel_error is None and m.undefined["cross_transfer_rel_error"] == NO_CROSS
+    assert m.undefined["gt_noise_psnr_db"] == IDENTICAL       # two identical ground truths
     _strict(m)
 
 
+def _noise(noise, error):
+    """An evaluation with only the two numbers the noise verdict reads."""
+    return Evaluation(None, None, None, None, error, None, noise, None, (1, 1), 1, {})
+
+
 def test_03_noise_verdict_names_the_samples_that_would_resolve_it():
-    verdict = gt_noise_verdict({"cross_gt_noise_rel": 0.33, "cross_transfer_rel_error": 0.26}, 128)
+    verdict = gt_noise_verdict(_noise(0.33, 0.26), 128)
     assert verdict is not None and verdict.spp_needed == 4096      # 128 * (0.33 / (0.25 * 0.26))^2 = 3299 -> 4096
     assert "--gt-spp 4096" in verdict.message() and "0.33" in verdict.message()
-    assert gt_noise_verdict({"cross_gt_noise_rel": 0.1, "cross_transfer_rel_error": 0.26}, 128) is None
-    assert gt_noise_verdict({"cross_gt_noise_rel": None, "cross_transfer_rel_error": 0.26}, 128) is None
-    big = gt_noise_verdict({"cross_gt_noise_rel": 0.2, "cross_transfer_rel_error": 0.39}, 64)
+    assert gt_noise_verdict(_noise(0.1, 0.26), 128) is None
+    assert gt_noise_verdict(_noise(None, 0.26), 128) is None
+    big = gt_noise_verdict(_noise(0.2, 0.39), 64)
     assert big is not None and big.spp_needed >= 128                # always more than the run had
 
 
@@ -78,10 +83,10 @@ def test_04_psnr_over_the_objects_sees_what_the_black_background_hides():
     truth[5, 7] = 1.0                                             # the peak
     image = (truth + 0.01 * on_object).astype(np.float32)        # off by 0.01 on the object only
     m = evaluate(_result(zero, image, alpha), _gt(truth, zero, truth, np.zeros((H, W), np.float32), alpha))
-    assert m["psnr_objects_db"] == pytest.approx(40.0)            # 10 log10(1 / 0.01^2)
-    assert m["psnr_objects_db_direct_only"] == pytest.approx(40.0)
-    assert m["psnr_db"] == pytest.approx(40.0 + 10 * np.log10(H * W / 16))      # 50.8 dB: flattered by 10.8 dB
-    assert m["metric_pixels"] == 16 and object_mask(_gt(truth, zero, truth, alpha, alpha), 1).sum() == 16
+    assert m.psnr_objects_db == pytest.approx(40.0)            # 10 log10(1 / 0.01^2)
+    assert m.psnr_objects_db_direct_only == pytest.approx(40.0)
+    assert m.psnr_db == pytest.approx(40.0 + 10 * np.log10(H * W / 16))      # 50.8 dB: flattered by 10.8 dB
+    assert m.metric_pixels == 16 and object_mask(_gt(truth, zero, truth, alpha, alpha), 1).sum() == 16
     # half the object's coverage in a 2 x 2 block still counts the block as the object's
     half = np.zeros((H, W), np.float32)
     half[4, 6] = 0.5
@@ -93,9 +98,9 @@ def test_05_no_object_in_view_psnr_over_objects_is_null_with_a_reason():
     background = rng.random((H, W, 3)).astype(np.float32)
     zero, none = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32)
     m = evaluate(_result(background + 0.01, zero, none), _gt(background, background, zero, none, none))
-    assert np.isfinite(m["psnr_db"])
+    assert np.isfinite(m.psnr_db)
     for key in ("psnr_objects_db", "psnr_objects_db_direct_only"):
-        assert m[key] is None and m["undefined"][key] == NO_PIXELS, key
+        assert getattr(m, key) is None and m.undefined[key] == NO_PIXELS, key
     assert _strict(m)["psnr_objects_db"] is None
 
 
@@ -123,7 +128,7 @@ def test_06_negative_control_margins_and_verdict():
     assert worse.measurably_worse
     assert worse.cross_error_margin == pytest.approx(0.5, abs=0.05)
     assert worse.psnr_objects_margin_db > 3 and all(m > 3 for m in worse.psnr_objects_margin_db_per_gt)
-    assert worse.cross_transfer_rel_error == pytest.approx(evaluate(run(0.4), gt)["cross_transfer_rel_error"])
+    assert worse.cross_transfer_rel_error == pytest.approx(evaluate(run(0.4), gt).cross_transfer_rel_error)
     entry = json.loads(json.dumps(worse.to_json(), allow_nan=False))
     assert entry["rig_model"] == "nominal (rig file)" and len(entry["cross_error_margin_per_gt"]) == 2
     # as far off as the run, on the other side: not measurably worse, and the message says so
@@ -155,7 +160,7 @@ def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
                              bounces=[SimpleNamespace(synthetic_view=view)])
     expected = evaluate(result, gt)
     check = cross_transfer_error(composite(syn, alpha, lit), none, gt)
-    assert check.error == pytest.approx(expected["cross_transfer_rel_error"], rel=1e-6) and check.error > 0.1
-    assert check.gt_noise == expected["cross_gt_noise_rel"] == 0.0          # the two seeds are the same here
+    assert check.error == pytest.approx(expected.cross_transfer_rel_error, rel=1e-6) and check.error > 0.1
+    assert check.gt_noise == expected.cross_gt_noise_rel == 0.0          # the two seeds are the same here
     assert cross_transfer_error(none + extra, none, gt).error == pytest.approx(0.0, abs=1e-6)
     assert cross_transfer_error(none + extra, none, _gt(none, real, syn, 1 - alpha, alpha)).error is None

@@ -581,7 +581,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
 
     verified = options.verify and opened.world is not None
     gt_spp = options.gt_spp if options.gt_spp is not None else render.gt_spp
-    gt, metrics, gt_spp_needed = None, {}, None
+    gt, metrics, gt_spp_needed = None, None, None
     by_model = {primary: {}}
     by_reconstruction = {settings.reconstruction: {}}
     if verified:
@@ -592,7 +592,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                                  warn=warning)
         timings["ground_truth"] = time.perf_counter() - t
         metrics = evaluate(result, gt)
-        by_model[primary] = {k: metrics[k] for k in BY_MODEL_KEYS}
+        by_model[primary] = {k: getattr(metrics, k) for k in BY_MODEL_KEYS}
         by_reconstruction[settings.reconstruction] = by_model[primary]
         noisy = gt_noise_verdict(metrics, gt_spp)
         if noisy is not None:
@@ -608,9 +608,10 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                            progress=step)
         if verified:
             m = evaluate(alt, gt)
-            table[other] = {k: m[k] for k in BY_MODEL_KEYS}
+            table[other] = {k: getattr(m, k) for k in BY_MODEL_KEYS}
         timings[timing] = time.perf_counter() - t
-    undefined = dict(metrics.get("undefined", {}))
+    measured = metrics.to_json() if metrics is not None else {}
+    undefined = dict(measured.get("undefined", {}))
     control = None
     if options.negative_control:
         why = negative_control_skipped(options) or (None if verified else "the run is not verified against "
@@ -630,7 +631,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     metric_keys = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
                    "cross_transfer_rel_error", "gt_noise_psnr_db", "cross_gt_noise_rel")
     report = {
-        **{k: metrics.get(k) for k in metric_keys},
+        **{k: measured.get(k) for k in metric_keys},
         "verification": "against path-traced ground truth" if verified else
         f"none: the {options.rig.kind} rig's real scene is not known to lftransfer",
         "lighting_model": primary,
@@ -641,7 +642,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "undefined_metrics": undefined,
         "warnings": warnings,
         "gt_spp_needed": gt_spp_needed,
-        "cross_term_rel_size": metrics.get("cross_term_rel_size"),
+        "cross_term_rel_size": measured.get("cross_term_rel_size"),
         "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
                      "projector_gain": b.projector_gain} for b in result.bounces],
         "projector_clipped_fraction": result.clipped_fraction,
@@ -650,7 +651,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
             "lenslets": [scene.rig.rows, scene.rig.cols], "lattice": scene.rig.lattice,
             "lf_camera": list(scene.rig.lf_camera), "projector": list(scene.rig.projector),
             "view": list(scene.view.resolution), "angular_samples": scene.rig.angular_samples,
-            "metrics": metrics.get("metric_resolution"),
+            "metrics": measured.get("metric_resolution"),
         },
         "gt_spp": gt_spp if verified else None,
         "renderer": resolve_renderer(pipeline_scene, options.renderer),

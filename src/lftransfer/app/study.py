@@ -325,7 +325,7 @@ class StudyWorker(Worker):
         gt = render_ground_truth(opened.world, spp=self.study.config.gt_spp or base, use_cache=use_cache)
         metrics = evaluate(result, gt)
         return StudyCell(scene=label, seed=int(seed), setting=setting_name,
-                         metrics={m: metrics.get(m) for m in METRICS}, seconds=seconds)
+                         metrics={m: getattr(metrics, m) for m in METRICS}, seconds=seconds)
 
 
 def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = None, resume: bool = False,

@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Callable
 
@@ -27,7 +27,7 @@ from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
 __all__ = ["CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
-           "cross_term_truth", "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor",
+           "cross_term_truth", "cross_transfer_error", "downsample", "Evaluation", "evaluate", "gt_noise_verdict", "metric_factor",
            "negative_control", "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
@@ -238,7 +238,43 @@ def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: G
     return CrossCheck(norm(downsample(composite_n - composite_0, f) - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm)
 
 
-def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
+@dataclass(frozen=True)
+class Evaluation:
+    """Metrics of a transfer result against the ground truth (:func:`evaluate`). A metric the scene leaves undefined
+    (a black ground truth, no cross term, identical images) is None and ``undefined`` says why.
+
+    Attributes:
+        psnr_db, psnr_db_direct_only: PSNR of the composite (N bounces, direct light only), every pixel, dB.
+        psnr_objects_db, psnr_objects_db_direct_only: the same over the pixels the objects cover
+            (:func:`object_mask`; the peak stays the ground truth's maximum), dB.
+        cross_transfer_rel_error: ||C_lft - C_gt|| / ||C_gt|| over the objects (DESIGN.md section 6).
+        gt_noise_psnr_db: PSNR of the ground truth's two seeds against each other, dB.
+        cross_gt_noise_rel: the ground truth's own noise on the cross term, relative to it.
+        cross_term_rel_size: ||C_gt|| / ||union||: how much of the image the exchange is.
+        metric_resolution: (width, height) of the box-downsampled images the metrics are computed on.
+        metric_pixels: pixels (at that resolution) the objects cover.
+        undefined: metric -> why it is None.
+    """
+
+    psnr_db: float | None
+    psnr_db_direct_only: float | None
+    psnr_objects_db: float | None
+    psnr_objects_db_direct_only: float | None
+    cross_transfer_rel_error: float | None
+    gt_noise_psnr_db: float | None
+    cross_gt_noise_rel: float | None
+    cross_term_rel_size: float | None
+    metric_resolution: tuple[int, int]
+    metric_pixels: int
+    undefined: dict[str, str]
+
+    def to_json(self) -> dict:
+        """The metrics as JSON data (None for undefined values; ``metric_resolution`` a list)."""
+        return {**{f.name: getattr(self, f.name) for f in fields(self)},
+                "metric_resolution": list(self.metric_resolution), "undefined": dict(self.undefined)}
+
+
+def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
     """Metrics of a transfer result against the ground truth (DESIGN.md section 6).
 
     A metric that the scene leaves undefined (a black ground truth, no cross term, identical images) is None
@@ -250,11 +286,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
         target_width: metrics are computed on images box-downsampled to about this width.
 
     Returns:
-        dict with psnr_db, psnr_db_direct_only (dB, every pixel), psnr_objects_db, psnr_objects_db_direct_only
-        (dB, the same over the pixels the objects cover, :func:`object_mask`; the peak stays the ground truth's
-        maximum), cross_transfer_rel_error, gt_noise_psnr_db, cross_gt_noise_rel, cross_term_rel_size,
-        metric_resolution ([width, height] of the metrics' images), metric_pixels (pixels the objects cover)
-        and undefined (metric -> reason).
+        :class:`Evaluation`.
     """
     f = metric_factor(result.real_view.shape[1], target_width)
     alpha = result.synthetic_view.alpha
@@ -288,19 +320,19 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> dict:
             return defined(key, float("nan"), NO_PIXELS)
         return defined(key, num / den if den > 0 else float("nan"), reason)
 
-    return {
-        "psnr_db": psnr_of("psnr_db", ds(comp_n), union),
-        "psnr_db_direct_only": psnr_of("psnr_db_direct_only", ds(comp_0), union),
-        "psnr_objects_db": psnr_of("psnr_objects_db", ds(comp_n), union, mask),
-        "psnr_objects_db_direct_only": psnr_of("psnr_objects_db_direct_only", ds(comp_0), union, mask),
-        "cross_transfer_rel_error": ratio("cross_transfer_rel_error", norm(c_lft - c_gt), c_norm, NO_CROSS),
-        "gt_noise_psnr_db": psnr_of("gt_noise_psnr_db", ds(gt.union[0]), ds(gt.union[1])),
-        "cross_gt_noise_rel": ratio("cross_gt_noise_rel", norm(c_gt_pair[0] - c_gt_pair[1]), c_norm, NO_CROSS),
-        "cross_term_rel_size": ratio("cross_term_rel_size", c_norm, u_norm, NO_LIGHT),
-        "metric_resolution": [int(union.shape[1]), int(union.shape[0])],
-        "metric_pixels": int(mask.sum()),
-        "undefined": undefined,
-    }
+    return Evaluation(
+        psnr_db=psnr_of("psnr_db", ds(comp_n), union),
+        psnr_db_direct_only=psnr_of("psnr_db_direct_only", ds(comp_0), union),
+        psnr_objects_db=psnr_of("psnr_objects_db", ds(comp_n), union, mask),
+        psnr_objects_db_direct_only=psnr_of("psnr_objects_db_direct_only", ds(comp_0), union, mask),
+        cross_transfer_rel_error=ratio("cross_transfer_rel_error", norm(c_lft - c_gt), c_norm, NO_CROSS),
+        gt_noise_psnr_db=psnr_of("gt_noise_psnr_db", ds(gt.union[0]), ds(gt.union[1])),
+        cross_gt_noise_rel=ratio("cross_gt_noise_rel", norm(c_gt_pair[0] - c_gt_pair[1]), c_norm, NO_CROSS),
+        cross_term_rel_size=ratio("cross_term_rel_size", c_norm, u_norm, NO_LIGHT),
+        metric_resolution=(int(union.shape[1]), int(union.shape[0])),
+        metric_pixels=int(mask.sum()),
+        undefined=undefined,
+    )
 
 
 @dataclass(frozen=True)
@@ -328,17 +360,18 @@ class NoiseVerdict:
                 f"is mostly noise; --gt-spp {self.spp_needed} would bring the noise to about a quarter of it")
 
 
-def gt_noise_verdict(metrics: dict, spp: int, *, threshold: float = 0.5, target: float = 0.25) -> NoiseVerdict | None:
+def gt_noise_verdict(metrics: Evaluation, spp: int, *, threshold: float = 0.5,
+                     target: float = 0.25) -> NoiseVerdict | None:
     """A :class:`NoiseVerdict` when ``cross_gt_noise_rel`` exceeds ``threshold`` x ``cross_transfer_rel_error``,
     else None (also when either is undefined).
 
     Args:
-        metrics: from :func:`evaluate`.
+        metrics: from :func:`evaluate` (its ``cross_gt_noise_rel`` and ``cross_transfer_rel_error``).
         spp: the ground truth's samples per pixel.
         threshold: noise / error above which the error is not trusted.
         target: noise / error the suggested sample count reaches.
     """
-    noise, error = metrics.get("cross_gt_noise_rel"), metrics.get("cross_transfer_rel_error")
+    noise, error = metrics.cross_gt_noise_rel, metrics.cross_transfer_rel_error
     if noise is None or error is None or not noise > threshold * error:
         return None
     factor = (noise / (target * error)) ** 2 if error > 0 else float("inf")
@@ -403,13 +436,13 @@ def single_seed(gt: GroundTruth, i: int) -> GroundTruth:
                        alpha_real=gt.alpha_real, alpha_synthetic=gt.alpha_synthetic)
 
 
-def _margins(run: dict, control: dict) -> tuple[float | None, float | None]:
+def _margins(run: Evaluation, control: Evaluation) -> tuple[float | None, float | None]:
     """(run's psnr_objects_db - control's, control's cross error - run's); None where either is undefined."""
     def diff(a: float | None, b: float | None) -> float | None:
         return None if a is None or b is None else float(a - b)
 
-    return (diff(run["psnr_objects_db"], control["psnr_objects_db"]),
-            diff(control["cross_transfer_rel_error"], run["cross_transfer_rel_error"]))
+    return (diff(run.psnr_objects_db, control.psnr_objects_db),
+            diff(control.cross_transfer_rel_error, run.cross_transfer_rel_error))
 
 
 def negative_control(result, control, gt: GroundTruth, rig_model: str, *, target_width: int = 256) -> NegativeControl:
@@ -428,8 +461,8 @@ def negative_control(result, control, gt: GroundTruth, rig_model: str, *, target
     per_gt = [_margins(evaluate(result, g, target_width=target_width), evaluate(control, g, target_width=target_width))
               for g in (single_seed(gt, 0), single_seed(gt, 1))]
     worse = all(m is not None and m > 0 for pair in [(psnr_margin, cross_margin), *per_gt] for m in pair)
-    return NegativeControl(rig_model=rig_model, psnr_objects_db=ctl_m["psnr_objects_db"], psnr_db=ctl_m["psnr_db"],
-                           cross_transfer_rel_error=ctl_m["cross_transfer_rel_error"],
+    return NegativeControl(rig_model=rig_model, psnr_objects_db=ctl_m.psnr_objects_db, psnr_db=ctl_m.psnr_db,
+                           cross_transfer_rel_error=ctl_m.cross_transfer_rel_error,
                            psnr_objects_margin_db=psnr_margin, cross_error_margin=cross_margin,
                            psnr_objects_margin_db_per_gt=(per_gt[0][0], per_gt[1][0]),
                            cross_error_margin_per_gt=(per_gt[0][1], per_gt[1][1]), measurably_worse=bool(worse))
