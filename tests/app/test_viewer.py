@@ -1,6 +1,6 @@
-"""``lft live``: the page in a real browser (Debian's chromium, headless, through Selenium) and the session's
-edits. The browser test skips where chromium or its driver is missing; the set-up (scripts/bootstrap.sh)
-installs both, so CI runs it."""
+"""``lft live``: the page in a real browser (Debian's chromium, headless, through Selenium), the session's edits
+and the bounce layers it computes on demand. The browser test skips where chromium or its driver is missing; the
+set-up (scripts/bootstrap.sh) installs both, so CI runs it."""
 
 from __future__ import annotations
 
@@ -82,8 +82,9 @@ def _pixels(data_url: str) -> np.ndarray:
 @pytest.mark.skipif(CHROMIUM is None or DRIVER is None, reason="Debian's chromium and chromium-driver are not installed")
 def test_03_page_in_a_real_browser(variant, tmp_path):
     """The page loads without console errors, shows a composite that is not black, a slider move changes the
-    composite within 2 s, a bad value shows a message and the loop keeps running; a second tab watches too and
-    closing it does not stop the loop."""
+    composite within 2 s, a bad value shows a message and the loop keeps running; the "bounce layers" button
+    shows each bounce's real and synthetic layers with their gains (not black) and the loop goes on; a second
+    tab watches too and closing it does not stop the loop."""
     import uvicorn
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
@@ -141,6 +142,23 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
         assert "albedo[0]: 1.7 is outside [0, 1]" in driver.find_element(By.ID, "message").text
         latest = frame_src(1.0)
         frame_src(10, latest)                                              # the loop goes on
+        assert driver.find_element(By.ID, "bounces").get_attribute("hidden") is not None
+        driver.find_element(By.ID, "bounce_layers").click()                 # the bounce layers, on demand
+        end = time.time() + 60
+        while time.time() < end and "took" not in driver.find_element(By.ID, "bounces_status").text:
+            time.sleep(0.05)
+        assert "1 bounce at t = 0.00 s, took" in driver.find_element(By.ID, "bounces_status").text
+        tiles = driver.find_elements(By.CSS_SELECTOR, "#bounce_grid figure")
+        captions = [t.find_element(By.TAG_NAME, "figcaption").text for t in tiles]
+        # real and synthetic layers of bounces 0 and 1, then the composite
+        assert len(tiles) == 2 * 2 + 1, captions
+        assert captions[0] == captions[2] == "direct x1" and captions[4] == "composite x1", captions
+        assert captions[1].startswith("bounce 1 x") and captions[3].startswith("bounce 1 x"), captions
+        for t in tiles:
+            assert _pixels(t.find_element(By.TAG_NAME, "img").get_attribute("src")).max() > 40      # not black
+        assert driver.find_element(By.ID, "bounce_layers").is_enabled()
+        latest = frame_src(1.0)
+        frame_src(10, latest)                                              # the live loop goes on afterwards
         driver.switch_to.new_window("tab")
         driver.get(f"http://127.0.0.1:{port}/")
         frame_src(30)
@@ -168,3 +186,108 @@ def test_04_ground_truth_beside_the_composite(session):
     session._gt_thread.join(120)
     side = session._layer(frame, "ground truth")[:, w:]
     assert side.max() > 0
+
+
+def _started(session):
+    """Start a session's loop; returns the list its callbacks fill, in order: ("frame", ViewerFrame) and
+    ("bounces", ViewerBounces)."""
+    events: list = []
+    lock = threading.Lock()
+
+    def add(kind):
+        def callback(item):
+            with lock:
+                events.append((kind, item))
+        return callback
+
+    session.start(add("frame"), add("error"), add("bounces"))
+    return events
+
+
+def _wait(predicate, timeout: float, what: str) -> None:
+    end = time.time() + timeout
+    while time.time() < end:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"{what}: not within {timeout} s")
+
+
+def test_05_bounce_layers_on_demand(variant, tmp_path):
+    """Asked for, the bounce loop runs between two live frames (none comes while it runs) on the scene as edited
+    and gives one real and one synthetic layer per bounce with finite positive gains, the bounce-1 layers not
+    black (the two objects exchange light); a second request meanwhile is dropped; the loop goes on afterwards,
+    and a paused loop stays paused."""
+    import cv2
+
+    from lftransfer.app.viewer.command import open_session
+
+    session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path)
+    events = _started(session)
+    try:
+        _wait(lambda: sum(k == "frame" for k, _ in events) >= 2, 60, "two live frames")
+        session.submit({"type": "object", "side": "synthetic", "index": 0, "translate": [0.01, 0.0, -0.08]})
+        assert session.submit({"type": "bounces", "bounces": 2}) == {"type": "ack", "edit": "bounces"}
+        assert session.submit({"type": "bounces"})["queued"] is False
+        _wait(lambda: any(k == "bounces" and b.state != "running" for k, b in events), 60, "the bounce layers")
+        kinds = [(k, getattr(x, "state", None)) for k, x in events]
+        first, done = kinds.index(("bounces", "running")), kinds.index(("bounces", "done"))
+        assert all(k == "bounces" for k, _ in kinds[first:done]), "a live frame came while the bounce loop ran"
+        result = events[done][1]
+        assert session.scene.synthetic[0].translate == [0.01, 0.0, -0.08]      # the edit before it was applied
+        assert result.bounces == 2 and result.error is None and result.elapsed_s > 0
+        for side in ("real", "synthetic"):
+            assert [x["index"] for x in result.layers if x["side"] == side] == [0, 1, 2]
+        gains = np.array([x["gain"] for x in result.layers])
+        assert np.all(np.isfinite(gains)) and np.all(gains > 0) and np.all(gains[[0, 3]] == 1.0)
+
+        def pixels(data: bytes) -> np.ndarray:
+            return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+
+        for x in result.layers:
+            if x["index"] == 1:
+                assert pixels(x["image"]).max() > 40, x["title"]            # not black
+        assert pixels(result.composite).max() > 40
+        assert set(result.message()) >= {"type", "state", "layers", "composite", "elapsed_s"}
+        count = len(events)
+        _wait(lambda: sum(k == "frame" for k, _ in events[count:]) >= 2, 30, "live frames after the bounce loop")
+
+        session.submit({"type": "pause"})
+        _wait(lambda: session.paused, 30, "the pause")
+        session.submit({"type": "bounces", "bounces": 1})
+        _wait(lambda: sum(k == "bounces" and b.state == "done" for k, b in events) == 2, 60, "the second layers")
+        count = sum(k == "frame" for k, _ in events)
+        time.sleep(0.3)
+        assert session.paused and sum(k == "frame" for k, _ in events) == count      # paused, as it was
+        session.submit({"type": "resume"})
+        _wait(lambda: sum(k == "frame" for k, _ in events) >= count + 2, 30, "live frames after resuming")
+    finally:
+        session.stop()
+
+
+def test_06_bounce_layers_failure_is_shown(variant, tmp_path, monkeypatch):
+    """A bounce loop that fails (here: the rig) ends in a "failed" message with the reason; the live loop goes on
+    and a later request works again."""
+    from lftransfer.app.viewer import session as session_module
+    from lftransfer.app.viewer.command import open_session
+    from lftransfer.rig.base import RigError
+
+    def broken(*_args, **_kwargs):
+        raise RigError("the projector does not answer")
+
+    session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path)
+    monkeypatch.setattr(session_module, "run_transfer", broken)
+    events = _started(session)
+    try:
+        session.submit({"type": "bounces"})
+        _wait(lambda: any(k == "bounces" and b.state == "failed" for k, b in events), 60, "the failure")
+        failed = next(b for k, b in events if k == "bounces" and b.state == "failed")
+        assert failed.error == "bounce layers failed: RigError: the projector does not answer"
+        assert failed.message()["error"] == failed.error and not failed.layers
+        count = sum(k == "frame" for k, _ in events)
+        _wait(lambda: sum(k == "frame" for k, _ in events) >= count + 2, 30, "live frames after the failure")
+        monkeypatch.undo()
+        session.submit({"type": "bounces"})
+        _wait(lambda: any(k == "bounces" and b.state == "done" for k, b in events), 60, "the bounce layers")
+    finally:
+        session.stop()

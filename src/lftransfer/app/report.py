@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -51,21 +52,45 @@ def _resize(image: np.ndarray, width: int) -> np.ndarray:
     return cv2.resize(image, (width, h), interpolation=cv2.INTER_AREA)
 
 
-def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, *,
-                 tile_width: int = 512, ceiling: float | None = None) -> np.ndarray:
-    """The paper's Fig. 4 as one picture.
+@dataclass(frozen=True)
+class BounceLayer:
+    """One bounce's real or synthetic layer as shown: at its own display scale, its gain written beside it.
 
-    Rows: real side (direct, bounce 1, ...), synthetic side (direct, bounce 1, ...), then the composite and the
-    ground truth (where there is one: the simulated rig). Each tile is shown at its own display scale, written on it relative to the direct image.
-    ``ceiling``: see :func:`display_scale` (emitters seen directly saturate).
+    Attributes:
+        side: "real" (R_n's view, ``Bounce.real_view``) or "synthetic" (S_n, ``Bounce.synthetic_view.rgb``).
+        index: the bounce n (0 = direct light).
+        scale: the display scale applied to the layer's radiance (:func:`display_scale`).
+        gain: ``scale`` relative to the direct images' scale (1 for the direct images): how much brighter than the
+            direct image the layer is shown.
+        title: its label, e.g. "real bounce 1  x3.2".
+        image: (H, W, 3) uint8 sRGB at the view camera's resolution, unlabelled.
+    """
+
+    side: str
+    index: int
+    scale: float
+    gain: float
+    title: str
+    image: np.ndarray
+
+
+def bounce_layers(result, composite_rgb: np.ndarray, *, ceiling: float | None = None) -> list[BounceLayer]:
+    """The per-bounce layers of a bounce loop's run as :func:`bounce_panel` shows them.
+
+    Args:
+        result: :class:`lftransfer.transfer.bounce.TransferResult` (its bounces' ``real_view``: black where a
+            bounce's view was not captured).
+        composite_rgb: (H, W, 3) linear radiance of the final composite (sets the scale where both direct images
+            are black, as in a scene lit only by synthetic emitters).
+        ceiling: see :func:`display_scale` (emitters seen directly saturate).
 
     Returns:
-        (H, W, 3) uint8 sRGB.
+        The real layers of bounces 0..N, then the synthetic ones; the direct ones at the direct scale (gain 1),
+        each other one at its own scale.
     """
     base = _base_scale(result, composite_rgb, ceiling)
-    rows = []
+    layers = []
     for side in ("real", "synthetic"):
-        tiles = []
         for b in result.bounces:
             img = b.real_view if side == "real" else b.synthetic_view.rgb
             if img is None:
@@ -73,8 +98,27 @@ def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndar
             img = np.clip(img, 0.0, None)
             s = base if b.index == 0 else display_scale(img, ceiling=ceiling)
             title = f"{side} {'direct' if b.index == 0 else f'bounce {b.index}'}  x{s / base:.3g}"
-            tiles.append(_label(_resize(to_display(img, s), tile_width), title))
-        rows.append(np.concatenate(tiles, axis=1))
+            layers.append(BounceLayer(side, b.index, s, s / base, title, to_display(img, s)))
+    return layers
+
+
+def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, *,
+                 tile_width: int = 512, ceiling: float | None = None,
+                 layers: list[BounceLayer] | None = None) -> np.ndarray:
+    """The paper's Fig. 4 as one picture.
+
+    Rows: real side (direct, bounce 1, ...), synthetic side (direct, bounce 1, ...), then the composite and the
+    ground truth (where there is one: the simulated rig). Each tile is shown at its own display scale, written on
+    it relative to the direct image. ``ceiling``: see :func:`display_scale` (emitters seen directly saturate).
+    ``layers``: :func:`bounce_layers` of the same run where the caller has them already (else computed here).
+
+    Returns:
+        (H, W, 3) uint8 sRGB.
+    """
+    layers = layers if layers is not None else bounce_layers(result, composite_rgb, ceiling=ceiling)
+    base = layers[0].scale
+    rows = [np.concatenate([_label(_resize(x.image, tile_width), x.title) for x in layers if x.side == side], axis=1)
+            for side in ("real", "synthetic")]
     last = [_label(_resize(to_display(composite_rgb, base), tile_width), "composite  x1")]
     if ground_truth is not None:
         last.append(_label(_resize(to_display(ground_truth, base), tile_width), "ground truth (path traced)  x1"))

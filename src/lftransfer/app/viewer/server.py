@@ -1,10 +1,13 @@
 """The web face of ``lft live``: FastAPI serves one page and a websocket; uvicorn runs it.
 
 - ``GET /``: the page (a jinja2 template with autoescaping, no external assets);
-- ``GET /health``: ``{"frames": N}``, for scripts and tests;
+- ``GET /health``: ``{"frames": N, "paused", "error", "bounces"}`` (the last bounce layers' state), for scripts
+  and tests;
 - ``WS /ws``: the page sends JSON edits (:meth:`LiveSession.submit`) and gets the scene's controls, every new
   frame of the layer it shows, acknowledgements and error messages. Any number of pages may watch; a page that
-  goes away is dropped, the loop goes on.
+  goes away is dropped, the loop goes on. The bounce layers one page asks for (``{"type": "bounces"}``) go to
+  every page connected (messages of type "bounces": running with its step, then done with the layers, or
+  failed with the reason), so all watching tabs show them and know the live loop waits meanwhile.
 
 The live loop runs on its own thread (:class:`LiveSession`); frames reach the event loop through
 ``asyncio.run_coroutine_threadsafe``, so rendering never blocks a page.
@@ -21,7 +24,7 @@ from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 
-from lftransfer.app.viewer.session import EditError, LiveSession, ViewerFrame
+from lftransfer.app.viewer.session import EditError, LiveSession, ViewerBounces, ViewerFrame
 
 __all__ = ["make_app", "serve"]
 
@@ -73,7 +76,10 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
         def on_error(message: str) -> None:
             asyncio.run_coroutine_threadsafe(clients.broadcast({"type": "error", "message": message}), loop)
 
-        session.start(on_frame, on_error)
+        def on_bounces(bounces: ViewerBounces) -> None:
+            asyncio.run_coroutine_threadsafe(clients.broadcast(bounces.message()), loop)
+
+        session.start(on_frame, on_error, on_bounces)
         try:
             yield
         finally:
@@ -87,7 +93,10 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
 
     @app.get("/health")
     async def health() -> dict:
-        return {"frames": clients.frames, "paused": session.paused, "error": session.error}
+        last = session.last_bounces
+        return {"frames": clients.frames, "paused": session.paused, "error": session.error,
+                "bounces": None if last is None else {"state": last.state, "bounces": last.bounces,
+                                                      "elapsed_s": last.elapsed_s, "error": last.error}}
 
     @app.websocket("/ws")
     async def socket(ws: WebSocket) -> None:

@@ -4,11 +4,19 @@ The loop thread runs :meth:`lftransfer.transfer.live.LiveTransfer.step` frame af
 frame to a callback (the server broadcasts it); edits from any page are validated at once (a bad value is refused
 with a message, the loop never sees it) and applied between frames, so a change reaches the screen on the next
 frame and the page never waits for a render.
+
+In the live loop a frame is one exchange, so its bounces cannot be told apart. On demand (an edit of type
+"bounces") the loop thread itself runs the bounce loop (:func:`lftransfer.transfer.bounce.run_transfer`, with
+``bounce_views``) on the scene as it stands, between two frames: the live loop waits meanwhile (one thread uses
+the rig) and goes on afterwards as it was (paused or running, its accumulated light kept), and the per-bounce
+layers R_n and S_n, each at its own display gain (:func:`lftransfer.app.report.bounce_layers`), go to a callback
+(:class:`ViewerBounces`). Nothing of this runs unless asked for.
 """
 
 from __future__ import annotations
 
 import base64
+import logging
 import math
 import queue
 import threading
@@ -20,13 +28,17 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from lftransfer.app.report import device_image, display_scale, emitter_ceiling, live_panel, to_display
+from lftransfer.app.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
+                                   to_display)
+from lftransfer.composite import composite
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.scenes import SceneError, with_overrides
-from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
 
-__all__ = ["EditError", "LAYERS", "LiveSession", "ViewerFrame"]
+__all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
+
+log = logging.getLogger(__name__)
 
 LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "ground truth")
 GT_SPP = 64                # samples per pixel of the viewer's ground truth (a preview, not a measurement)
@@ -65,6 +77,51 @@ class ViewerFrame:
                 "stages_ms": {k: round(v, 1) for k, v in self.stages_ms.items()}, "layer": layer,
                 "clipped_fraction": self.clipped_fraction,
                 "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
+
+
+@dataclass
+class ViewerBounces:
+    """The bounce loop's per-bounce layers as the pages get them (or where it stands, or why it failed).
+
+    Attributes:
+        state: "running" (sent when it starts and at each of its steps), "done" or "failed".
+        bounces: N, the bounces after the direct light.
+        time_s: the scene time it ran at, seconds.
+        step: what it is doing ("running"), else "".
+        elapsed_s: seconds it took ("done", "failed"), while the live loop waited.
+        layers: ("done") one dict per layer: side ("real" or "synthetic"), index (bounce n, 0 = direct), gain
+            (display gain relative to the direct image), title (as in the Fig. 4 panel) and image (JPEG bytes,
+            the view camera's resolution); the real layers of bounces 0..N, then the synthetic ones.
+        composite: ("done") JPEG bytes of the final composite, at the direct images' display scale.
+        ground_truth: ("done", simulated rig) JPEG bytes of the path-traced ground truth of the same state at the
+            same scale, where the "ground truth" layer has one at hand (else empty: none is rendered for this).
+        stages_ms: ("done") milliseconds per stage of the bounce loop (summed over its bounces).
+        error: ("failed") the reason, as shown on the page.
+    """
+
+    state: str
+    bounces: int
+    time_s: float
+    step: str = ""
+    elapsed_s: float | None = None
+    layers: list[dict] = field(default_factory=list)
+    composite: bytes = b""
+    ground_truth: bytes = b""
+    stages_ms: dict[str, float] = field(default_factory=dict)
+    error: str | None = None
+
+    def message(self) -> dict:
+        """The JSON message for the pages (images as JPEG data URLs)."""
+        def url(data: bytes) -> str:
+            return "data:image/jpeg;base64," + base64.b64encode(data).decode("ascii")
+
+        return {"type": "bounces", "state": self.state, "bounces": self.bounces, "time_s": round(self.time_s, 3),
+                "step": self.step, "elapsed_s": None if self.elapsed_s is None else round(self.elapsed_s, 3),
+                "layers": [{**{k: v for k, v in x.items() if k != "image"}, "image": url(x["image"])}
+                           for x in self.layers],
+                "composite": url(self.composite) if self.composite else None,
+                "ground_truth": url(self.ground_truth) if self.ground_truth else None,
+                "stages_ms": {k: round(v, 1) for k, v in self.stages_ms.items()}, "error": self.error}
 
 
 def _number(payload: dict, key: str, low: float, high: float) -> float:
@@ -128,6 +185,8 @@ class LiveSession:
         self._thread: threading.Thread | None = None
         self._times: list[float] = []
         self._clock = 0.0
+        self._bounces_queued = threading.Event()     # a bounce-layer request waits or runs (one at a time)
+        self.last_bounces: ViewerBounces | None = None
 
     # -- what the page may ask for ------------------------------------------------------------------------------
     def describe(self) -> dict:
@@ -149,6 +208,10 @@ class LiveSession:
     def submit(self, payload: dict) -> dict | None:
         """Check an edit from a page and queue it for the loop; returns an acknowledgement for the page.
 
+        Edits are applied in the order they came, between frames. ``{"type": "bounces"}`` (optionally with
+        ``"bounces": N``) asks for the bounce layers (:meth:`bounce_layers`); a second request while one waits
+        or runs is acknowledged with ``"queued": False`` and dropped.
+
         Raises:
             EditError: a malformed or out-of-range edit (nothing is queued).
         """
@@ -159,6 +222,13 @@ class LiveSession:
             self._pending.edits.put((kind, None))
         elif kind == "exchanges":
             self._pending.edits.put((kind, int(_number(payload, "exchanges", 1, MAX_EXCHANGES))))
+        elif kind == "bounces":
+            # N: the page's bounce control as it stands when the request's turn comes, unless the request names it
+            n = None if payload.get("bounces") is None else int(_number(payload, "bounces", 1, MAX_EXCHANGES))
+            if self._bounces_queued.is_set():
+                return {"type": "ack", "edit": kind, "queued": False}     # one already waits or runs
+            self._bounces_queued.set()
+            self._pending.edits.put((kind, n))
         elif kind == "lighting_model":
             model = payload.get("lighting_model")
             if model not in LIGHTING_MODELS:
@@ -214,9 +284,18 @@ class LiveSession:
         return side, index, edited
 
     # -- the loop -----------------------------------------------------------------------------------------------
-    def start(self, on_frame: Callable[[ViewerFrame], None], on_error: Callable[[str], None] | None = None) -> None:
-        """Run the loop on its own thread until :meth:`stop`."""
+    def start(self, on_frame: Callable[[ViewerFrame], None], on_error: Callable[[str], None] | None = None,
+              on_bounces: Callable[[ViewerBounces], None] | None = None) -> None:
+        """Run the loop on its own thread until :meth:`stop`.
+
+        Args:
+            on_frame: called (on the loop thread) with every finished frame.
+            on_error: called with the message of a frame that failed (the loop goes on).
+            on_bounces: called with the bounce layers asked for (:meth:`bounce_layers`): when the bounce loop
+                starts, at each of its steps, and when it is done or failed.
+        """
         self._on_frame, self._on_error = on_frame, on_error or (lambda _m: None)
+        self._on_bounces = on_bounces or (lambda _b: None)
         self._thread = threading.Thread(target=self._run, name="lft-live-loop", daemon=True)
         self._thread.start()
 
@@ -260,6 +339,13 @@ class LiveSession:
                     self.sim_rig.place_real(objs)
             elif kind == "save":
                 self.save()
+            elif kind == "bounces":
+                try:
+                    self.last_bounces = self.bounce_layers(value if value is not None else self.exchanges,
+                                                           on_step=self._on_bounces)
+                finally:
+                    self._bounces_queued.clear()
+                self._on_bounces(self.last_bounces)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -270,8 +356,7 @@ class LiveSession:
                     continue
                 self._step_once.clear()
                 t0 = time.perf_counter()
-                times = self.scene.frame_times()
-                t = float(times[int(self._clock) % len(times)]) if self.scene.moving else 0.0
+                t = self._time_next()
                 for _ in range(self.exchanges):
                     frame = self.live.step(t)
                 self._clock += 1
@@ -282,6 +367,62 @@ class LiveSession:
                 self.error = f"{type(exc).__name__}: {exc}"
                 self._on_error(self.error)
                 time.sleep(0.5)
+
+    def _time_next(self) -> float:
+        """The scene time of the next frame, seconds (0 for a still scene)."""
+        times = self.scene.frame_times()
+        return float(times[int(self._clock) % len(times)]) if self.scene.moving else 0.0
+
+    def bounce_layers(self, bounces: int, *, on_step: Callable[[ViewerBounces], None] | None = None) -> ViewerBounces:
+        """Run the bounce loop on the scene as it stands and return its per-bounce layers; never raises.
+
+        The scene as it stands: the synthetic objects as edited, the real ones where the page put them (simulated
+        rig), the time of the frame on the screen, the live loop's rig, rig model and settings (lighting model,
+        samples). Call it only from the loop's thread (:meth:`submit` ``{"type": "bounces"}`` from elsewhere), or
+        while the loop does not run: it uses the rig. The live loop's state (its projected light field, frame
+        count, pause) is left as it was; the next live frame projects that light field again.
+
+        Args:
+            bounces: N >= 1, exchanges after the direct light.
+            on_step: called with a "running" :class:`ViewerBounces` as it starts and at each step; a stop of the
+                session (:meth:`stop`) aborts the run at the next step.
+
+        Returns:
+            "done" with the real layers R_n (``Bounce.real_view``) and the synthetic ones S_n for n = 0..N, their
+            display gains relative to the direct image and the composite; or "failed" with the reason (a rig
+            error, a render error, the session stopped).
+        """
+        step = on_step or (lambda _b: None)
+        t = self.last.time_s if self.last is not None else self._time_next()
+        settings = replace(self.live.settings, bounces=int(bounces), bounce_views=True)
+        t0 = time.perf_counter()
+
+        def progress(message: str) -> None:
+            if self._stop.is_set():
+                raise RuntimeError("the session stopped")
+            step(ViewerBounces("running", settings.bounces, t, step=message))
+
+        try:
+            progress("starting")
+            result = run_transfer(self.live.rig, self.live.model, self.scene.synthetic_part(), settings,
+                                  progress=progress, time_s=t)
+            comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+            layers = bounce_layers(result, comp, ceiling=emitter_ceiling(self.scene))
+            base = layers[0].scale                        # the direct images' display scale
+            gt = self._gt                                 # the ground truth at hand, if it shows this very state
+            if gt is not None and gt[0] != self._world_now(t).model_dump_json(exclude={"source"}):
+                gt = None
+            return ViewerBounces(
+                "done", settings.bounces, t, elapsed_s=time.perf_counter() - t0,
+                layers=[{"side": x.side, "index": x.index, "gain": x.gain, "title": x.title,
+                         "image": _jpeg(x.image, 92)} for x in layers],
+                composite=_jpeg(to_display(np.clip(comp, 0, None), base), 92),
+                ground_truth=_jpeg(to_display(gt[1], base), 92) if gt is not None else b"",
+                stages_ms={k: 1000.0 * v for k, v in result.timings_s.items()})
+        except Exception as exc:  # noqa: BLE001 - shown on the page; the live loop goes on
+            error = f"bounce layers failed: {type(exc).__name__}: {exc}"
+            log.warning("%s", error, exc_info=True)
+            return ViewerBounces("failed", settings.bounces, t, elapsed_s=time.perf_counter() - t0, error=error)
 
     def _viewer_frame(self, frame: LiveFrame) -> ViewerFrame:
         if self.scale is None:
