@@ -424,8 +424,9 @@ def live(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCEN
          calibration: Optional[Path] = typer.Option(None, metavar="FILE", help=_CAL_HELP),
          renderer: str = typer.Option("auto", metavar="auto|fast|exact", help=_RENDERER_HELP)) -> None:
     """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
-    layers, the light field images and the time of every stage; move and edit the synthetic objects (and the
-    real ones on the simulated rig), change the bounces and the lighting model, pause, step, reset, save."""
+    layers, the light field images, the time of every stage and, on demand, the layers of each bounce with their
+    display gains; move and edit the synthetic objects (and the real ones on the simulated rig), change the bounces
+    and the lighting model, pause, step, reset, save."""
     try:
         from lftransfer.app.viewer.server import serve
     except ImportError as exc:
