@@ -39,20 +39,12 @@ def write_text(path: str | Path, text: str) -> Path:
     Returns:
         The path.
     """
-    path = Path(path)
-    tmp = _atomic_target(path)
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    return write_bytes(path, text.encode("utf-8"))
 
 
 def write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write a binary file (an encoded PNG, ...) atomically, like :func:`write_text`."""
+    """Write a binary file (an encoded PNG, UTF-8 text, ...) atomically: a temporary file in the same folder, then
+    ``os.replace``."""
     path = Path(path)
     tmp = _atomic_target(path)
     try:

@@ -68,7 +68,7 @@ def calibrated(variant, tmp_path_factory):
     cal = calibrate_rig(rig, scene.synthetic_part())
     errors = calibration_errors(cal, rig.truth)
     path = write_calibration_report(tmp_path_factory.mktemp("report"), cal, errors)
-    return scene, cal, errors, path
+    return scene, cal, errors.to_json(), path
 
 
 

@@ -40,7 +40,7 @@ def test_01_recovers_the_hidden_rig(calibrated):
     cameras, is 0.05 % off (bound 0.5 %). The point light, 3.1 mm from the scene file's position, is measured to
     0.67 mm (bound 1 mm; the chessboards' pose error at 256 x 192 view pixels, docs/calibration.md)."""
     scene, rig, cal, messages = calibrated
-    e = calibration_errors(cal, rig.truth, true_light=true_light_scene(scene, 3).light.position)
+    e = calibration_errors(cal, rig.truth, true_light=true_light_scene(scene, 3).light.position).to_json()
     assert e["lenslets_found"] == 120
     for key in ("lenslet_centre_rms_px", "projector_mapping_rms_px", "camera_response_error",
                 "projector_response_error", "light_position_error_mm"):     # met at this resolution too

@@ -84,15 +84,15 @@ _CYAN, _ORANGE = "#28dcff", "#ff9620"
 _SKIPPED = (KeyError, IndexError, TypeError, ValueError, AttributeError, ZeroDivisionError, np.linalg.LinAlgError)
 
 
-def write_calibration_report(path, calibration, errors: dict | None = None) -> Path:
+def write_calibration_report(path, calibration, errors=None) -> Path:
     """Write the calibration report as one self-contained HTML file, atomically.
 
     Args:
         path: a folder (the file is ``calibration_report.html`` in it) or a file name ending in ``.html``;
             missing folders are created.
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
-        errors: errors against a simulated rig's hidden truth (:func:`lftransfer.sim.verify.calibration_errors`),
-            shown with the project's targets; None to leave that table out.
+        errors: errors against a simulated rig's hidden truth (:class:`lftransfer.sim.verify.CalibrationErrors`,
+            or its ``to_json()``), shown with the project's targets; None to leave that table out.
 
     Returns:
         Path of the written file.
@@ -103,13 +103,14 @@ def write_calibration_report(path, calibration, errors: dict | None = None) -> P
     return write_text(path, render_calibration_report(calibration, errors))
 
 
-def render_calibration_report(calibration, errors: dict | None = None) -> str:
+def render_calibration_report(calibration, errors=None) -> str:
     """The calibration report as an HTML document (see :func:`write_calibration_report`).
 
     Returns:
         the document's text.
     """
     cal = calibration
+    errors = errors.to_json() if hasattr(errors, "to_json") else errors
     diag = cal.diagnostics if isinstance(cal.diagnostics, dict) else {}
     a, cam, prj = cal.model.array, cal.model.camera.device, cal.model.projector.device
     return environment().get_template("calibration_report.html").render(

@@ -840,7 +840,7 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml
         fail(str(exc), FAILED)
     except RigError as exc:
         fail(f"calibration failed: {exc}", FAILED)
-    errors = write_calibration(out, cal, opened.truth) or {}
+    errors = write_calibration(out, cal, opened.truth)
     table = Table(title=escape(f"calibration -> {out}"))
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -855,16 +855,17 @@ def calibrate_rig_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml
     if placement:
         _row(table, "board as measured vs as asked for", f"{placement['depth_mm']:+.2f} mm along its normal, "
                                                        f"{placement['tilt_deg']:.2f} deg")
-    if errors:
-        _row(table, "error vs hidden truth: lenslet centres", f"{errors['lenslet_centre_rms_px']:.3f} px")
-        _row(table, "error vs hidden truth: projector mapping", f"{errors['projector_mapping_rms_px']:.3f} px")
-        _row(table, "error vs hidden truth: pose", f"{errors['pose_position_rms_mm']:.2f} mm, "
-                                                   f"{errors['pose_rotation_deg']:.3f} deg")
-        _row(table, "error vs hidden truth: responses", f"camera {errors['camera_response_error']:.4f}, "
-                                                        f"projector {errors['projector_response_error']:.4f}")
+    if errors is not None:
+        _row(table, "error vs hidden truth: lenslet centres", f"{errors.lenslet_centre_rms_px:.3f} px")
+        _row(table, "error vs hidden truth: projector mapping", f"{errors.projector_mapping_rms_px:.3f} px")
+        _row(table, "error vs hidden truth: pose", f"{errors.pose_position_rms_mm:.2f} mm, "
+                                                   f"{errors.pose_rotation_deg:.3f} deg")
+        _row(table, "error vs hidden truth: responses", f"camera {errors.camera_response_error:.4f}, "
+                                                        f"projector {errors.projector_response_error:.4f}")
     Console().print(table)
     Console().print(escape(f"wrote {out}, {out.parent / 'calibration_report.html'}"
-                           + (f", {out.parent / 'calibration_errors.json'}" if errors else "")), soft_wrap=True)
+                           + (f", {out.parent / 'calibration_errors.json'}" if errors is not None else "")),
+                  soft_wrap=True)
 
 
 def _parse_seeds(seeds: str) -> list[int]:

@@ -300,7 +300,7 @@ def _other_reconstructions(scene, options: RunOptions) -> list[str]:
 
 
 def write_calibration(path: Path, calibration, truth=None, source: Path | None = None, *,
-                      true_light=None) -> dict | None:
+                      true_light=None):
     """Write a calibration file, its HTML report and (simulated rig only) its errors against the hidden truth.
 
     Args:
@@ -313,7 +313,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
         true_light: (3,) where the simulated rig's point light really stands (world frame), or None.
 
     Returns:
-        The errors (:func:`lftransfer.sim.verify.calibration_errors`), or None without a truth.
+        The errors (:class:`lftransfer.sim.verify.CalibrationErrors`), or None without a truth.
     """
     from lftransfer.app.calibration_report import write_calibration_report
     from lftransfer.sim.verify import calibration_errors
@@ -325,7 +325,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
     errors_path = path.parent / "calibration_errors.json"
     if truth is not None:
         errors = calibration_errors(calibration, truth, true_light=true_light)
-        write_json(errors_path, errors)
+        write_json(errors_path, errors.to_json())
     else:
         errors_path.unlink(missing_ok=True)            # an earlier calibration's, which this one does not match
     write_calibration_report(path.parent / "calibration_report.html", calibration, errors)
@@ -659,7 +659,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "rig": str(options.rig),
         "truth_seed": opened.truth_seed,
         "rig_model": rig_model,
-        "calibration_errors": calibration_errors_,
+        "calibration_errors": calibration_errors_.to_json() if calibration_errors_ is not None else None,
         "variant": variant(),
         "scene": str(scene.source) if scene.source else None,
     }

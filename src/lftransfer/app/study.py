@@ -158,6 +158,10 @@ def load_study(path: str | Path) -> Study:
             raise StudyError(f"{path}: study.scenes[{i}]: {exc}") from None
         scenes[label] = quick_scene(scene) if config.quick else scene
         digest.update(file.read_bytes())
+    keys = [cell_key(label, 0, "") for label in config.scenes]
+    if len(set(keys)) != len(keys):
+        raise StudyError(f"{path}: study.scenes: two scenes have the same name ({config.scenes}); their cells' files "
+                         f"would collide, rename one")
     study = Study(path=path, config=config, scenes=scenes, digest=digest.hexdigest())
     for j, setting in enumerate(config.setting):
         for label in config.scenes:
@@ -193,9 +197,9 @@ class StudyCell:
 
 
 def cell_key(scene: str, seed: int, setting: str) -> str:
-    """A file name for a cell (the scene label made safe)."""
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(scene).stem if scene.endswith(".toml")) \
-        if scene.endswith(".toml") else scene
+    """A file name for a cell: the scene's name (a file's stem, made safe), the seed and the setting."""
+    name = Path(scene).stem if scene.endswith(".toml") else scene
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
     return f"{safe}-seed{seed}-{setting}"
 
 

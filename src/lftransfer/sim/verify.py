@@ -26,7 +26,7 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
+__all__ = ["CalibrationErrors", "CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
            "cross_term_truth", "cross_transfer_error", "downsample", "Evaluation", "evaluate", "gt_noise_verdict", "metric_factor",
            "negative_control", "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
@@ -474,7 +474,54 @@ def _rig_rotation(model) -> np.ndarray:
     return rotation_xy(model.tilt) @ rotation_z(model.array.rotation)
 
 
-def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int = 200_000) -> dict:
+@dataclass(frozen=True)
+class CalibrationErrors:
+    """A calibration against the simulated rig's hidden truth (:func:`calibration_errors`; verification only). The
+    keys of ``to_json()`` are those of the project's targets (:mod:`lftransfer.calibration.targets`).
+
+    Attributes:
+        lenslet_assignment_agreement: fraction of camera pixels assigned to the right lenslet.
+        ray_direction_rms_deg: each camera pixel's ray in the world, RMS angle, degrees.
+        projector_mapping_rms_px: camera -> projector mapping, RMS, projector px.
+        pose_position_rms_mm, pose_position_max_mm: the lenslet centres in the world, mm.
+        pose_rotation_deg: the array's orientation, degrees.
+        pitch_rel_error: calibrated / true pitch - 1.
+        distortion_k1_rms: per-lenslet k1, RMS.
+        camera_response_error, projector_response_error: responses, max, fraction of full scale.
+        projector_mixing_rel_error: brightness x cross-talk, max, relative.
+        black_level_error: projector black level, max, fraction of its max radiance.
+        exposure_rel_error: LF camera exposure, relative.
+        lenslet_centre_rms_px, lenslet_centre_max_px, lenslets_found: lenslet centres, LF camera px (None: the
+            calibration has no lattice fit, e.g. read from a file).
+        camera_gain_rel_rms: exposure x vignetting per pixel, RMS relative (None without vignetting).
+        light_position_error_mm: the measured point light against the true one, mm (None: not measured).
+    """
+
+    lenslet_assignment_agreement: float
+    ray_direction_rms_deg: float
+    projector_mapping_rms_px: float
+    pose_position_rms_mm: float
+    pose_position_max_mm: float
+    pose_rotation_deg: float
+    pitch_rel_error: float
+    distortion_k1_rms: float
+    camera_response_error: float
+    projector_response_error: float
+    projector_mixing_rel_error: float
+    black_level_error: float
+    exposure_rel_error: float
+    lenslet_centre_rms_px: float | None = None
+    lenslet_centre_max_px: float | None = None
+    lenslets_found: int | None = None
+    camera_gain_rel_rms: float | None = None
+    light_position_error_mm: float | None = None
+
+    def to_json(self) -> dict:
+        """quantity -> error, the measured ones only (``calibration_errors.json``)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+
+def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int = 200_000) -> CalibrationErrors:
     """Errors of a calibration against the simulated rig's hidden truth (verification only).
 
     Args:
@@ -485,10 +532,8 @@ def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int =
         max_pixels: camera pixels sampled for the ray and mapping errors.
 
     Returns:
-        JSON-ready dict: lenslet centres (LF camera px), projector mapping (projector px), global pose (mm,
-        degrees), pitch, ray directions (degrees), responses (fraction of full scale), cross-talk, black level,
-        brightness, exposure, vignetting; ``light_position_error_mm`` (the distance from the measured point light
-        to the true one) where the calibration measured it and ``true_light`` is given.
+        :class:`CalibrationErrors`; ``light_position_error_mm`` where the calibration measured the light and
+        ``true_light`` is given.
     """
     from lftransfer.calibration.radiometric import response_error
 
@@ -553,4 +598,4 @@ def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int =
     light = getattr(calibration, "light", None)
     if light is not None and true_light is not None:
         out["light_position_error_mm"] = float(1000 * np.linalg.norm(light.position - np.asarray(true_light, float)))
-    return out
+    return CalibrationErrors(**out)

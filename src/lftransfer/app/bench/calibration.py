@@ -109,7 +109,8 @@ def calibrate_seed(scene, seed: int, *, progress: Callable[[str], None] | None =
     rig = SimRig(world, truth=truth, operator_seed=seed)
     t = time.perf_counter()
     cal = calibrate_rig(rig, scene.synthetic_part(), progress=lambda msg: say(f"seed {seed}: {msg}"))
-    errors = calibration_errors(cal, rig.truth, true_light=None if world.light is None else world.light.position)
+    errors = calibration_errors(cal, rig.truth,
+                                true_light=None if world.light is None else world.light.position).to_json()
     placement = cal.diagnostics["pose"]["board_placement"]
     errors["board_depth_mm"] = placement["depth_mm"]
     errors["board_tilt_deg"] = placement["tilt_deg"]
