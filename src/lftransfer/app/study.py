@@ -49,13 +49,13 @@ from lftransfer.validation import read_json, read_toml, validation_message
 __all__ = ["METRICS", "Study", "StudyCell", "StudyConfig", "StudyError", "StudyResult", "StudySetting", "cell_key",
            "load_study", "run_study", "write_study_outputs"]
 
-# metric -> (label, unit, lower is better); the cells' columns (lftransfer.sim.verify.evaluate)
+# metric -> (label, unit, lower is better, short label); the cells' columns (lftransfer.sim.verify.evaluate)
 METRICS = {
-    "cross_transfer_rel_error": ("cross-transfer error", "relative", True),
-    "cross_gt_noise_rel": ("ground truth's own noise on it", "relative", True),
-    "psnr_objects_db": ("PSNR over the objects", "dB", False),
-    "psnr_objects_db_direct_only": ("PSNR over the objects, direct light only", "dB", False),
-    "psnr_db": ("PSNR, every pixel", "dB", False),
+    "cross_transfer_rel_error": ("cross-transfer error", "relative", True, "cross error"),
+    "cross_gt_noise_rel": ("ground truth's own noise on it", "relative", True, "its GT noise"),
+    "psnr_objects_db": ("PSNR over the objects", "dB", False, "PSNR objects"),
+    "psnr_objects_db_direct_only": ("PSNR over the objects, direct light only", "dB", False, "PSNR objects, direct"),
+    "psnr_db": ("PSNR, every pixel", "dB", False, "PSNR all pixels"),
 }
 CELLS = "cells"
 
@@ -214,7 +214,7 @@ class StudyResult:
         rig_model: what the pipeline knew of each rig.
         bounces: N.
         cluster: where it ran (None: in one process).
-        seconds: wall time of the whole study, s.
+        seconds: wall time of the whole study, s (every run of a resumed one, added up).
     """
 
     title: str
@@ -255,7 +255,7 @@ class StudyResult:
     def markdown(self) -> str:
         """The table: one row per scene and setting, the mean over the seeds of each metric (range in brackets
         where there are several seeds)."""
-        head = "| scene | setting | " + " | ".join(f"{METRICS[m][0]} ({METRICS[m][1]})" for m in METRICS) + " |"
+        head = "| scene | setting | " + " | ".join(f"{METRICS[m][3]} ({METRICS[m][1]})" for m in METRICS) + " |"
         rows = [head, "|" + "---|" * (len(METRICS) + 2)]
         tables = {m: {(r["scene"], r["setting"]): r for r in self.summary(m)} for m in METRICS}
         for scene in self.scenes:
@@ -358,8 +358,10 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
                          settings=[s.name for s in c.setting], rig_model=c.rig_model, bounces=c.bounces)
     cells_dir = out / CELLS
     marker = out / "study_key.json"
+    before = 0.0                                   # seconds the earlier runs of a resumed study took
     if resume and marker.is_file():
         key = read_json(marker, "study key", StudyError)
+        before = float(key.get("seconds", 0.0))
         if key.get("digest") != study.digest:
             raise StudyError(f"--resume: {out} holds another study (or the study or its scenes changed); run "
                              f"without --resume to start again")
@@ -373,18 +375,23 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
         for name in ("study.json", "study.md", "study.png", "study.html"):
             (out / name).unlink(missing_ok=True)
     cells_dir.mkdir(parents=True, exist_ok=True)
-    write_json(marker, {"digest": study.digest, "study": str(study.path)})
+    def mark() -> None:
+        write_json(marker, {"digest": study.digest, "study": str(study.path),
+                            "seconds": before + time.perf_counter() - t0})
+
+    t0 = time.perf_counter()
+    mark()
     finished = {c_.key for c_ in result.cells}
     todo = [(label, seed, s.name) for label, seed in pairs for s in c.setting
             if cell_key(label, seed, s.name) not in finished]
     need = sorted({(label, seed) for label, seed, _ in todo}, key=pairs.index)
     say = progress or (lambda msg, done, n: None)
-    t0 = time.perf_counter()
     write_status(out, "running", rig="sim")
     with tracked_run(out, "sim", interrupted="interrupted (Ctrl-C); --resume continues"):
 
         def keep(cell: StudyCell) -> None:
             write_json(cells_dir / f"{cell.key}.json", asdict(cell))
+            mark()
             result.cells.append(cell)
             say(f"{cell.scene}, seed {cell.seed}, {cell.setting}", len(result.cells), total)
 
@@ -413,7 +420,8 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
         order = {(label, seed, s): i for i, (label, seed, s) in
                  enumerate((label, seed, s.name) for label, seed in pairs for s in c.setting)}
         result.cells.sort(key=lambda x: order[(x.scene, x.seed, x.setting)])
-        result.seconds = time.perf_counter() - t0
+        result.seconds = before + time.perf_counter() - t0
+        mark()
         write_study_outputs(out, result)
     return result
 

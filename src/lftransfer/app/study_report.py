@@ -57,7 +57,7 @@ def study_figure(result):
                 if s in noise:
                     ax.hlines(noise[s], i - 0.42, i + 0.42, colors="k", linestyles=":", lw=1.2,
                               label="ground truth's own noise" if i == 0 else None)
-        label, unit, lower = METRICS[metric]
+        label, unit, lower, _ = METRICS[metric]
         ax.set_title(f"{label} ({'lower' if lower else 'higher'} is better)")
         ax.set_ylabel(unit)
         ax.set_xticks(x, [Path(s).stem if s.endswith(".toml") else s for s in result.scenes],
@@ -79,7 +79,7 @@ def write_study_report(out: Path, result) -> None:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     write_bytes(out / "study.png", buf.getvalue())
-    head = ["scene", "setting"] + [f"{label} ({unit})" for label, unit, _ in METRICS.values()]
+    head = ["scene", "setting"] + [f"{short} ({unit})" for _, unit, _, short in METRICS.values()]
     tables = {m: {(r["scene"], r["setting"]): r for r in result.summary(m)} for m in METRICS}
     rows = [[scene, setting] + [tables[m][(scene, setting)] for m in METRICS]
             for scene in result.scenes for setting in result.settings]
@@ -91,7 +91,8 @@ def write_study_report(out: Path, result) -> None:
                  f"rig model {result.rig_model}; {result.bounces} bounces",
         sections=["Summary", "Every cell"], result=result, figure=figures.embed(fig, "Mean over the hidden truths "
         "(bars), their range (error bars); dotted: the ground truth's own noise on the cross term.", fmt="svg"),
-        head=head, rows=rows, metrics=list(METRICS), units=[u for _, u, _ in METRICS.values()],
-        cell_head=["scene", "seed", "setting"] + [label for label, _, _ in METRICS.values()] + ["transfer (s)"],
+        head=head, rows=rows, metrics=list(METRICS), units=[m[1] for m in METRICS.values()],
+        legend=[(m[3], m[0], m[1]) for m in METRICS.values()],
+        cell_head=["scene", "seed", "setting"] + [m[3] for m in METRICS.values()] + ["transfer (s)"],
         cells=cells)
     write_text(out / "study.html", page)
