@@ -71,6 +71,7 @@ def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(var
     killed = []
 
     def kill_one(record, done, total):
+        """After a frame is written, kill a worker that is rendering another (the first time one is busy)."""
         if not killed:
             busy = _busy_workers()
             if busy:
@@ -79,7 +80,7 @@ def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(var
 
     seq = SequenceOptions(mode="converged", frames=4, verify_every=1, cluster=ClusterSpec("local", workers=2))
     many = render_sequence(scene, tmp_path / "many", options, seq, progress=kill_one)
-    assert killed, "no worker was busy after the first frame: nothing was killed"
+    assert killed, "no worker was busy when a frame was written: nothing was killed"
     assert many["cluster"]["workers"] == 2
     assert [f["index"] for f in many["frames"]] == [0, 1, 2, 3]
     for i in range(4):
