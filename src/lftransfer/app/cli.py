@@ -641,11 +641,14 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
           peer: bool = typer.Option(True, "--peer/--no-peer", metavar="", help=(
               "Also time Mitsuba's path integrator on the light field job (point model), at equal RMSE.")),
           quick: bool = _flag("--quick", _QUICK_HELP),
+          live: bool = _flag("--live", (
+              "Time the step with a synthetic object moving (a still scene's first synthetic object slides 2 cm "
+              "and turns 20 degrees and back over the frames; an animated scene moves as its keyframes say).")),
           max_memory: Optional[str] = _memory_option()) -> None:
     """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and the
     scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the step's
     rays once."""
-    from lftransfer.app.bench.step import BenchOptions, count_bench_steps, run_bench
+    from lftransfer.app.bench.step import BenchOptions, count_bench_steps, run_bench, with_moving_object
     from lftransfer.app.pipeline import CalibrationFailedError
     from lftransfer.app.report import write_json
     from lftransfer.app.terminal import say
@@ -655,6 +658,11 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
     _check_reconstruction(reconstruction)
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
+    if live:
+        try:
+            scene = with_moving_object(scene, iterations + 1)
+        except ValueError as exc:
+            fail(str(exc))
     rig_opts = _rig_options(scene, truth_seed, False, rig_model, calibration, "sim")
     calibrates = calibration is None and rig_model == "calibrated"
     _check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
@@ -675,8 +683,9 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
         fail(f"bench failed: {exc}", FAILED)
     data = result.to_json()
     data["settings"]["quick"] = quick
+    data["settings"]["live"] = live
     data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed,
-                                                 lighting_model, reconstruction, renderer, accuracy, peer)
+                                                 lighting_model, reconstruction, renderer, accuracy, peer, live)
     _bench_table(result)
     if json_out is not None:
         write_json(json_out, data)
@@ -699,7 +708,7 @@ def _demo_calibration_hint(scene) -> str:
 
 
 def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed, lighting_model,
-                   reconstruction, renderer, accuracy, peer) -> str:
+                   reconstruction, renderer, accuracy, peer, live=False) -> str:
     """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
     import shlex
 
@@ -708,6 +717,8 @@ def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_
         parts += ["--scene", str(scene_file)]
     if quick:
         parts.append("--quick")
+    if live:
+        parts.append("--live")
     parts += ["--iterations", str(iterations)]
     if calibration is not None:
         parts += ["--calibration", str(calibration)]
@@ -759,9 +770,13 @@ def _bench_table(result) -> None:
     if other is not None:
         _row(table, "  same rays, the other geometry", f"{other:.1f} ms")
     _row(table, "iteration_over_floor", f"{result.iteration_over_floor:.1f}x")
+    _row(table, "frames per second: pipeline / whole step", f"{result.pipeline_fps:.2f} / {result.step_fps:.3f} "
+                                                            f"(the step includes the simulator's capture)")
+    _row(table, "frames in which a synthetic object moved", f"{result.frames_moved} of {s['iterations']}")
     if result.fast_vs_exact is not None:
-        v = result.fast_vs_exact.psnr_db
-        _row(table, "fast vs exact composite PSNR", "n/a (exact path)" if v is None else f"{v:.1f} dB")
+        v, o = result.fast_vs_exact.psnr_db, result.fast_vs_exact.psnr_objects_db
+        _row(table, "fast vs exact composite PSNR: all / objects", "n/a (exact path)" if v is None else
+             f"{v:.1f} dB / " + ("n/a" if o is None else f"{o:.1f} dB"))
     if result.peer is not None:
         q = result.peer
         bound = "" if q.reached_target else " (lower bound: the peer missed our RMSE)"

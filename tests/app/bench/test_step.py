@@ -152,3 +152,27 @@ def test_07_peer_and_options(tiny):
 def test_08_rejects_bad_options(kw):
     with pytest.raises(ValueError):
         BenchOptions(**kw)
+
+
+def test_live_moves_a_synthetic_object_every_frame(quick_fig4):
+    """--live: the still Fig. 4 scene's cube moves in every timed frame (and stays in its half-space), the step's
+    frame rates are reported, and the fast path is measured against the exact path over the cube's pixels."""
+    from lftransfer.app.bench.step import LIVE_SLIDE_M, with_moving_object
+
+    moving = with_moving_object(quick_fig4, 4)
+    assert moving.moving and not quick_fig4.moving
+    cube0, cube_mid = moving.at(0.0).synthetic[0], moving.at(moving.animation.duration_s / 2).synthetic[0]
+    assert cube_mid.translate[1] - cube0.translate[1] == pytest.approx(LIVE_SLIDE_M)
+    assert with_moving_object(moving, 4) is moving                           # its own motion is kept
+    options = BenchOptions(iterations=3, rig_model="oracle", peer=False, exact_aperture_samples=8)
+    result = run_bench(moving, options)
+    assert result.frames_moved == 3
+    assert result.pipeline_fps == pytest.approx(1000 / result.pipeline_iteration_ms, rel=1e-2)
+    assert 0 < result.step_fps <= result.pipeline_fps
+    f = result.fast_vs_exact
+    assert f.psnr_objects_db is not None and f.psnr_db is not None
+    assert f.psnr_objects_db < f.psnr_db             # the errors sit on the cube: the whole frame dilutes them
+    with pytest.raises(ValueError, match="no synthetic object"):
+        from lftransfer.scenes import with_overrides
+
+        with_moving_object(with_overrides(quick_fig4, synthetic=[]), 4)

@@ -29,12 +29,16 @@ class FastVsExact:
         psnr_db: PSNR of the step's composite against the exact one (peak: the exact composite's maximum), dB;
             None where the step renders with the exact path itself (nothing approximated) or the images are
             identical or dark.
+        psnr_objects_db: the same over the pixels the synthetic objects cover (the exact render's coverage:
+            where the fast path renders; the rest of the frame is the same real view), same peak, dB; None as
+            above or where no synthetic object is in view.
         exact_aperture_samples: aperture points per lenslet of the exact reference (area model).
         exact_spp: rays per view pixel of the exact reference.
         note: what was compared, in words.
     """
 
     psnr_db: float | None
+    psnr_objects_db: float | None
     exact_aperture_samples: int
     exact_spp: int
     note: str
@@ -58,7 +62,7 @@ def fast_vs_exact(frame, side, settings, *, max_depth: int, aperture_samples: in
 
     spp = max(4, settings.view_spp)
     if not isinstance(side.renderer, fast.CachedRenderer):
-        return FastVsExact(None, settings.aperture_samples, settings.view_spp,
+        return FastVsExact(None, None, settings.aperture_samples, settings.view_spp,
                            "the step renders with the exact path: nothing is approximated by the fast path")
     area = settings.lighting_model == "area"
     samples = int(aperture_samples) if area else settings.aperture_samples
@@ -68,8 +72,13 @@ def fast_vs_exact(frame, side, settings, *, max_depth: int, aperture_samples: in
     exact = HalfSpaceRenderer(side.renderer.objects, max_depth=max_depth)
     view = exact.render_view(side.sensor, side.width, side.height, [*side.direct_lights, incident], spp=spp,
                              seed=settings.seed)
-    value = psnr(frame.composite, composite(view.rgb, view.alpha, frame.real_view))
+    reference = composite(view.rgb, view.alpha, frame.real_view)
+    peak = float(reference.max())
+    value = psnr(frame.composite, reference, peak)
+    covered = view.alpha > 0.5
+    objects = psnr(frame.composite, reference, peak, mask=covered) if covered.any() else float("nan")
     note = (f"the step's composite (fast path, {settings.view_spp} rays per pixel, {settings.aperture_samples} "
             f"aperture points) against the exact path ({spp} rays per pixel, {samples} aperture points, shadow "
             f"rays at every hit, max_depth {max_depth}), same lights, {settings.lighting_model} model")
-    return FastVsExact(round(value, 2) if math.isfinite(value) else None, samples, spp, note)
+    return FastVsExact(round(value, 2) if math.isfinite(value) else None,
+                       round(objects, 2) if math.isfinite(objects) else None, samples, spp, note)

@@ -37,7 +37,7 @@ from lftransfer.transfer.bounce import TransferSettings
 from lftransfer.transfer.live import LiveTransfer
 
 __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_MODELS", "Spread",
-           "count_bench_steps", "run_bench", "transfer_settings"]
+           "count_bench_steps", "run_bench", "transfer_settings", "with_moving_object"]
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
@@ -124,6 +124,10 @@ class BenchResult:
         floor_ms: the floor: the step's light field and view rays cast once against the synthetic scene, ms.
         floor: its details (rays per batch, ms per batch, against the renderer's own geometry).
         iteration_over_floor: pipeline_iteration_ms / floor_ms.
+        pipeline_fps: frames per second of the pipeline's share (1000 / pipeline_iteration_ms): what a physical
+            rig's computer sustains while its cameras expose.
+        step_fps: frames per second of the whole step on the simulated rig (1000 / step_total_ms; the simulator's
+            capture included).
         fast_vs_exact: the fast path's accuracy on the last timed frame, or None (not asked for).
         peer: Mitsuba's path tracer on the light field job, or None (not asked for).
         settings: the settings used (scene, resolution, samples, models, rig, variant, ...).
@@ -143,6 +147,8 @@ class BenchResult:
     floor_ms: float
     floor: FloorTiming
     iteration_over_floor: float
+    pipeline_fps: float
+    step_fps: float
     fast_vs_exact: FastVsExact | None
     peer: PeerComparison | None
     settings: dict
@@ -155,6 +161,38 @@ class BenchResult:
     def to_json(self) -> dict:
         """JSON-ready dict (nested dataclasses as dicts)."""
         return asdict(self)
+
+
+LIVE_FPS = 24.0                 # frame rate of the motion --live gives a still scene
+LIVE_SLIDE_M = 0.02             # ... its first synthetic object sliding this far along y and back
+LIVE_TURN_DEG = 20.0            # ... while turning this far about y and back
+
+
+def with_moving_object(scene, frames: int):
+    """The scene with its first synthetic object moving over ``frames`` frames (``lft bench --live``): it slides
+    :data:`LIVE_SLIDE_M` along y (parallel to the array) and back while turning :data:`LIVE_TURN_DEG` about y, at
+    :data:`LIVE_FPS`. An animated scene is returned as it is (its own motion is timed).
+
+    Raises:
+        ValueError: a still scene without synthetic objects (nothing to move).
+    """
+    from lftransfer.scenes import with_overrides
+
+    if scene.moving:
+        return scene
+    if not scene.synthetic:
+        raise ValueError("--live: the scene has no synthetic object to move")
+    obj = scene.synthetic[0].model_dump()
+    x, y, z = obj["translate"]
+    rx, ry, rz = obj["rotate_deg"]
+    duration = max(frames - 1, 1) / LIVE_FPS
+    obj["keyframes"] = [{"time_s": 0.0},
+                        {"time_s": duration / 2, "translate": [x, y + LIVE_SLIDE_M, z],
+                         "rotate_deg": [rx, ry + LIVE_TURN_DEG, rz]},
+                        {"time_s": duration}]
+    obj["interpolation"] = "smooth"
+    return with_overrides(scene, synthetic=[obj, *scene.synthetic[1:]],
+                          animation={"duration_s": duration, "fps": LIVE_FPS})
 
 
 def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> TransferSettings:
@@ -315,6 +353,8 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         floor_ms=floor.ms,
         floor=floor,
         iteration_over_floor=round(pipeline_ms / floor.ms, 2),
+        pipeline_fps=round(1000.0 / pipeline_ms, 2) if pipeline_ms > 0 else float("inf"),
+        step_fps=round(1000.0 / statistics.median(1000.0 * f.timings_s["total"] for f in frames), 3),
         fast_vs_exact=accuracy,
         peer=peer,
         settings=_settings_json(scene, options, settings, renderer, rig_model),
