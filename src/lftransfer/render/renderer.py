@@ -56,6 +56,18 @@ class ViewImage:
     depth: np.ndarray
 
 
+def sample_mean(values: np.ndarray, spp: int) -> np.ndarray:
+    """The mean of every ``spp`` consecutive rows: (N * spp, ...) -> (N, ...) float32 (samples of one pixel or
+    light field entry, stored sample-fastest). The ``spp`` slices are summed: numpy's mean over a short middle
+    axis is about three times slower (it was half of a full-resolution view render)."""
+    groups = np.asarray(values, np.float32).reshape(-1, spp, *np.shape(values)[1:])
+    total = groups[:, 0].copy()
+    for s in range(1, spp):
+        total += groups[:, s]
+    total *= np.float32(1.0 / spp)
+    return total
+
+
 class HalfSpaceRenderer:
     """Renders the objects of one half-space lit by a list of lights.
 
@@ -139,7 +151,7 @@ class HalfSpaceRenderer:
 
         origins, directions = self._rays(("lf", array, U, V, side, model == "area", spp, seed), make)
         radiance, _, _ = self.render_rays(origins, directions, lights, seed=seed)
-        data = radiance.reshape(K, V, U, S, 3).mean(axis=3)
+        data = sample_mean(radiance, S).reshape(K, V, U, 3)
         data *= lf.mask()[None, :, :, None]
         lf.data[...] = data
         return lf
@@ -152,10 +164,9 @@ class HalfSpaceRenderer:
         o, d = self._rays(("view", id(sensor), width, height, spp, seed),
                           lambda: view_rays(sensor, width, height, spp, seed))
         radiance, hit, dist = self.render_rays(o, d, lights, seed=seed)
-        rgb = radiance.reshape(height, width, spp, 3).mean(axis=2)
-        hits = hit.reshape(height, width, spp)
-        alpha = hits.mean(axis=2).astype(np.float32)
-        dist = np.where(hits, dist.reshape(height, width, spp), 0.0).sum(axis=2)
+        rgb = sample_mean(radiance, spp).reshape(height, width, 3)
+        alpha = sample_mean(hit.astype(np.float32), spp).reshape(height, width)
+        near = sample_mean(np.where(hit, dist, np.float32(0.0)).astype(np.float32), spp).reshape(height, width)
         with np.errstate(invalid="ignore", divide="ignore"):
-            depth = np.where(alpha > 0, dist / np.maximum(hits.sum(axis=2), 1), np.inf).astype(np.float32)
-        return ViewImage(rgb=rgb.astype(np.float32), alpha=alpha, depth=depth)
+            depth = np.where(alpha > 0, near / np.maximum(alpha, np.float32(1e-30)), np.float32(np.inf))
+        return ViewImage(rgb=rgb, alpha=alpha, depth=depth.astype(np.float32))

@@ -259,7 +259,11 @@ class SimRig:
         lenslet's aperture."""
         array = self._truth.array
         centres = array.centres[self._pix_lenslet]                 # (P, 2)
-        offsets = aperture_offsets(array, len(self._pix), self.capture_spp, seed=self._seed + 101)  # (P, S, 2)
+        key = (len(self._pix), self.capture_spp)
+        if getattr(self, "_offsets_key", None) != key:          # the same points for every capture: drawn once
+            self._offsets = aperture_offsets(array, len(self._pix), self.capture_spp, seed=self._seed + 101)
+            self._offsets_key = key
+        offsets = self._offsets                                      # (P, S, 2)
         acc = np.zeros((len(self._pix), 3), np.float64)
         origins = np.zeros((len(self._pix), 3), np.float32)
         for s in range(self.capture_spp):
