@@ -22,6 +22,7 @@ from pathlib import Path
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse
+from fastapi.websockets import WebSocketState
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 
 from lftransfer.app.viewer.session import EditError, LiveSession, ViewerBounces, ViewerFrame
@@ -120,6 +121,12 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
                     await clients.send(ws, {"type": "error", "message": str(exc)})
         except WebSocketDisconnect:
             pass
+        except RuntimeError:
+            # a page that went away while a frame was being sent to it: the failed send closed the socket, and
+            # the next receive raises (starlette's WebSocketDisconnected, a RuntimeError) instead of
+            # WebSocketDisconnect. Anything else is a real fault.
+            if ws.application_state != WebSocketState.DISCONNECTED:
+                raise
         finally:
             clients.layers.pop(ws, None)
 
