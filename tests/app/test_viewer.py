@@ -291,3 +291,41 @@ def test_06_bounce_layers_failure_is_shown(variant, tmp_path, monkeypatch):
         _wait(lambda: any(k == "bounces" and b.state == "done" for k, b in events), 60, "the bounce layers")
     finally:
         session.stop()
+
+
+class _LostPage:
+    """A page's websocket whose peer has gone: every send fails (and, as in starlette, marks the socket closed),
+    and the next receive raises the RuntimeError starlette raises on a closed socket."""
+
+    def __init__(self, closes: bool = True) -> None:
+        from fastapi.websockets import WebSocketState
+
+        self.application_state = WebSocketState.CONNECTED
+        self._closed, self._closes = WebSocketState.DISCONNECTED, closes
+
+    async def accept(self) -> None:
+        pass
+
+    async def send_text(self, text: str) -> None:
+        if self._closes:
+            self.application_state = self._closed
+        raise OSError("connection reset by peer")
+
+    async def receive_text(self) -> str:
+        raise RuntimeError('WebSocket is not connected. Need to call "accept" first.')
+
+
+def test_07_a_lost_page_ends_its_socket_quietly(session):
+    """A page that goes away while a frame is sent to it ends its own socket without an error (the loop and the
+    other pages go on); a RuntimeError on a socket that is still open is a real fault and is raised."""
+    import asyncio
+
+    from lftransfer.app.viewer.server import make_app
+
+    app = make_app(session)
+    handler = next(r.endpoint for r in app.routes if getattr(r, "path", None) == "/ws")
+    lost = _LostPage()
+    asyncio.run(handler(lost))
+    assert lost not in app.state.clients.layers
+    with pytest.raises(RuntimeError, match="not connected"):
+        asyncio.run(handler(_LostPage(closes=False)))
