@@ -443,10 +443,7 @@ class CachedRenderer(HalfSpaceRenderer):
                 any(a is not b for a, b in zip(self._lit_by, lights)):
             self.relight(lights, seed=seed)
         n = len(origins)
-        o = np.ascontiguousarray(origins, dtype=np.float32)
-        d = np.ascontiguousarray(directions, dtype=np.float32)
-        rays = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
-                        mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))))
+        rays = self.jit_rays(origins, directions)
         pi = self.scene.ray_intersect_preliminary(rays)
         dr.eval(pi)          # every field in one kernel (read apart, each would intersect again)
         t = np.array(pi.t, dtype=np.float32)

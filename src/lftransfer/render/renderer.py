@@ -108,13 +108,40 @@ class HalfSpaceRenderer:
         return True
 
     def _rays(self, key: tuple, make):
-        """Primary rays are the same from frame to frame: build them once per key (a small memo)."""
+        """Primary rays are the same from frame to frame: build them once per key (a small memo). The arrays are
+        made read-only, which lets a renderer keep their Dr.Jit copies too (:meth:`jit_rays`)."""
         memo = self.__dict__.setdefault("_ray_memo", {})
         if key not in memo:
             if len(memo) >= 8:
                 memo.pop(next(iter(memo)))
-            memo[key] = make()
+            arrays = make()
+            for a in arrays:
+                a.flags.writeable = False
+            memo[key] = arrays
         return memo[key]
+
+    def jit_rays(self, origins: np.ndarray, directions: np.ndarray):
+        """``mi.Ray3f`` of (N, 3) origins and directions. Read-only arrays (the memoised primary rays) are
+        converted once and kept (a few per renderer): converting 4 million rays column by column costs about
+        17 ms per frame at the paper's resolution."""
+        from lftransfer.render.lights import jit_array
+
+        mi = mitsuba()
+        kept = self.__dict__.setdefault("_jit_ray_memo", [])
+        constant = not origins.flags.writeable and not directions.flags.writeable
+        if constant:
+            for o, d, rays in kept:
+                if o is origins and d is directions:
+                    return rays
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        rays = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
+                        mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))))
+        if constant:
+            if len(kept) >= 4:
+                kept.pop(0)
+            kept.append((origins, directions, rays))
+        return rays
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
