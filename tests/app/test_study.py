@@ -103,3 +103,23 @@ def test_03_study_on_a_cluster_equals_one_process(variant, tmp_path):
     many = run_study(study, tmp_path / "many", use_cache=False, cluster=ClusterSpec("local", workers=2))
     assert many.cluster["workers"] == 2
     assert [c.metrics for c in many.cells] == [c.metrics for c in one.cells]
+
+
+def test_04_the_command(variant, tmp_path):
+    """``lft study``: the table on the terminal and the files; a bad study file is one line naming the field."""
+    from typer.testing import CliRunner
+
+    from lftransfer.app.cli import app
+
+    runner = CliRunner()
+    path = _study(tmp_path)
+    path.write_text(STUDY.format(extra="").replace("truth_seeds = [1, 2]", "truth_seeds = [1]"), encoding="utf-8")
+    result = runner.invoke(app, ["study", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "| tiny.toml | box |" in result.output and (tmp_path / "out" / "study.html").is_file()
+    path.write_text(STUDY.format(extra="").replace("bounces = 1", "bounces = 99"), encoding="utf-8")
+    bad = runner.invoke(app, ["study", str(path), "--out", str(tmp_path / "bad")])
+    text = " ".join(bad.output.split())
+    assert bad.exit_code == 2 and "study.toml" in text and "bounces" in text, text
+    missing = runner.invoke(app, ["study", str(tmp_path / "none.toml")])
+    assert missing.exit_code == 2 and "no such file" in " ".join(missing.output.split())
