@@ -54,7 +54,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.render.integrator import Light
-from lftransfer.render.lights import jit_array, to_numpy
+from lftransfer.render.lights import jit_array, jit_rays, to_numpy
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import bsdf_dict, emitter_dict, object_keys, shape_dict
 
@@ -164,8 +164,7 @@ def texcoords(obj, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
     normals = np.asarray(normals, np.float64)
     o = inner + 1e-4 * normals
     d = -normals
-    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
-                                      mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3)))))
+    si = scene.ray_intersect(jit_rays(o, d))
     uv = np.array(si.uv, np.float64).T.reshape(-1, 3, 2)
     if obj.shape == "sphere":
         u = uv[..., 0]

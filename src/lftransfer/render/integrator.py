@@ -14,7 +14,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from lftransfer.backend import mitsuba
-from lftransfer.render.lights import jit_array, to_numpy
+from lftransfer.render.lights import jit_rays, to_numpy
 
 
 class Light(Protocol):
@@ -40,8 +40,6 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         radiance (N, 3) float32 W m^-2 sr^-1, hit (N,) bool (first ray hit a surface), distance (N,) float32
         (inf where missed).
     """
-    mi = mitsuba()
-
     n = len(origins)
     radiance = np.zeros((n, 3), np.float32)
     distance = np.full(n, np.inf, np.float32)
@@ -49,8 +47,7 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         return radiance, np.zeros(0, bool), distance
     o = np.ascontiguousarray(origins, dtype=np.float32)
     d = np.ascontiguousarray(directions, dtype=np.float32)
-    rays = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
-                    mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))))
+    rays = jit_rays(o, d)
     t = scene.ray_intersect_preliminary(rays).t
     t_np = np.array(t)
     hit = np.isfinite(t_np)
@@ -69,8 +66,7 @@ def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     import drjit as dr
 
     n = len(origins)
-    ray = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, origins[:, i]) for i in range(3))),
-                   mi.Vector3f(*(jit_array(mi.Float, directions[:, i]) for i in range(3))))
+    ray = jit_rays(origins, directions)
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(dr.opaque(mi.UInt32, seed), n)
     ctx = mi.BSDFContext()

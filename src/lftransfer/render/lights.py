@@ -71,6 +71,14 @@ def jit_array(kind, values: np.ndarray):
     return kind(aligned)
 
 
+def jit_rays(origins: np.ndarray, directions: np.ndarray):
+    """``mi.Ray3f`` of (N, 3) origins and directions (any float dtype, stored as float32 through
+    :func:`jit_array`)."""
+    mi = mitsuba()
+    return mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, origins[:, i]) for i in range(3))),
+                    mi.Vector3f(*(jit_array(mi.Float, directions[:, i]) for i in range(3))))
+
+
 class Incident(NamedTuple):
     """What :meth:`LightFieldLight.incident` finds along rays (all (N,) Dr.Jit arrays).
 
