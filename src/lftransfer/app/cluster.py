@@ -24,9 +24,9 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
-__all__ = ["ClusterError", "ClusterInfo", "ClusterSpec", "Worker", "WorkerPool", "connect"]
+__all__ = ["ClusterError", "ClusterInfo", "ClusterSpec", "LocalPool", "Worker", "WorkerPool", "connect"]
 
 # Environment variables the workers must see as the driver does (the LLVM library, the variant, the caches).
 _FORWARDED_ENV = ("DRJIT_LIBLLVM_PATH", "LFT_VARIANT", "LFT_CACHE_DIR", "DRJIT_CACHE_DIR")
@@ -184,7 +184,7 @@ class WorkerPool:
 
     def __init__(self, worker_class: type, args: Sequence[Any], info: ClusterInfo, workers: int | None = None) -> None:
         ray = _ray()
-        self._ray = ray
+        self._ray, self.info = ray, info
         n = workers or info.default_workers()
         per = {"num_cpus": info.cpus / n}
         if info.gpus >= 1:
@@ -199,8 +199,12 @@ class WorkerPool:
         # The first call on each worker waits for its set-up (variant, rig) and says which process it is.
         self.pids = ray.get([a.pid.remote() for a in self.actors])
 
-    def map(self, method: str, items: Iterable[tuple], *, on_submit: Callable[[tuple], None] | None = None
-            ) -> Iterator[tuple[tuple, Any]]:
+    def describe(self) -> dict:
+        """Where the work ran, for reports: the cluster's address, the workers, the cluster's CPUs and GPUs."""
+        return {"address": self.info.address, "workers": len(self.actors), "cpus": self.info.cpus,
+                "gpus": self.info.gpus}
+
+    def map(self, method: str, items: Iterable[tuple]) -> Iterator[tuple[tuple, Any]]:
         """Run ``worker.method(*item)`` for every item, each on the next free worker.
 
         Yields:
@@ -220,8 +224,6 @@ class WorkerPool:
             while queue and free:
                 actor, item = free.pop(), queue.pop()
                 running[getattr(actor, method).remote(*item)] = (actor, item)
-                if on_submit is not None:
-                    on_submit(item)
             done, _ = ray.wait(list(running), num_returns=1)
             actor, item = running.pop(done[0])
             try:
@@ -232,3 +234,20 @@ class WorkerPool:
                 raise ClusterError(f"a worker died {MAX_RETRIES + 1} times running {method}{item}: {exc}") from None
             free.append(actor)
             yield item, result
+
+
+class LocalPool:
+    """A :class:`WorkerPool`'s ``map`` in this process: one worker (a :class:`Worker` made here), the items one
+    after the other, in their order. The same code then drives work in one process and on a cluster.
+
+    Args:
+        worker: the worker.
+    """
+
+    def __init__(self, worker) -> None:
+        self.worker = worker
+
+    def map(self, method: str, items: Iterable[tuple]) -> Iterator[tuple[tuple, Any]]:
+        """(item, ``worker.method(*item)``) for every item, in order."""
+        for item in items:
+            yield item, getattr(self.worker, method)(*item)

@@ -24,7 +24,7 @@ from typing import Callable, Iterable, Literal
 
 import numpy as np
 
-from lftransfer.app.cluster import ClusterSpec, Worker
+from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
 from lftransfer.app.pipeline import NOMINAL, OpenedRig, RunOptions, calibrate, open_rig, write_calibration
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import tracked_run, write_status
@@ -330,9 +330,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                 todo = [(i, float(times[i]), gt_spp if verify and i % seq.verify_every == 0 else None,
                          options.use_cache) for i in range(n) if i not in finished]
                 if seq.cluster is None:
-                    worker = _InProcess(opened, model, ps, settings)
-                    frames = (worker.transfer(*item) for item in todo)
-                    writer.converged(frames)
+                    pool = LocalPool(_InProcess(opened, model, ps, settings))
+                    writer.converged(frame for _, frame in pool.map("transfer", todo))
                 else:
                     report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, settings,
                                                               todo, step)
@@ -365,7 +364,7 @@ def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, opti
         pool = WorkerPool(FrameWorker, (scene, options, model, settings), info, spec.workers)
         step(f"frames on {len(pool.actors)} workers")
         writer.converged(frame for _, frame in pool.map("transfer", todo))
-        return {"address": info.address, "workers": len(pool.actors), "cpus": info.cpus, "gpus": info.gpus}
+        return pool.describe()
 
 
 class _FrameWriter:

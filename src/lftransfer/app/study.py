@@ -33,14 +33,14 @@ from __future__ import annotations
 import hashlib
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal, Optional
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from lftransfer.app.cluster import ClusterSpec, Worker
+from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.imageio_utils import write_json, write_text
 from lftransfer.scenes import SceneError, builtin_scene, builtin_scenes, load_scene, with_overrides
@@ -122,6 +122,10 @@ class Study:
         """The scene ``label``, with ``setting``'s changes to its ``[render]`` table."""
         scene = self.scenes[label]
         return scene if setting is None or not setting.render else with_overrides(scene, render=setting.render)
+
+    def gt_spp(self, label: str) -> int:
+        """Samples per pixel of the ground truth of scene ``label``: the study's ``gt_spp``, else the scene's."""
+        return self.config.gt_spp or self.scenes[label].render.gt_spp
 
 
 def load_study(path: str | Path) -> Study:
@@ -304,29 +308,24 @@ class StudyWorker(Worker):
         opened = self._opened(label, seed)
         scene = self.study.scene(label)
         known = knowledge(opened, scene, self.study.config.rig_model)
-        render_ground_truth(opened.world, spp=self.study.config.gt_spp or scene.render.gt_spp, use_cache=use_cache)
+        render_ground_truth(opened.world, spp=self.study.gt_spp(label), use_cache=use_cache)
         return known.model, known.scene
 
     def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
         """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared)."""
+        from lftransfer.app.bench.step import transfer_settings
         from lftransfer.sim.verify import evaluate, render_ground_truth
-        from lftransfer.transfer.bounce import TransferSettings, run_transfer
+        from lftransfer.transfer.bounce import run_transfer
 
         setting = next(s for s in self.study.config.setting if s.name == setting_name)
-        scene = self.study.scene(label, setting)
         ps = with_overrides(ps, render=setting.render) if setting.render else ps
         opened = self._opened(label, seed)
-        r = scene.render
-        settings = TransferSettings(bounces=self.study.config.bounces, angular_samples=scene.rig.angular_samples,
-                                    lighting_model=r.lighting_model, aperture_samples=r.aperture_samples,
-                                    reconstruction=r.reconstruction if r.lighting_model == "area" else "box",
-                                    lf_spp=r.spp, view_spp=r.spp)
+        settings = replace(transfer_settings(self.study.scene(label, setting)), bounces=self.study.config.bounces)
         t0 = time.perf_counter()
         opened.start_frame(0)
         result = run_transfer(opened.rig, model, ps, settings)
         seconds = time.perf_counter() - t0
-        base = self.study.scene(label).render.gt_spp
-        gt = render_ground_truth(opened.world, spp=self.study.config.gt_spp or base, use_cache=use_cache)
+        gt = render_ground_truth(opened.world, spp=self.study.gt_spp(label), use_cache=use_cache)
         metrics = evaluate(result, gt)
         return StudyCell(scene=label, seed=int(seed), setting=setting_name,
                          metrics={m: getattr(metrics, m) for m in METRICS}, seconds=seconds)
@@ -395,28 +394,25 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
             result.cells.append(cell)
             say(f"{cell.scene}, seed {cell.seed}, {cell.setting}", len(result.cells), total)
 
-        if cluster is None:
-            worker = _LocalStudyWorker(study)
+        def rounds(pool) -> None:
+            """Round 1 (each scene and seed's rig model and ground truth), then every cell, on ``pool``."""
             prepared = {}
-            for label, seed in need:
+            for (label, seed, _), prep in pool.map("prepare", [(label, seed, use_cache) for label, seed in need]):
+                prepared[(label, seed)] = prep
                 say(f"{label}, seed {seed}: rig model and ground truth", len(result.cells), total)
-                prepared[(label, seed)] = worker.prepare(label, seed, use_cache)
-            for label, seed, name in todo:
-                keep(worker.cell(label, seed, name, *prepared[(label, seed)], use_cache))
+            items = [(label, seed, name, *prepared[(label, seed)], use_cache) for label, seed, name in todo]
+            for _, cell in pool.map("cell", items):
+                keep(cell)
+
+        if cluster is None:
+            rounds(LocalPool(_LocalStudyWorker(study)))
         else:
             from lftransfer.app.cluster import WorkerPool, connect
 
             with connect(cluster) as info:
                 pool = WorkerPool(StudyWorker, (study,), info, cluster.workers)
-                prepared = {}
-                for (label, seed, _), prep in pool.map("prepare", [(label, seed, use_cache) for label, seed in need]):
-                    prepared[(label, seed)] = prep
-                    say(f"{label}, seed {seed}: rig model and ground truth ready", len(result.cells), total)
-                items = [(label, seed, name, *prepared[(label, seed)], use_cache) for label, seed, name in todo]
-                for _, cell in pool.map("cell", items):
-                    keep(cell)
-                result.cluster = {"address": info.address, "workers": len(pool.actors), "cpus": info.cpus,
-                                  "gpus": info.gpus}
+                rounds(pool)
+                result.cluster = pool.describe()
         order = {(label, seed, s): i for i, (label, seed, s) in
                  enumerate((label, seed, s.name) for label, seed in pairs for s in c.setting)}
         result.cells.sort(key=lambda x: order[(x.scene, x.seed, x.setting)])

@@ -42,12 +42,8 @@ def study_figure(result):
     for ax, metric in zip(np.atleast_1d(axes), PANELS):
         rows = {(r["scene"], r["setting"]): r for r in result.summary(metric)}
         for j, setting in enumerate(result.settings):
-            mean = np.array([np.nan if rows[(s, setting)]["mean"] is None else rows[(s, setting)]["mean"]
-                             for s in result.scenes])
-            lo = np.array([np.nan if rows[(s, setting)]["min"] is None else rows[(s, setting)]["min"]
-                           for s in result.scenes])
-            hi = np.array([np.nan if rows[(s, setting)]["max"] is None else rows[(s, setting)]["max"]
-                           for s in result.scenes])
+            mean, lo, hi = (np.array([np.nan if rows[(s, setting)][k] is None else rows[(s, setting)][k]
+                                      for s in result.scenes]) for k in ("mean", "min", "max"))
             pos = x - 0.4 + width * (j + 0.5)
             ax.bar(pos, mean, width * 0.9, color=colours[j], label=setting,
                    yerr=np.nan_to_num(np.stack([mean - lo, hi - mean])), capsize=2, error_kw={"lw": 0.8})
