@@ -30,7 +30,7 @@ def setup(tmp_path_factory):
     d = tmp_path_factory.mktemp("calfile")
     scene = load_scene(write_tiny_scene(d / "tiny.toml"))
     cal = nominal_calibration(scene)
-    cal.light = LIGHT
+    cal.lights = [LIGHT]
     path = cal.write(d / "calibration.json")
     return scene, json.loads(path.read_text())
 
@@ -180,17 +180,43 @@ def test_08_the_light_section_is_optional(setup, tmp_path):
     """The measured point light reads back exactly (NaN measurements as null); a file without the section (written
     before the step existed, or for a scene without a light) loads, and the scene file's light then stands."""
     scene, data = setup
-    assert data["light"]["std_mm"][2] is None
+    assert data["light"]["std_mm"][2] is None and "lights" not in data
     cal = load_calibration(_write(tmp_path, data), scene)
-    np.testing.assert_array_equal(cal.light.position, LIGHT.position)
-    assert cal.light.boards == 4 and cal.light.pixels == 13000 and math.isnan(cal.light.std_mm[2])
-    assert cal.light.residual_rms == LIGHT.residual_rms and cal.light.shift_mm == pytest.approx(LIGHT.shift_mm)
-    assert cal.light_position(scene) == tuple(LIGHT.position.tolist())
+    (light,) = cal.lights
+    np.testing.assert_array_equal(light.position, LIGHT.position)
+    assert light.boards == 4 and light.pixels == 13000 and math.isnan(light.std_mm[2])
+    assert light.residual_rms == LIGHT.residual_rms and light.shift_mm == pytest.approx(LIGHT.shift_mm)
+    assert cal.light_positions(scene) == [tuple(LIGHT.position.tolist())]
     again = json.loads(cal.write(tmp_path / "again.json").read_text())
     assert again["light"] == data["light"]
     old = {k: v for k, v in data.items() if k != "light"}
     cal = load_calibration(_write(tmp_path, old, "old.json"), scene)
-    assert cal.light is None and "light" not in cal.to_json()
-    assert cal.light_position(scene) == tuple(scene.light.position)
+    assert cal.lights == [] and "light" not in cal.to_json()
+    assert cal.light_positions(scene) == [tuple(scene.lights[0].position)]
     minimal = {**old, "light": {"position_m": [0.31, 0.12, 0.0]}}
-    assert load_calibration(_write(tmp_path, minimal, "minimal.json"), scene).light_position(scene) == (0.31, 0.12, 0.0)
+    assert load_calibration(_write(tmp_path, minimal, "minimal.json"), scene).light_positions(scene) == \
+        [(0.31, 0.12, 0.0)]
+
+
+def test_09_several_lights(setup, tmp_path):
+    """A scene with two point lights: its file holds ``lights`` (one entry per light, in the scene's order) and
+    reads back; a count that does not fit the scene, or both sections, is an error naming the field."""
+    from lftransfer.scenes import with_overrides
+
+    scene, data = setup
+    two = with_overrides(scene, lights=[*scene.lights, {"position": [-0.1, 0.1, 0.0], "intensity": [1, 1, 1]}])
+    cal = load_calibration(_write(tmp_path, data), scene)
+    second = LightFit(position=(-0.1013, 0.1, 0.001), start=(-0.1, 0.1, 0.0), intensity_albedo=(0.8, 0.8, 0.8),
+                      dark_ratio=0.25, residual_rms=0.001, std_mm=(0.01, 0.01, 0.02), pixels=9000, boards=4)
+    cal.lights = [LIGHT, second]
+    written = json.loads(cal.write(tmp_path / "two.json").read_text())
+    assert "light" not in written and len(written["lights"]) == 2
+    back = load_calibration(tmp_path / "two.json", two)
+    assert back.light_positions(two) == [tuple(LIGHT.position.tolist()), tuple(second.position.tolist())]
+    assert "lights: 2 point light(s) measured, but the scene has 1" in _error(tmp_path, scene, written)
+    assert "light: 1 point light(s) measured, but the scene has 2" in _error(tmp_path, two, data)
+    both = {**written, "light": data["light"]}
+    assert "give light (one point light) or lights (several), not both" in _error(tmp_path, two, both)
+    bad = copy.deepcopy(written)
+    bad["lights"][1]["position_m"] = [0.1, 0.2]
+    assert "lights[1].position_m" in _error(tmp_path, two, bad)

@@ -40,7 +40,7 @@ def test_01_recovers_the_hidden_rig(calibrated):
     cameras, is 0.05 % off (bound 0.5 %). The point light, 3.1 mm from the scene file's position, is measured to
     0.67 mm (bound 1 mm; the chessboards' pose error at 256 x 192 view pixels, docs/calibration.md)."""
     scene, rig, cal, messages = calibrated
-    e = calibration_errors(cal, rig.truth, true_light=true_light_scene(scene, 3).light.position).to_json()
+    e = calibration_errors(cal, rig.truth, true_lights=[lt.position for lt in true_light_scene(scene, 3).lights]).to_json()
     assert e["lenslets_found"] == 120
     for key in ("lenslet_centre_rms_px", "projector_mapping_rms_px", "camera_response_error",
                 "projector_response_error", "light_position_error_mm"):     # met at this resolution too
@@ -50,7 +50,7 @@ def test_01_recovers_the_hidden_rig(calibrated):
     assert isinstance(rig._setup, RealScene)             # calibration leaves the rig in the real scene
     # brightness, exposure, pose and point light boards
     assert len(rig.boards_held) == 2 + POSE_ROUNDS * len(POSE_DEPTHS) + LIGHT_BOARDS
-    assert cal.light.residual_rms < 0.005
+    assert cal.lights[0].residual_rms < 0.005
     assert e["ray_direction_rms_deg"] < 0.5 and e["lenslet_assignment_agreement"] > 0.999
     assert abs(e["exposure_rel_error"]) < 0.005 and e["projector_mixing_rel_error"] < 0.01
     assert len(messages) == count_calibration_steps(scene)
@@ -76,8 +76,8 @@ def test_02_file_round_trip(calibrated, tmp_path):
     assert back.camera.exposure == pytest.approx(cal.model.camera.exposure)
     assert back.projector.max_radiance == pytest.approx(cal.model.projector.max_radiance)
     np.testing.assert_allclose(back.projector.cross_talk, cal.model.projector.cross_talk)
-    np.testing.assert_array_equal(loaded.light.position, cal.light.position)
-    assert loaded.light_position(scene) == tuple(cal.light.position) != tuple(scene.light.position)
+    np.testing.assert_array_equal(loaded.lights[0].position, cal.lights[0].position)
+    assert loaded.light_positions(scene) == [tuple(cal.lights[0].position)] != [tuple(scene.lights[0].position)]
 
 
 def test_03_bad_files_are_named(calibrated, tmp_path):

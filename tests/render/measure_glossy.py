@@ -104,7 +104,7 @@ def timing(material: dict, frames: int = 5, quick: bool = True) -> dict:
     U = scene.rig.angular_samples
     w, h = scene.view.resolution
     sensor = mi.load_dict(sensor_dict(scene.view.origin, scene.view.target, scene.view.up, scene.view.fov_deg, w, h))
-    point = PointLight(np.array(scene.light.position), np.array(scene.light.intensity))
+    point = PointLight(np.array(scene.lights[0].position), np.array(scene.lights[0].intensity))
     captured = HalfSpaceRenderer(scene.real, max_depth=1).render_lightfield(array, [point], U, U, side="real",
                                                                            model="area", spp=4)
     synthetic = with_overrides(scene, synthetic=[{**scene.synthetic[0].model_dump(mode="json"),

@@ -204,6 +204,9 @@ def test_with_overrides_revalidates():
     (LIGHT + "[view]\ntarget = [0.55, 0.22, 0.0]\n" + BOX, "view.target", "must differ from origin"),
     (LIGHT + BOX + "source = 'x'\n", "real[0].source", "unknown key"),
     (LIGHT + "[rig]\nrows = 10\n[[real]\nname = 'a'\n", "<toml>", "malformed TOML"),
+    ("[[light]]\nposition = [0.1, 0.2, 0.0]\n[[light]]\nposition = [0.1, 0.2]\n" + BOX, "light[1].position",
+     "at least 3"),
+    ("[[light]]\nposition = [0.1, 0.2, 0.0]\n" * 9 + BOX, "light", "at most 8"),
 ])
 def test_bad_input_names_file_and_field(tmp_path, text, path, what):
     message = _error(tmp_path, text)
@@ -222,6 +225,19 @@ def test_missing_file_and_unknown_builtin(tmp_path):
         load_scene(tmp_path / "nothing.toml")
     with pytest.raises(SceneError, match="available: .*fig4, fig5"):
         builtin_scene("fig99")
+
+
+def test_one_light_or_several(tmp_path):
+    """``[light]`` is one point light, ``[[light]]`` several, in the file's order; ``lights`` holds them either way
+    and survives :func:`with_overrides`."""
+    one = load_scene(_write(tmp_path, LIGHT + BOX))
+    assert [lt.position for lt in one.lights] == [[0.1, 0.2, 0.0]]
+    text = "[[light]]\nposition = [0.1, 0.2, 0.0]\n[[light]]\nposition = [-0.1, 0.2, 0.0]\nintensity = [2, 2, 2]\n"
+    two = load_scene(_write(tmp_path, text + BOX, "two.toml"))
+    assert [lt.position for lt in two.lights] == [[0.1, 0.2, 0.0], [-0.1, 0.2, 0.0]]
+    assert two.lights[1].intensity == [2.0, 2.0, 2.0] and two.synthetic_part().lights == two.lights
+    assert with_overrides(two, view={"fov_deg": 30.0}).lights == two.lights
+    assert with_overrides(two, lights=two.lights[:1]).lights == one.lights
 
 
 def test_model_validate_applies_the_same_rules():

@@ -70,7 +70,7 @@ def test_03_fig5_the_sun_lights_the_head_through_the_projector(variant):
     from the second on, the synthetic sun's light, sent by the projector, lights it; the sun is seen at its own
     radiance and the planet's side towards the sun is lit."""
     scene = quick_scene(load_scene(builtin_scene("fig5")))
-    assert scene.light is None and scene.moving
+    assert not scene.lights and scene.moving
     opened = open_rig(scene, RunOptions(truth_seed=None))
     settings = TransferSettings(angular_samples=scene.rig.angular_samples)
     live = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings)

@@ -159,7 +159,7 @@ def _summary(cal, errors: dict | None) -> dict:
                  ("projector mapping", "camera pixels used", str(pm["pixels"]), "")]
     else:
         rows.append(("projector mapping", "Gray-code fit", NOT_AVAILABLE, ""))
-    light = cal.light
+    lights = cal.lights
     lf, pj = data["lf_camera"], data["projector"]
     rows += [("global pose", "projected fringe points, reprojection RMS", _num(pose["rms_px"], ".3f"), "view px"),
              ("global pose", "printed chessboard (solvePnP), RMS", _num(pose["pnp_rms_px"], ".3f"), "view px"),
@@ -169,15 +169,21 @@ def _summary(cal, errors: dict | None) -> dict:
              ("radiometry", "camera exposure", _num(rad["camera_exposure"], ".5g"), "sr m^2 / W"),
              ("radiometry", "projector max_radiance", _num(rad["max_radiance"], ".5g"), "W / (m^2 sr)"),
              ("radiometry", "black level (R, G, B)", _vec(rad["black_level"], ".5f"), "of max_radiance"),
-             *([("point light", "position", "not measured: the scene file's position stands", "")] if light is None
-               else [("point light", "position (x, y, z)", _vec(light.position * 1e3, ".2f"), "mm"),
-                     ("point light", "moved from the scene file's position", _num(light.shift_mm, ".2f"), "mm"),
-                     ("point light", "fit residual, RMS (relative)", _num(100 * light.residual_rms, ".3f"), "%"),
-                     ("point light", "standard error from the residuals (x, y, z)", _vec(light.std_mm, ".3f"), "mm"),
-                     ("point light", "boards, view pixels", f"{light.boards}, {light.pixels}", "")]),
+             *([("point light", "position", "not measured: the scene file's position stands", "")] if not lights
+               else [row for i, light in enumerate(lights) for row in _light_rows(
+                   "point light" if len(lights) == 1 else f"point light {i + 1}", light)]),
              ("devices", "LF camera", f"{lf['width']} x {lf['height']}, {lf['bits']} bit", "px"),
              ("devices", "projector", f"{pj['width']} x {pj['height']}, {pj['bits']} bit", "px")]
     return {"rows": rows, "errors": _error_rows(errors) if errors else None}
+
+
+def _light_rows(name: str, light) -> list[tuple[str, str, str, str]]:
+    """The table's rows of one measured point light."""
+    return [(name, "position (x, y, z)", _vec(light.position * 1e3, ".2f"), "mm"),
+            (name, "moved from the scene file's position", _num(light.shift_mm, ".2f"), "mm"),
+            (name, "fit residual, RMS (relative)", _num(100 * light.residual_rms, ".3f"), "%"),
+            (name, "standard error from the residuals (x, y, z)", _vec(light.std_mm, ".3f"), "mm"),
+            (name, "boards, view pixels", f"{light.boards}, {light.pixels}", "")]
 
 
 def _error_rows(errors: dict) -> list[dict]:

@@ -300,7 +300,7 @@ def _other_reconstructions(scene, options: RunOptions) -> list[str]:
 
 
 def write_calibration(path: Path, calibration, truth=None, source: Path | None = None, *,
-                      true_light=None):
+                      true_lights=None):
     """Write a calibration file, its HTML report and (simulated rig only) its errors against the hidden truth.
 
     Args:
@@ -310,7 +310,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
         truth: the simulated rig's true ``RigModel``, or None (a physical rig or a recording: no errors).
         source: the file the calibration was read from, if any: it is not written over with the (shorter)
             calibration read from it.
-        true_light: (3,) where the simulated rig's point light really stands (world frame), or None.
+        true_lights: (3,) per point light, where the simulated rig's lights really stand (world frame), or None.
 
     Returns:
         The errors (:class:`lftransfer.sim.verify.CalibrationErrors`), or None without a truth.
@@ -324,7 +324,7 @@ def write_calibration(path: Path, calibration, truth=None, source: Path | None =
     errors = None
     errors_path = path.parent / "calibration_errors.json"
     if truth is not None:
-        errors = calibration_errors(calibration, truth, true_light=true_light)
+        errors = calibration_errors(calibration, truth, true_lights=true_lights)
         write_json(errors_path, errors.to_json())
     else:
         errors_path.unlink(missing_ok=True)            # an earlier calibration's, which this one does not match
@@ -420,8 +420,9 @@ class Knowledge:
     rig_model: str
 
 
-def _true_light(opened: OpenedRig):
-    return None if opened.world is None or opened.world.light is None else opened.world.light.position
+def _true_lights(opened: OpenedRig) -> list | None:
+    """Where the simulated rig's point lights really stand (world frame), or None where the rig hides no truth."""
+    return None if opened.world is None else [lt.position for lt in opened.world.lights]
 
 
 def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
@@ -452,12 +453,13 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
         model, label = opened.truth, "true (oracle)"
     else:
         model, label = nominal_rig(scene.rig), NOMINAL
-    light_at = calibration.light_position(ps) if calibration is not None else \
-        _true_light(opened) if rig_model == "oracle" else None
-    if light_at is not None:
+    lights_at = calibration.light_positions(ps) if calibration is not None else \
+        _true_lights(opened) if rig_model == "oracle" else None
+    if lights_at:
         from lftransfer.scenes import with_overrides
 
-        ps = with_overrides(ps, light={"position": [float(v) for v in light_at]})
+        ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
+                                        for lt, at in zip(ps.lights, lights_at)])
     return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label)
 
 
@@ -498,6 +500,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     return report
 
 
+SATURATION_WARNING = 0.01       # warn when more of the direct capture's LF camera codes than this are at full scale
 BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model and reconstruction
 
 
@@ -564,11 +567,11 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         if known.calibration is not None:
             timings["calibration"] = time.perf_counter() - t
     model, pipeline_scene, calibration = known.model, known.scene, known.calibration
-    true_light = _true_light(opened)
+    true_lights = _true_lights(opened)
     if calibration is not None:
         step("calibration report")
         calibration_errors_ = write_calibration(out / "calibration.json", calibration, opened.truth,
-                                                source=options.calibration, true_light=true_light)
+                                                source=options.calibration, true_lights=true_lights)
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
@@ -580,6 +583,10 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         timings[k] = timings.get(k, 0.0) + v
 
     verified = options.verify and opened.world is not None
+    if result.saturated_fraction > SATURATION_WARNING:
+        warning(f"{100 * result.saturated_fraction:.2g} % of the LF camera's codes are at full scale in the direct "
+                f"capture: the light clipped there does not reach the synthetic side (lower [rig] exposure, or the "
+                f"lights' intensity)")
     gt_spp = options.gt_spp if options.gt_spp is not None else render.gt_spp
     gt, metrics, gt_spp_needed = None, None, None
     by_model = {primary: {}}
@@ -646,6 +653,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
                      "projector_gain": b.projector_gain} for b in result.bounces],
         "projector_clipped_fraction": result.clipped_fraction,
+        "lf_camera_saturated_fraction": result.saturated_fraction,
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
         "resolution": {
             "lenslets": [scene.rig.rows, scene.rig.cols], "lattice": scene.rig.lattice,

@@ -180,7 +180,8 @@ class ProjectorMappingEntry(_Model):
 
 class LightEntry(_Model):
     """``light`` (optional; files from before the point light step lack it): the real point light as measured,
-    world frame (the scene file's), metres; the rest are the fit's measurements, for reports."""
+    world frame (the scene file's), metres; the rest are the fit's measurements, for reports. A scene with several
+    point lights has ``lights`` instead: one entry per light, in the scene file's order."""
 
     position_m: Vec3
     start_m: Optional[Vec3] = None
@@ -205,6 +206,17 @@ class CalibrationFile(_Model):
     distortion: Optional[DistortionEntry] = None
     projector_mapping: Optional[ProjectorMappingEntry] = None
     light: Optional[LightEntry] = None
+    lights: Optional[Annotated[list[LightEntry], Field(min_length=2)]] = None
+
+    @model_validator(mode="after")
+    def _one_light_section(self):
+        if self.light is not None and self.lights is not None:
+            raise ValueError("give light (one point light) or lights (several), not both")
+        return self
+
+    def light_entries(self) -> list[LightEntry]:
+        """The measured point lights, in the scene file's order (none: a file from before the step)."""
+        return [self.light] if self.light is not None else list(self.lights or [])
 
 
 def parse_calibration_file(data: object, name: str) -> CalibrationFile:

@@ -379,8 +379,9 @@ def _predicted_cov(terms: list) -> np.ndarray:
     return total[:3, :3]
 
 
-def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, chart=LIGHT_CHART) -> list[Board]:
-    """Where to ask for the boards that measure the point light (module docstring, step 1).
+def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, chart=LIGHT_CHART, *,
+                      light: int = 0) -> list[Board]:
+    """Where to ask for the boards that measure one point light (module docstring, step 1).
 
     Candidates: centres on a grid in front of the array (:data:`GRID_XY` per axis over :data:`GRID_SPAN` of its
     half extent, at :data:`GRID_DEPTHS_M`), normals turned from the direction to the scene file's light by
@@ -391,22 +392,27 @@ def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, c
     each the one that most lowers the predicted error of the light's position (:func:`_predicted_cov`'s trace).
 
     Args:
-        scene: the synthetic part of the scene (its light, view camera and rig file).
+        scene: the synthetic part of the scene (its lights, view camera and rig file).
         count: boards to ask for (>= 2).
         size: (width, height) of the board, metres.
         chart: its printed chessboard.
+        light: which of the scene's point lights (0-based).
 
     Returns:
-        ``count`` :class:`~lftransfer.rig.requests.Board` requests with ``point_light=True``.
+        ``count`` :class:`~lftransfer.rig.requests.Board` requests with ``point_light=True`` (and, in a scene with
+        several lights, ``light`` naming the one to switch on alone).
 
     Raises:
-        LightError: the scene has no point light, or fewer than ``count`` poses are seen well and lit.
+        LightError: the scene has no such point light, or fewer than ``count`` poses are seen well and lit.
     """
-    if scene.light is None:
-        raise LightError("point light: the scene has no [light] to measure")
+    if not 0 <= light < len(scene.lights):
+        raise LightError(f"point light: the scene has {len(scene.lights)} point light(s) ([light]); "
+                         f"there is no light {light} (0-based) to measure")
     if count < 2:
         raise ValueError(f"count: the light needs at least 2 boards, got {count}")
-    light = np.asarray(scene.light.position, np.float64)
+    index = light
+    name = _light_name(scene, index)
+    light = np.asarray(scene.lights[index].position, np.float64)
     view = scene.view
     eye = np.asarray(view.origin, np.float64)
     w_img, h_img = view.resolution
@@ -443,8 +449,8 @@ def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, c
                             continue
                         candidates.append((c, n))
     if len(candidates) < count:
-        raise LightError(f"point light: only {len(candidates)} board poses in front of the array face the light at "
-                         f"{tuple(np.round(light, 3))} m and the view camera and are seen well by it; {count} are "
+        raise LightError(f"{name}: only {len(candidates)} board poses in front of the array face the light at "
+                         f"{tuple(round(float(v), 3) for v in light)} m and the view camera and are seen well by it; {count} are "
                          "needed (move the light or the view camera)")
     terms = [_design_terms(c, n, size, chart, light, view) for c, n in candidates]
     chosen: list[int] = []
@@ -460,15 +466,21 @@ def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, c
             if score < best_score:
                 best, best_score = i, score
         if best is None:
-            raise LightError("point light: no set of board poses fixes the light's position")
+            raise LightError(f"{name}: no set of board poses fixes the light's position")
         chosen.append(best)
     return [Board(centre=tuple(candidates[i][0].tolist()), normal=tuple(candidates[i][1].tolist()), size=tuple(size),
-                  albedo=LIGHT_BOARD_ALBEDO, chart=tuple(chart), point_light=True) for i in chosen]
+                  albedo=LIGHT_BOARD_ALBEDO, chart=tuple(chart), point_light=True,
+                  light=None if len(scene.lights) == 1 else index) for i in chosen]
+
+
+def _light_name(scene, light: int) -> str:
+    """How messages name a light: "point light", or "point light 2" (1-based) in a scene with several."""
+    return "point light" if len(scene.lights) == 1 else f"point light {light + 1}"
 
 
 def count_light_messages(scene, boards: int = LIGHT_BOARDS) -> int:
-    """Progress messages of :func:`calibrate_light` (0 for a scene without a point light)."""
-    return 0 if scene.light is None else boards + _MESSAGES_AFTER_BOARDS
+    """Progress messages of :func:`calibrate_light` over every point light of the scene (0 without one)."""
+    return len(scene.lights) * (boards + _MESSAGES_AFTER_BOARDS)
 
 
 # ---- the step -----------------------------------------------------------------------------------------------------
@@ -484,9 +496,12 @@ def black_share(projector) -> np.ndarray:
     return b / projector.cross_talk_matrix.sum(axis=1)
 
 
-def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: int = LIGHT_SPP,
+def calibrate_light(rig: Rig, model, scene, *, light: int = 0, boards: int = LIGHT_BOARDS, spp: int = LIGHT_SPP,
                     progress: Progress | None = None) -> tuple[LightFit, dict]:
-    """Measure the point light's position through the rig (module docstring).
+    """Measure one point light's position through the rig (module docstring).
+
+    In a scene with several point lights each is measured on its own: the boards are asked for with that light
+    alone switched on (:class:`~lftransfer.rig.requests.Board` ``light``).
 
     Each board is photographed twice without moving it: lit by the point light with the projector black (the
     measurement), then with the projector full white too. The projector's black level (light at code 0, up to
@@ -498,7 +513,8 @@ def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: 
         rig: the rig; it is asked for ``boards`` :class:`~lftransfer.rig.requests.Board` set-ups with the point
             light on, and two view captures of each (projector black, then white).
         model: the calibrated ``RigModel`` (its projector's black level and cross-talk; nothing else is used).
-        scene: the synthetic part of the scene (the scene file's light, the view camera, the rig file).
+        scene: the synthetic part of the scene (the scene file's lights, the view camera, the rig file).
+        light: which of the scene's point lights (0-based).
         boards: poses photographed (>= 2).
         spp: view camera quality of the photographs.
         progress: called with a message per board and one for the fit.
@@ -512,16 +528,18 @@ def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: 
             (:data:`MAX_SHIFT_M`) from the scene file's position.
     """
     say = progress or (lambda msg: None)
-    poses = light_board_poses(scene, boards)
-    start = np.asarray(scene.light.position, np.float64)
+    poses = light_board_poses(scene, boards, light=light)
+    name = _light_name(scene, light)
+    start = np.asarray(scene.lights[light].position, np.float64)
+    intensity = tuple(scene.lights[light].intensity)
     eye = np.asarray(scene.view.origin, np.float64)
     share = black_share(model.projector).astype(np.float32)
     black = rig.info.black()
     white = np.full_like(black, 2 ** rig.info.projector_bits - 1)
     samples, per_board = [], []
     for i, asked in enumerate(poses, 1):
-        where = f"point light: board {i} of {len(poses)} at ({', '.join(f'{100 * v:+.0f}' for v in asked.centre)}) cm"
-        say(f"{where}, lit by the point light (projector black, then white)")
+        where = f"{name}: board {i} of {len(poses)} at ({', '.join(f'{100 * v:+.0f}' for v in asked.centre)}) cm"
+        say(f"{where}, lit by the {name} (projector black, then white)")
         rig.setup(asked)
         rig.project(black)
         lit = rig.capture_view(ViewCapture(quality=spp)).radiance
@@ -541,24 +559,23 @@ def calibrate_light(rig: Rig, model, scene, *, boards: int = LIGHT_BOARDS, spp: 
                              f"(at least {MIN_PIXELS} needed); is the point light on and the board in view?")
         # as bright as the scene file's light would make it (its intensity, the board's albedo), within a factor
         g, _, _ = _log_model(start, s.points, s.normal)
-        expected = np.exp(g)[:, None] * np.asarray(scene.light.intensity) * LIGHT_BOARD_ALBEDO / np.pi \
+        expected = np.exp(g)[:, None] * np.asarray(intensity) * LIGHT_BOARD_ALBEDO / np.pi \
             * np.where(s.dark, DARK_RATIO, 1.0)[:, None]
         brightness = float(np.median(s.radiance.sum(1) / np.maximum(expected.sum(1), 1e-30)))
         if not MIN_BRIGHTNESS <= brightness <= 1 / MIN_BRIGHTNESS:
             raise LightError(f"{where}: the board is {brightness:.3g} times as bright as the scene file's light "
-                             f"(intensity {tuple(scene.light.intensity)} W/sr) would make it; is the point light on, "
-                             "and the only light?")
+                             f"(intensity {intensity} W/sr) would make it; is the {name} on, and the only light?")
         samples.append(s)
         per_board.append({"asked_centre_m": list(asked.centre), "asked_normal": list(asked.normal),
                           "centre_m": m[:3, 3].tolist(), "normal": m[:3, 2].tolist(), "chart_rms_px": chart_rms,
                           "black_level_share": float(np.mean((flood - lit) * share) / max(float(np.mean(lit)), 1e-30))})
-    say("point light: fit of its position to the boards' shading")
+    say(f"{name}: fit of its position to the boards' shading")
     fit = fit_light(samples, start)
     for entry, fitted in zip(per_board, fit.per_board):
         entry.update(fitted)
     fit.per_board = per_board
     if fit.shift_mm > 1000 * MAX_SHIFT_M:
-        raise LightError(f"point light: the fit puts it {fit.shift_mm:.0f} mm from the scene file's position "
-                         f"{tuple(np.round(start, 3))} m (at most {1000 * MAX_SHIFT_M:.0f} mm expected; residual "
+        raise LightError(f"{name}: the fit puts it {fit.shift_mm:.0f} mm from the scene file's position "
+                         f"{tuple(round(float(v), 3) for v in start)} m (at most {1000 * MAX_SHIFT_M:.0f} mm expected; residual "
                          f"{100 * fit.residual_rms:.1f} %); is it where the scene file says, and the only light on?")
     return fit, {"boards": per_board}

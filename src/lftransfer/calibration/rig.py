@@ -9,8 +9,9 @@
 4. radiometry: responses, vignetting, cross-talk, black level, brightness and exposure (:mod:`.radiometric`);
 5. global pose: projected fringes on boards the view camera sees (:mod:`.pose`), which carry the
    model frame into the world (array rotation, offset, pitch and tilt);
-6. point light (scenes with a ``[light]``): boards lit by the real point light alone, photographed by the view
-   camera, give its position (:mod:`.light`), where the synthetic side's virtual twin of it is put.
+6. point lights (scenes with a ``[light]``): boards lit by one real point light alone, photographed by the view
+   camera, give its position (:mod:`.light`), where the synthetic side's virtual twin of it is put; a scene with
+   several lights measures each in turn.
 
 The result is a :class:`Calibration`, whose :attr:`Calibration.model` is the rig model the pipeline uses, and
 which is written as JSON in OpenCV's conventions (camera matrices, distortion ``k1 k2 p1 p2 k3``).
@@ -60,8 +61,8 @@ class Calibration:
         projector_fit: LF camera -> projector pixel homography.
         radiometry: responses, vignetting, cross-talk, black level, brightness, exposure.
         pose: the model frame's pose in the world.
-        light: the real point light as measured (world frame), or None (a scene without one, or a calibration
-            file from before the step existed): the scene file's position then stands.
+        lights: the real point lights as measured (world frame), in the scene file's order; empty for a scene
+            without one, or a calibration file from before the step existed: the scene file's positions then stand.
         diagnostics: images and measurements for the report (not saved).
     """
 
@@ -71,16 +72,15 @@ class Calibration:
     projector_fit: ProjectorCameraFit | None
     radiometry: Radiometry
     pose: ArrayPose
-    light: LightFit | None = None
+    lights: list[LightFit] = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
 
-    def light_position(self, scene) -> tuple[float, float, float] | None:
-        """Where the synthetic side's point light goes (world frame, metres): the measured position, else the
-        scene file's; None for a scene without a point light."""
-        if scene.light is None:
-            return None
-        where = self.light.position if self.light is not None else scene.light.position
-        return tuple(float(v) for v in where)
+    def light_positions(self, scene) -> list[tuple[float, float, float]]:
+        """Where the synthetic side's point lights go (world frame, metres), one per light of the scene: the
+        measured positions, else (a file from before the step) the scene file's."""
+        measured = [fit.position for fit in self.lights] if len(self.lights) == len(scene.lights) else \
+            [lt.position for lt in scene.lights]
+        return [tuple(float(v) for v in where) for where in measured]
 
     def to_json(self) -> dict:
         """The calibration as plain JSON data (OpenCV conventions for the per-lenslet cameras)."""
@@ -107,8 +107,10 @@ class Calibration:
         if self.projector_fit is not None:
             data["projector_mapping"] = {"camera_to_projector": self.projector_fit.homography.tolist(),
                                          "rms_px": self.projector_fit.rms_px, "pixels": self.projector_fit.pixels}
-        if self.light is not None:
-            data["light"] = self.light.to_json()
+        if len(self.lights) == 1:
+            data["light"] = self.lights[0].to_json()          # one light: the section files have had since the step
+        elif self.lights:
+            data["lights"] = [fit.to_json() for fit in self.lights]
         return data
 
     def write(self, path) -> Path:
@@ -192,14 +194,14 @@ def load_calibration(path, scene) -> Calibration:
         pose = ArrayPose.from_json({k: float("nan") if v is None else v for k, v in entry.pose.model_dump().items()})
     except (KeyError, TypeError, ValueError) as exc:
         raise bad("pose", exc) from None
-    light = None
-    if entry.light is not None:
+    lights = []
+    for i, light in enumerate(entry.light_entries()):
         try:
-            light = LightFit.from_json(entry.light.model_dump())
+            lights.append(LightFit.from_json(light.model_dump()))
         except (KeyError, TypeError, ValueError) as exc:
-            raise bad("light", exc) from None
+            raise bad("light" if entry.light is not None else f"lights[{i}]", exc) from None
     return Calibration(model=model, lattice=None, distortion=None, projector_fit=None, radiometry=radiometry,
-                       pose=pose, light=light)
+                       pose=pose, lights=lights)
 
 
 def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
@@ -221,6 +223,11 @@ def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
         if len(dev.lenslets) != a.K:
             raise CalibrationFileError(f"{path}: {name}.lenslets: {len(dev.lenslets)} lenslet cameras, but the "
                                        f"array has {a.rows} x {a.cols} = {a.K} lenslets")
+    measured = entry.light_entries()
+    if measured and len(measured) != len(scene.lights):
+        field_name = "light" if entry.light is not None else "lights"
+        raise CalibrationFileError(f"{path}: {field_name}: {len(measured)} point light(s) measured, but the scene has "
+                                   f"{len(scene.lights)} ([light])")
     shape = entry.radiometry.vignetting.shape
     if tuple(shape) != (scene.rig.lf_camera[1], scene.rig.lf_camera[0]):
         raise CalibrationFileError(f"{path}: radiometry.vignetting.shape: {shape} ([height, width]), but the LF "
@@ -335,11 +342,11 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
         rig: any :class:`~lftransfer.rig.base.Rig`; the steps ask it for set-ups (collimator, focal-plane
             diffuser, boards), projections and captures, and leave it in the real scene with the projector black.
         scene: the synthetic part of the scene (``SceneConfig.synthetic_part()``): the rig file's nominal
-            values, the view camera and the point light as the scene file places it (the last step's start).
+            values, the view camera and the point lights as the scene file places them (the last step's start).
         progress: called with a message per capture or step.
 
     Returns:
-        Calibration (``light`` None for a scene without a point light).
+        Calibration (``lights`` empty for a scene without a point light).
     """
     say = progress or (lambda msg: None)
     check_rig_matches(rig, check_synthetic(scene))
@@ -394,11 +401,12 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
     diag["pose"] = pose_diag
     model = apply_pose(model, pose)
 
-    # 6. the point light (its black level's light taken out with the calibrated projector)
-    light = None
-    if scene.light is not None:
-        light, diag["light"] = calibrate_light(rig, model, scene, progress=say)
+    # 6. the point lights, one by one (their black level's light taken out with the calibrated projector)
+    lights = []
+    for i in range(len(scene.lights)):
+        fit, diag["light" if i == 0 else f"light_{i}"] = calibrate_light(rig, model, scene, light=i, progress=say)
+        lights.append(fit)
     rig.project(rig.info.black())
     rig.setup(RealScene())
     return Calibration(model=model, lattice=lattice, distortion=distortion, projector_fit=prj_fit,
-                       radiometry=radiometry, pose=pose, light=light, diagnostics=diag)
+                       radiometry=radiometry, pose=pose, lights=lights, diagnostics=diag)

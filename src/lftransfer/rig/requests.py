@@ -129,6 +129,8 @@ class Board:
         point_light: the real point light on (the board lit by it and by whatever the projector shows; the point
             light step of the calibration keeps the projector black); off by default. :func:`describe` leaves it
             out while it is off, so recordings made before it existed replay unchanged.
+        light: with ``point_light``, which of the scene's point lights is on (0-based, in the scene file's order;
+            the others off), or None: all of them. :func:`describe` leaves it out while it is None.
     """
 
     centre: tuple[float, float, float]
@@ -137,6 +139,7 @@ class Board:
     albedo: float = 0.8
     chart: tuple[int, int, float] | None = None
     point_light: bool = False
+    light: int | None = None
     kind: str = field(default="board", init=False)
 
     def __post_init__(self) -> None:
@@ -155,6 +158,13 @@ class Board:
         if not isinstance(self.point_light, (bool, np.bool_)):
             raise ValueError(f"Board.point_light must be True or False, got {self.point_light!r}")
         object.__setattr__(self, "point_light", bool(self.point_light))
+        if self.light is not None:
+            if isinstance(self.light, (bool, np.bool_)) or not isinstance(self.light, (int, np.integer)) \
+                    or self.light < 0:
+                raise ValueError(f"Board.light must be None or a light's index >= 0, got {self.light!r}")
+            if not self.point_light:
+                raise ValueError("Board.light names a point light to switch on, but point_light is False")
+            object.__setattr__(self, "light", int(self.light))
 
     def prompt(self) -> str:
         c = self.centre
@@ -164,7 +174,9 @@ class Board:
                  f"(x {100 * c[0]:+.0f} cm, y {100 * c[1]:+.0f} cm), facing ({self.normal[0]:+.2f}, "
                  f"{self.normal[1]:+.2f}, {self.normal[2]:+.2f})")
         if self.point_light:
-            return (f"{where}, towards the point light; take the real objects away and switch the point light ON "
+            which = "the point light ON" if self.light is None else \
+                f"point light {self.light + 1} (in the scene file's order) ON and every other one off"
+            return (f"{where}, towards the point light; take the real objects away and switch {which} "
                     "(the projector stays black; keep your hand and body out of the light's path).")
         return f"{where}, where the projected image looks sharp; take the real objects away, point light off."
 
@@ -310,6 +322,8 @@ def describe(request) -> dict:
     data = dataclasses.asdict(request)
     if isinstance(request, Board) and not request.point_light:
         del data["point_light"]           # as before the field existed: older recordings keep their keys
+    if isinstance(request, Board) and request.light is None:
+        del data["light"]
     if isinstance(request, LFCapture):
         data["kind"] = "lf_capture"
     elif isinstance(request, ViewCapture):

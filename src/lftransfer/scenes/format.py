@@ -1,7 +1,7 @@
 """The scene file format: pydantic models of a TOML scene and its loader.
 
-A scene file describes the light field interface hardware (``[rig]``), the view camera (``[view]``), the one
-point light (``[light]``), render settings (``[render]``) and the objects of the two half-spaces
+A scene file describes the light field interface hardware (``[rig]``), the view camera (``[view]``), the real
+point lights (``[light]``, or several ``[[light]]``), render settings (``[render]``) and the objects of the two half-spaces
 (``[[real]]`` at z > 0, known only to the simulated rig; ``[[synthetic]]`` at z < 0, rendered). Units are
 metres, degrees and linear RGB. ``docs/scene-format.md`` is the reference of every field.
 
@@ -22,6 +22,7 @@ from typing import Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import (
     AfterValidator,
+    AliasChoices,
     BaseModel,
     ConfigDict,
     Discriminator,
@@ -183,8 +184,11 @@ class ViewConfig(_Model):
         return up
 
 
+MAX_LIGHTS = 8      # real point lights a scene may have (each is measured by its own calibration step)
+
+
 class LightConfig(_Model):
-    """The point light. It is real (the simulated rig has it) and the renderer uses a virtual twin.
+    """A point light. It is real (the simulated rig has it) and the renderer uses a virtual twin of it.
 
     Attributes:
         position: metres.
@@ -702,8 +706,9 @@ class _SceneBase(_Model):
     Attributes:
         rig: light field interface hardware (nominal values; defaults: the paper's rig).
         view: the view camera.
-        light: the real point light (its position as measured by hand), or None: the scene is lit by its
-            emitting synthetic objects alone (through the projector on the real side).
+        lights: the real point lights (their positions as measured by hand): ``[light]`` (one) or
+            ``[[light]]`` (several) in the file; empty: the scene is lit by its emitting synthetic objects alone
+            (through the projector on the real side).
         render: render settings.
         animation: the time line of keyframed objects (``[animation]``), or None for a still scene.
         source: the TOML file it was loaded from, or None.
@@ -711,7 +716,8 @@ class _SceneBase(_Model):
 
     rig: RigConfig = Field(default_factory=RigConfig)
     view: ViewConfig = Field(default_factory=ViewConfig)
-    light: LightConfig | None = None
+    lights: list[LightConfig] = Field(default_factory=list, validation_alias=AliasChoices("light", "lights"),
+                                      max_length=MAX_LIGHTS)
     render: RenderConfig = Field(default_factory=RenderConfig)
     animation: AnimationConfig | None = None
     source: Path | None = None
@@ -739,9 +745,15 @@ class _SceneBase(_Model):
         """The synthetic objects that emit light."""
         return [o for o in self.synthetic if o.material.type == "emitter"]
 
+    @field_validator("lights", mode="before")
+    @classmethod
+    def _one_or_several(cls, value):
+        # ``[light]`` is one table, ``[[light]]`` a list of them; None (from older code) is no light
+        return [] if value is None else [value] if isinstance(value, (dict, LightConfig)) else value
+
     @model_validator(mode="after")
     def _something_lights_it(self):
-        if self.light is None and not self.emitters:
+        if not self.lights and not self.emitters:
             raise ValueError("nothing lights the scene: give a [light] table (the real point light) or a synthetic "
                              "object with material type = 'emitter'")
         return self
@@ -821,7 +833,7 @@ class SceneConfig(_SceneBase):
             raise ValueError(f"effect.by: expected the name of one [[synthetic]] object "
                              f"({', '.join(map(repr, synthetic))}), found {e.by!r}"
                              + (" (more than one object has it)" if e.by in synthetic else ""))
-        if e.kind == "shadow" and self.light is None and len(self.emitters) == 1 and self.emitters[0].name == e.by:
+        if e.kind == "shadow" and not self.lights and len(self.emitters) == 1 and self.emitters[0].name == e.by:
             raise ValueError(f"effect.by: {e.by!r} is the only light of the scene: it cannot shadow anything")
         return self
 

@@ -59,6 +59,6 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         scene,
         **objects,
         synthetic=[move(o) for o in scene.synthetic],
-        **({"light": {"position": point(scene.light.position)}} if scene.light is not None else {}),
+        lights=[lt.model_copy(update={"position": point(lt.position)}) for lt in scene.lights],
         view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},
     )

@@ -96,8 +96,8 @@ class SimRig:
         self._absorber = lens_array_absorber(array)
         self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
                                        max_depth=scene.render.max_depth)
-        self._point_light = None if scene.light is None else \
-            PointLight(np.asarray(scene.light.position, float), np.asarray(scene.light.intensity, float))
+        self._point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
+                              for lt in scene.lights]
         cam = self._truth.camera
         self._cam_shape = (cam.device.height, cam.device.width)
         px = np.stack(np.meshgrid(np.arange(cam.device.width), np.arange(cam.device.height)), -1).reshape(-1, 2)
@@ -136,6 +136,9 @@ class SimRig:
         """Arrange the simulated world: the real scene (its objects posed at the request's time), a collimator, a white diffuser, the focal-plane diffuser
         or a board held by the (simulated) operator, who misplaces it by a hidden error (lit by the point light too
         when the request says ``point_light``)."""
+        if isinstance(request, Board) and request.light is not None and request.light >= len(self._point_lights):
+            raise ValueError(f"Board.light: the scene has {len(self._point_lights)} point light(s); there is no "
+                             f"light {request.light} (0-based) to switch on")
         if isinstance(request, Board):
             self._world = self._board_renderer(request)
         elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
@@ -237,13 +240,17 @@ class SimRig:
         return [self._projector_light] if self._projector_light is not None else []
 
     def _lights(self):
-        return ([self._point_light] if self._point_light is not None else []) + self._projector_lights()
+        return [*self._point_lights, *self._projector_lights()]
 
     def _setup_lights(self) -> list:
-        """The lights of the current set-up: the point light (where it really stands) and the projector in the
-        real scene and on a board asked for with the point light on; the projector alone otherwise."""
-        lit = isinstance(self._setup, RealScene) or (isinstance(self._setup, Board) and self._setup.point_light)
-        return self._lights() if lit else self._projector_lights()
+        """The lights of the current set-up: the point lights (where they really stand) and the projector in the
+        real scene; on a board asked for with the point light on, the one it names (all where it names none)
+        and the projector; the projector alone otherwise."""
+        if isinstance(self._setup, Board) and self._setup.point_light:
+            i = self._setup.light
+            on = self._point_lights if i is None else self._point_lights[i:i + 1]
+            return [*on, *self._projector_lights()]
+        return self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
 
     def _expose_frames(self, radiance: np.ndarray, frames: int) -> np.ndarray:
         cam = self._truth.camera

@@ -144,10 +144,10 @@ def hidden_world(scene, seed: int | None):
 
 
 def true_light_scene(scene, seed: int, size: Perturbation = Perturbation()):
-    """The scene as it really is: the point light where it really stands, away from the file's position.
+    """The scene as it really is: every point light where it really stands, away from the file's position.
 
-    The scene file's position is a measurement by hand; the truth differs by up to ``size.light_error_m`` per
-    axis (drawn from ``seed``, independently of :func:`perturbed_rig`).
+    The scene file's positions are measurements by hand; the truth differs by up to ``size.light_error_m`` per
+    axis, drawn from ``seed`` for each light on its own (independently of :func:`perturbed_rig`).
 
     Returns:
         A new SceneConfig (for the simulated rig and the ground truth only); the scene itself when it has no
@@ -155,8 +155,11 @@ def true_light_scene(scene, seed: int, size: Perturbation = Perturbation()):
     """
     from lftransfer.scenes import with_overrides
 
-    if scene.light is None:
+    if not scene.lights:
         return scene
-    rng = np.random.default_rng([seed, 17])
-    error = rng.uniform(-size.light_error_m, size.light_error_m, 3)
-    return with_overrides(scene, light={"position": (np.asarray(scene.light.position) + error).tolist()})
+    moved = []
+    for i, light in enumerate(scene.lights):
+        rng = np.random.default_rng([seed, 17] if i == 0 else [seed, 17, i])
+        error = rng.uniform(-size.light_error_m, size.light_error_m, 3)
+        moved.append(light.model_copy(update={"position": (np.asarray(light.position) + error).tolist()}))
+    return with_overrides(scene, lights=moved)

@@ -71,10 +71,16 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
 
     payload = {
         "real": objects(scene.real), "synthetic": objects(scene.synthetic),
-        "light": scene.light.model_dump(mode="json") if scene.light is not None else None, "view": scene.view.model_dump(mode="json"),
+        # one light hashes as the single table it was before several were possible (cached entries stay valid)
+        "light": _lights_key(scene.lights), "view": scene.view.model_dump(mode="json"),
         "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _lights_key(lights) -> dict | list | None:
+    dumps = [lt.model_dump(mode="json") for lt in lights]
+    return None if not dumps else dumps[0] if len(dumps) == 1 else dumps
 
 
 STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real and synthetic alphas
@@ -109,9 +115,10 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
             warn(cached.message())
     mi = mitsuba()
     view = scene.view
-    light = {"point_light": {"type": "point", "position": list(map(float, scene.light.position)),
-                             "intensity": {"type": "rgb", "value": list(map(float, scene.light.intensity))}}} \
-        if scene.light is not None else {}
+    light = {("point_light" if i == 0 else f"point_light_{i}"):
+             {"type": "point", "position": list(map(float, lt.position)),
+              "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
+             for i, lt in enumerate(scene.lights)}
     extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
              "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
              **light}
@@ -494,7 +501,8 @@ class CalibrationErrors:
         lenslet_centre_rms_px, lenslet_centre_max_px, lenslets_found: lenslet centres, LF camera px (None: the
             calibration has no lattice fit, e.g. read from a file).
         camera_gain_rel_rms: exposure x vignetting per pixel, RMS relative (None without vignetting).
-        light_position_error_mm: the measured point light against the true one, mm (None: not measured).
+        light_position_error_mm: the measured point lights against the true ones, the worst light, mm (None: not
+            measured).
     """
 
     lenslet_assignment_agreement: float
@@ -521,19 +529,19 @@ class CalibrationErrors:
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
 
-def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int = 200_000) -> CalibrationErrors:
+def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int = 200_000) -> CalibrationErrors:
     """Errors of a calibration against the simulated rig's hidden truth (verification only).
 
     Args:
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
         truth: the true ``RigModel`` (``SimRig.truth``).
-        true_light: (3,) where the point light really stands, world frame, metres (the hidden world's
-            ``light.position``: :func:`lftransfer.sim.truth.true_light_scene`), or None.
+        true_lights: (3,) per point light, where it really stands, world frame, metres (the hidden world's
+            ``lights``: :func:`lftransfer.sim.truth.true_light_scene`), in the scene file's order, or None.
         max_pixels: camera pixels sampled for the ray and mapping errors.
 
     Returns:
-        :class:`CalibrationErrors`; ``light_position_error_mm`` where the calibration measured the light and
-        ``true_light`` is given.
+        :class:`CalibrationErrors`; ``light_position_error_mm`` (the worst light) where the calibration measured
+        the lights and ``true_lights`` are given.
     """
     from lftransfer.calibration.radiometric import response_error
 
@@ -595,7 +603,8 @@ def calibration_errors(calibration, truth, *, true_light=None, max_pixels: int =
         st = tcam.exposure * tcam.vignetting[ys, xs]
         sc = ccam.exposure * ccam.vignetting[ys, xs]
         out["camera_gain_rel_rms"] = float(np.sqrt(np.mean((sc / st - 1) ** 2)))
-    light = getattr(calibration, "light", None)
-    if light is not None and true_light is not None:
-        out["light_position_error_mm"] = float(1000 * np.linalg.norm(light.position - np.asarray(true_light, float)))
+    fits = getattr(calibration, "lights", [])
+    if fits and true_lights is not None and len(true_lights) == len(fits):
+        out["light_position_error_mm"] = max(float(1000 * np.linalg.norm(fit.position - np.asarray(at, float)))
+                                             for fit, at in zip(fits, true_lights))
     return CalibrationErrors(**out)

@@ -109,6 +109,8 @@ class TransferResult:
         projected_lf: sum of Ls_0..Ls_{N-1} (:func:`final_projection`; all zero for N = 0).
         clipped_fraction: fraction of lit light field samples above the projector's range in the final frame.
         captured_raw: the LF camera image of the direct frame (device integers).
+        saturated_fraction: fraction of the direct frame's LF camera codes at full scale (light clipped there
+            is lost to the synthetic side).
         timings_s: seconds per stage.
     """
 
@@ -120,6 +122,7 @@ class TransferResult:
     projected_lf: LightField
     clipped_fraction: float
     captured_raw: np.ndarray
+    saturated_fraction: float = 0.0
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
@@ -261,4 +264,6 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
     return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
-                          clipped_fraction=clipped, captured_raw=raw0, timings_s=timer.totals)
+                          clipped_fraction=clipped, captured_raw=raw0,
+                          saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
+                          timings_s=timer.totals)

@@ -98,8 +98,8 @@ class SyntheticSide:
     Attributes:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
         encoder: LightField -> projector image.
-        point_light: the virtual twin of the real point light (array frame), or None for a scene without one.
-        direct_lights: the synthetic scene's own light: the point light, and its emitting objects where it
+        point_lights: the virtual twins of the real point lights (array frame), one per light of the scene.
+        direct_lights: the synthetic scene's own light: the point lights, and its emitting objects where it
             has any (:class:`~lftransfer.render.lights.EmitterLight`).
     """
 
@@ -149,10 +149,9 @@ class SyntheticSide:
         self._set_lights(posed)
 
     def _set_lights(self, posed: SyntheticScene) -> None:
-        light = posed.light
-        self.point_light = None if light is None else \
-            PointLight(np.asarray(light.position, float), np.asarray(light.intensity, float))
-        self.direct_lights = ([self.point_light] if self.point_light is not None else []) \
+        self.point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
+                             for lt in posed.lights]
+        self.direct_lights = [*self.point_lights] \
             + ([EmitterLight(seed=self.settings.seed)] if posed.emitters else [])
 
     def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:

@@ -39,7 +39,7 @@ OTHERS = {
     "camera_gain_rel_rms": ("", "LF camera exposure x vignetting per pixel (relative RMS)"),
     "board_depth_mm": ("mm", "pose board: measured off the asked-for plane (operator's hand error)"),
     "board_tilt_deg": ("deg", "pose board: measured tilt from the asked-for plane"),
-    "light_residual_rms": ("relative", "point light: the fit's residual, RMS"),
+    "light_residual_rms": ("relative", "point lights: the fit's residual, RMS (the worst light)"),
 }
 
 
@@ -109,13 +109,12 @@ def calibrate_seed(scene, seed: int, *, progress: Callable[[str], None] | None =
     rig = SimRig(world, truth=truth, operator_seed=seed)
     t = time.perf_counter()
     cal = calibrate_rig(rig, scene.synthetic_part(), progress=lambda msg: say(f"seed {seed}: {msg}"))
-    errors = calibration_errors(cal, rig.truth,
-                                true_light=None if world.light is None else world.light.position).to_json()
+    errors = calibration_errors(cal, rig.truth, true_lights=[lt.position for lt in world.lights]).to_json()
     placement = cal.diagnostics["pose"]["board_placement"]
     errors["board_depth_mm"] = placement["depth_mm"]
     errors["board_tilt_deg"] = placement["tilt_deg"]
-    if cal.light is not None:
-        errors["light_residual_rms"] = cal.light.residual_rms
+    if cal.lights:
+        errors["light_residual_rms"] = max(fit.residual_rms for fit in cal.lights)
     return SeedCalibration(seed=int(seed), errors={k: float(v) for k, v in errors.items()},
                            calibration_s=time.perf_counter() - t)
 
