@@ -497,6 +497,16 @@ def test_14_a_board_lit_by_the_point_light_records_and_replays(tmp_path):
     assert "point light ON" in lit.prompt() and "point light off" in dark.prompt()
     with pytest.raises(ValueError, match="point_light must be True or False"):
         Board(centre=(0.0, 0.0, 0.08), normal=(0.0, 0.0, 1.0), point_light="yes")
+    # one of several lights: named in the description and the prompt; left out while None (all lights)
+    second = Board(centre=lit.centre, normal=lit.normal, size=lit.size, chart=lit.chart, point_light=True, light=1)
+    assert "light" not in describe(lit) and describe(second)["light"] == 1
+    assert setup_from_json(describe(second)) == second and request_key(second, None, ViewCapture()) != \
+        request_key(lit, None, ViewCapture())
+    assert "switch point light 2 (in the scene file's order) ON and every other one off" in second.prompt()
+    for bad, words in (({"light": -1}, "light's index >= 0"), ({"light": True}, "light's index >= 0"),
+                       ({"light": 0, "point_light": False}, "but point_light is False")):
+        with pytest.raises(ValueError, match=words):
+            Board(**{"centre": (0.0, 0.0, 0.08), "normal": (0.0, 0.0, 1.0), "point_light": True, **bad})
 
     def session(rig):
         out = []

@@ -176,7 +176,8 @@ class Board:
         if self.point_light:
             which = "the point light ON" if self.light is None else \
                 f"point light {self.light + 1} (in the scene file's order) ON and every other one off"
-            return (f"{where}, towards the point light; take the real objects away and switch {which} "
+            towards = "the point light" if self.light is None else f"point light {self.light + 1}"
+            return (f"{where}, towards {towards}; take the real objects away and switch {which} "
                     "(the projector stays black; keep your hand and body out of the light's path).")
         return f"{where}, where the projected image looks sharp; take the real objects away, point light off."
 
