@@ -164,3 +164,39 @@ def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
     assert check.gt_noise == expected.cross_gt_noise_rel == 0.0          # the two seeds are the same here
     assert cross_transfer_error(none + extra, none, gt).error == pytest.approx(0.0, abs=1e-6)
     assert cross_transfer_error(none + extra, none, _gt(none, real, syn, 1 - alpha, alpha)).error is None
+
+
+def test_08_cross_by_side_splits_where_the_error_is():
+    """The split by side: a transfer that is exact on the synthetic objects and gives 80 % of the light on the real
+    ones has error 0 and energy ratio 1 there, 0.2 and 0.8 here, and no error left after the best scale (a pure
+    energy loss); a wrong shape of the same energy keeps its error after scaling. The two halves' squared errors
+    add up to the whole cross error's."""
+    from lftransfer.sim.verify import GroundTruth, cross_by_side
+
+    rng = np.random.default_rng(3)
+    h, w = 8, 12
+    alpha_syn = np.zeros((h, w), np.float32)
+    alpha_syn[:, :5] = 1
+    alpha_real = np.zeros((h, w), np.float32)
+    alpha_real[:, 5:] = 1
+    c = rng.uniform(0.5, 1.0, (h, w, 3)).astype(np.float32)
+    noise = 1e-3 * rng.standard_normal((h, w, 3)).astype(np.float32)
+    both = np.stack([c, c])
+    gt = GroundTruth(union=both, real=both, synthetic=both, alpha_real=alpha_real, alpha_synthetic=alpha_syn)
+    pair = [c + noise, c - noise]
+    lft = c.copy()
+    lft[:, 5:] *= 0.8
+    split = cross_by_side(lft, pair, gt, 1)
+    assert split["synthetic"].rel_error == pytest.approx(0, abs=1e-6) and split["synthetic"].energy_ratio == \
+        pytest.approx(1)
+    assert split["real"].rel_error == pytest.approx(0.2, rel=1e-4) and split["real"].energy_ratio == \
+        pytest.approx(0.8, rel=1e-5)
+    assert split["real"].rel_error_shape == pytest.approx(0, abs=1e-5)
+    assert split["real"].pixels == 7 * h and split["synthetic"].pixels == 5 * h
+    assert 0 < split["real"].gt_noise_rel < 0.01
+    flipped = c.copy()
+    flipped[:, 5:] = c[:, 5:][:, ::-1]                       # the same light, in the wrong places
+    assert cross_by_side(flipped, pair, gt, 1)["real"].rel_error_shape > 0.1
+    total = np.sqrt(np.sum((lft - c) ** 2) / np.sum(c ** 2))
+    parts = [split[s].rel_error ** 2 * np.sum(c[m] ** 2) for s, m in (("real", alpha_real > 0), ("synthetic", alpha_syn > 0))]
+    assert np.sqrt(sum(parts) / np.sum(c ** 2)) == pytest.approx(total, rel=1e-5)

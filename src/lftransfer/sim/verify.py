@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Callable
 
@@ -26,7 +26,7 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
 
-__all__ = ["CalibrationErrors", "CrossCheck", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
+__all__ = ["CalibrationErrors", "CrossCheck", "CrossSide", "cross_by_side", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
            "cross_term_truth", "cross_transfer_error", "downsample", "Evaluation", "evaluate", "gt_noise_verdict", "metric_factor",
            "negative_control", "object_mask", "psnr", "render_ground_truth", "single_seed"]
 
@@ -261,6 +261,9 @@ class Evaluation:
         metric_resolution: (width, height) of the box-downsampled images the metrics are computed on.
         metric_pixels: pixels (at that resolution) the objects cover.
         undefined: metric -> why it is None.
+        cross_by_side: the cross-transfer error split by where it shows (:func:`cross_by_side`): ``"real"``, the
+            real objects lit by the synthetic ones through the projector; ``"synthetic"``, the synthetic objects
+            lit by the captured light field. Empty where the cross term is undefined.
     """
 
     psnr_db: float | None
@@ -274,11 +277,65 @@ class Evaluation:
     metric_resolution: tuple[int, int]
     metric_pixels: int
     undefined: dict[str, str]
+    cross_by_side: dict[str, "CrossSide"] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The metrics as JSON data (None for undefined values; ``metric_resolution`` a list)."""
         return {**{f.name: getattr(self, f.name) for f in fields(self)},
-                "metric_resolution": list(self.metric_resolution), "undefined": dict(self.undefined)}
+                "metric_resolution": list(self.metric_resolution), "undefined": dict(self.undefined),
+                "cross_by_side": {side: asdict(v) for side, v in self.cross_by_side.items()}}
+
+
+@dataclass(frozen=True)
+class CrossSide:
+    """The cross-transfer term over the pixels of one side's objects.
+
+    Attributes:
+        rel_error: ||C_lft - C_gt|| / ||C_gt|| over these pixels (None: no cross term there).
+        energy_ratio: sum of C_lft / sum of C_gt: below 1, light of the exchange is missing on this side.
+        rel_error_shape: the error left after the best single scale of C_lft: what the energy does not explain.
+        gt_noise_rel: the two ground truths' cross terms against each other over ||C_gt||, here.
+        pixels: pixels at the metrics' resolution.
+    """
+
+    rel_error: float | None
+    energy_ratio: float | None
+    rel_error_shape: float | None
+    gt_noise_rel: float | None
+    pixels: int
+
+
+def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], gt: GroundTruth, factor: int) -> dict[str, CrossSide]:
+    """The cross term's error split into the pixels where a synthetic object is seen (lit by the captured light
+    field) and those where only real objects are (lit through the projector).
+
+    Args:
+        c_lft: (h, w, 3) the transfer's cross term at the metrics' resolution.
+        c_gt_pair: the two ground truths' cross terms (:func:`cross_term_truth`).
+        gt: the ground truth (its object masks).
+        factor: the metrics' downsampling factor.
+
+    Returns:
+        ``{"real": CrossSide, "synthetic": CrossSide}``.
+    """
+    c_gt = 0.5 * (c_gt_pair[0] + c_gt_pair[1])
+    synthetic = downsample(gt.alpha_synthetic, factor) > 0.5
+    covered = object_mask(gt, factor)
+    out = {}
+    for side, where in (("real", covered & ~synthetic), ("synthetic", covered & synthetic)):
+        g, l_ = c_gt[where], c_lft[where]
+        g2 = float(np.sum(g.astype(np.float64) ** 2))
+        if not g2 > 0:
+            out[side] = CrossSide(None, None, None, None, int(where.sum()))
+            continue
+        scale = float(np.sum(g * l_) / max(float(np.sum(l_.astype(np.float64) ** 2)), 1e-300))
+        out[side] = CrossSide(
+            rel_error=float(np.sqrt(np.sum((l_ - g) ** 2) / g2)),
+            energy_ratio=float(np.sum(l_) / np.sum(g)) if np.sum(g) != 0 else None,
+            rel_error_shape=float(np.sqrt(np.sum((scale * l_ - g) ** 2) / g2)),
+            gt_noise_rel=float(np.sqrt(np.sum((c_gt_pair[0][where] - c_gt_pair[1][where]) ** 2) / g2)),
+            pixels=int(where.sum()))
+    return out
 
 
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
@@ -339,6 +396,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
         metric_resolution=(int(union.shape[1]), int(union.shape[0])),
         metric_pixels=int(mask.sum()),
         undefined=undefined,
+        cross_by_side=cross_by_side(c_lft, c_gt_pair, gt, f) if mask.any() and c_norm > 0 else {},
     )
 
 
