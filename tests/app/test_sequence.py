@@ -107,3 +107,33 @@ def test_04_converged_resume_fills_gaps(variant, tmp_path):
     assert seen == [(1, 3, 3)]
     assert [f["index"] for f in report["frames"]] == [0, 1, 2]
     assert np.array_equal(read_exr(out / "frames" / "0001.exr"), before)
+
+
+def test_05_the_synthetic_lights_stand_where_the_model_says(variant, tmp_path):
+    """A sequence knows the rig as ``lft run`` does (``pipeline.knowledge``): with the oracle its synthetic point
+    lights stand where the simulated world's really are (each a few millimetres from the scene file's position),
+    with a calibration file where that file measured them; the nominal model keeps the file's positions."""
+    from lftransfer.app.pipeline import open_rig
+    from lftransfer.app.sequence import acquire_model
+    from lftransfer.calibration.light import LightFit
+    from tests.app.small import nominal_calibration
+
+    scene = quick_scene(load_scene(builtin_scene("fig4")))
+    scene = with_overrides(scene, lights=[*scene.lights, {"position": [0.22, -0.10, 0.0]}])
+    opened = open_rig(scene, RunOptions(truth_seed=3))
+    try:
+        oracle = acquire_model(opened, scene, RunOptions(truth_seed=3, rig_model="oracle"), tmp_path, False, print)
+        assert [lt.position for lt in oracle.scene.lights] == [lt.position for lt in opened.world.lights]
+        assert oracle.scene.lights != scene.lights and oracle.model is opened.truth
+        nominal = acquire_model(opened, scene, RunOptions(truth_seed=3, rig_model="nominal"), tmp_path, False, print)
+        assert nominal.scene.lights == scene.lights
+        cal = nominal_calibration(scene.synthetic_part())
+        cal.lights = [LightFit(position=p, start=lt.position, intensity_albedo=(1, 1, 1), dark_ratio=0.25,
+                               residual_rms=0.001, std_mm=(0, 0, 0), pixels=1, boards=4)
+                      for p, lt in zip([(0.301, 0.121, 0.0), (0.219, -0.099, 0.001)], scene.lights)]
+        path = cal.write(tmp_path / "cal.json")
+        known = acquire_model(opened, scene, RunOptions(truth_seed=3, calibration=path), tmp_path, False, print)
+        assert [tuple(lt.position) for lt in known.scene.lights] == [(0.301, 0.121, 0.0), (0.219, -0.099, 0.001)]
+        assert known.rig_model == f"calibration file {path}"
+    finally:
+        opened.rig.close()

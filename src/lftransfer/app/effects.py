@@ -166,14 +166,14 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     step = step or (lambda _msg: None)
     settings = TransferSettings(**{**report["key"]["settings"], "bounce_views": False})
     direct = TransferSettings(**{**report["key"]["settings"], "bounce_views": False, "bounces": 0})
-    ps = scene.synthetic_part()
     check = ExchangeCheck(effect=EffectCurve(kind=effect.kind, on=effect.on, by=effect.by) if effect else None)
     spp = options.gt_spp or scene.render.gt_spp
     opened = open_rig(scene, options)
     try:
         if opened.world is None:
             return None
-        model, _ = acquire_model(opened, scene, options, out, True, step)
+        known = acquire_model(opened, scene, options, out, True, step)
+        model, ps = known.model, known.scene
         for f in verified:
             i, t = int(f["index"]), float(f["time_s"])
             step(f"check the exchange: frame {i}")

@@ -25,14 +25,13 @@ from typing import Callable, Iterable, Literal
 import numpy as np
 
 from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
-from lftransfer.app.pipeline import NOMINAL, OpenedRig, RunOptions, calibrate, open_rig, write_calibration
+from lftransfer.app.pipeline import Knowledge, OpenedRig, RunOptions, knowledge, open_rig, write_calibration
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.composite import composite
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
-from lftransfer.rig.model import nominal_rig
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
@@ -154,24 +153,30 @@ def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: Tr
             "resolution": list(scene.view.resolution)}
 
 
-def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool, step: Callable[[str], None]):
-    """The rig model of a sequence or a live session and how it was had: a calibration file, a calibration run
-    now (written to ``out/calibration.json``; a resumed sequence reuses it), the oracle or the nominal model."""
+def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
+                  step: Callable[[str], None]) -> Knowledge:
+    """What a sequence or a live session knows of the rig (:func:`~lftransfer.app.pipeline.knowledge`, as
+    ``lft run`` has it): the rig model from a calibration file, a calibration run now (written to
+    ``out/calibration.json``; a resumed sequence reuses it), the oracle or the nominal model; and the synthetic
+    scene with its point lights where the calibration measured them (the oracle: where they really stand).
+
+    Raises:
+        SequenceError: the oracle on a rig without a known truth.
+    """
     ps = scene.synthetic_part()
     kept = out / "calibration.json"
+    calibration, label = None, None
     if options.calibration is not None:
-        return load_calibration(options.calibration, ps).model, f"calibration file {options.calibration}"
-    if options.rig_model == "calibrated":
-        if resume and kept.is_file():
-            return load_calibration(kept, ps).model, f"calibrated (resumed from {kept})"
-        calibration = calibrate(opened.rig, ps, progress=step)
-        write_calibration(kept, calibration, opened.truth)
-        return calibration.model, "calibrated"
-    if options.rig_model == "oracle":
-        if opened.truth is None:
-            raise SequenceError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
-        return opened.truth, "true (oracle)"
-    return nominal_rig(scene.rig), NOMINAL
+        calibration, label = load_calibration(options.calibration, ps), f"calibration file {options.calibration}"
+    elif options.rig_model == "calibrated" and resume and kept.is_file():
+        calibration, label = load_calibration(kept, ps), f"calibrated (resumed from {kept})"
+    try:
+        known = knowledge(opened, scene, options.rig_model, calibration=calibration, progress=step)
+    except ValueError as exc:
+        raise SequenceError(str(exc)) from None
+    if calibration is None and known.calibration is not None:
+        write_calibration(kept, known.calibration, opened.truth)
+    return replace(known, rig_model=label or known.rig_model)
 
 
 @dataclass
@@ -232,13 +237,16 @@ class FrameWorker(Worker):
         options: the run's options (the rig, its truth seed, the ground truth's samples).
         model: the rig model the driver calibrated or chose.
         settings: the transfer's settings.
+        synthetic: the synthetic scene the driver knows (its point lights where calibrated), or None: the scene's.
         threads: Dr.Jit threads (:class:`lftransfer.app.cluster.Worker`).
     """
 
-    def __init__(self, scene, options: RunOptions, model, settings: TransferSettings, threads: int | None = None):
+    def __init__(self, scene, options: RunOptions, model, settings: TransferSettings, synthetic=None,
+                 threads: int | None = None):
         super().__init__(threads)
         self.opened = open_rig(scene, options)
-        self.model, self.settings, self.scene = model, settings, scene.synthetic_part()
+        self.model, self.settings = model, settings
+        self.scene = synthetic if synthetic is not None else scene.synthetic_part()
 
     def transfer(self, index: int, time_s: float, spp: int | None, use_cache: bool) -> ConvergedFrame:
         """:func:`converged_frame` and, where ``spp`` is given, :func:`frame_ground_truth`."""
@@ -313,8 +321,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
         opened = None
         try:
             opened = open_rig(scene, options)
-            model, rig_model = acquire_model(opened, scene, options, out, seq.resume, step)
-            ps = scene.synthetic_part()
+            known = acquire_model(opened, scene, options, out, seq.resume, step)
+            model, rig_model, ps = known.model, known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
                       "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
@@ -333,8 +341,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                     pool = LocalPool(_InProcess(opened, model, ps, settings))
                     writer.converged(frame for _, frame in pool.map("transfer", todo))
                 else:
-                    report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, settings,
-                                                              todo, step)
+                    report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, ps,
+                                                              settings, todo, step)
             step("write the videos")
             report["summary"] = _summary(report["frames"])
             _write_videos(out, n, report["fps"])
@@ -352,7 +360,7 @@ class _InProcess(FrameWorker):
         self.opened, self.model, self.scene, self.settings = opened, model, scene, settings
 
 
-def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, options: RunOptions, model,
+def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, options: RunOptions, model, synthetic,
                           settings: TransferSettings, todo: list[tuple], step: Callable[[str], None]) -> dict:
     """The converged frames ``todo`` on a Ray cluster, written as they finish; returns what the report keeps of
     the cluster (where, how many workers)."""
@@ -361,7 +369,7 @@ def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, opti
     step(f"start the cluster ({spec})")
     with connect(spec) as info:
         step("start the workers")
-        pool = WorkerPool(FrameWorker, (scene, options, model, settings), info, spec.workers)
+        pool = WorkerPool(FrameWorker, (scene, options, model, settings, synthetic), info, spec.workers)
         step(f"frames on {len(pool.actors)} workers")
         writer.converged(frame for _, frame in pool.map("transfer", todo))
         return pool.describe()

@@ -23,12 +23,12 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = "calibrated", cali
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
                          renderer=renderer)
     opened = open_rig(scene, options)
-    model, _ = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
+    known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     r = scene.render
     settings = TransferSettings(angular_samples=scene.rig.angular_samples, lighting_model=r.lighting_model,
                                 aperture_samples=r.aperture_samples,
                                 reconstruction=r.reconstruction if r.lighting_model == "area" else "box",
                                 lf_spp=r.spp, view_spp=r.spp, renderer=renderer)
-    live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
+    live = LiveTransfer(opened.rig, known.model, known.scene, settings)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
     return LiveSession(scene, live, out, sim_rig=sim, world=opened.world)
