@@ -1,9 +1,9 @@
 """The scene file format: pydantic models of a TOML scene and its loader.
 
 A scene file describes the light field interface hardware (``[rig]``), the view camera (``[view]``), the real
-point lights (``[light]``, or several ``[[light]]``), render settings (``[render]``) and the objects of the two half-spaces
-(``[[real]]`` at z > 0, known only to the simulated rig; ``[[synthetic]]`` at z < 0, rendered). Units are
-metres, degrees and linear RGB. ``docs/scene-format.md`` is the reference of every field.
+point lights (``[light]``, or several ``[[light]]``), render settings (``[render]``) and the objects of the two
+half-spaces (``[[real]]`` at z > 0, known only to the simulated rig; ``[[synthetic]]`` at z < 0, rendered). Units
+are metres, degrees and linear RGB. ``docs/scene-format.md`` is the reference of every field.
 
 This module does not import Mitsuba: :mod:`lftransfer.render.shapes` turns the validated objects into
 Mitsuba scene dicts.
