@@ -128,6 +128,13 @@ def test_04_two_point_lights(variant, tmp_path):
                                                  rig_model="nominal"))
     assert report["cross_transfer_rel_error"] < 0.25
     assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
+    assert report["lf_camera_saturated_fraction"] < 0.01 and not [w for w in report["warnings"] if "full scale" in w]
+    # at the file's exposure the brighter real side clips 5 % of the LF camera's codes: said, not silently lost
+    bright = run_scene(with_overrides(two, rig={"exposure": 0.25}), tmp_path / "bright",
+                       RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=None, rig_model="nominal",
+                                  verify=False))
+    assert bright["lf_camera_saturated_fraction"] > 0.03
+    assert [w for w in bright["warnings"] if "of the LF camera's codes are at full scale" in w]
     settings = TransferSettings(bounces=0, angular_samples=12, view_spp=4, lf_spp=4)
     views = []
     for lights in ([*scene.lights, second], scene.lights, [second]):
