@@ -234,6 +234,10 @@ def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
                                    f"camera is {scene.rig.lf_camera[1]} x {scene.rig.lf_camera[0]} ([height, width])")
 
 
+EXPOSURE_LEVEL = 0.9              # the exposure step's projector level, of its range, before any clipping
+EXPOSURE_TRIES = 5                # levels tried, each a quarter of the one before
+
+
 def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, radius: float = 0.03,
                        albedo: float = 0.8) -> tuple[float, dict]:
     """The LF camera's absolute exposure, against the view camera (the radiometric reference).
@@ -254,26 +258,7 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     from lftransfer.lightfield import LightField
 
     board = board_pattern(scene.view, depth)
-    # light from the lenslets that reach the board's centre (within the lenslets' window), the others dark:
-    # the measurement needs one uniformly lit spot, and dark lenslets cost the simulated capture nothing
-    n = scene.rig.angular_samples
-    lf = LightField.zeros(model.array, n, n)
-    reach = depth * 1.2 * model.array.half_width + model.array.pitch + radius
-    near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
-    lf.data[near_axis] = 0.9 * model.projector.max_radiance
-    white = model.encoder(n, n)(lf)
-    rig.setup(Board(centre=board.centre, normal=board.normal, size=(0.2, 0.2), albedo=albedo))
-    rig.project(white)
-    view_img = rig.capture_view().radiance
-    raw = rig.capture_lf().codes
-    rig.project(rig.info.black())
-    vh, vw = view_img.shape[:2]
-    vy, vx = np.mgrid[0:vh, 0:vw]
-    vpx = np.stack([vx.ravel(), vy.ravel()], 1).astype(np.float64)
-    on_board = np.linalg.norm(backproject(scene.view, vpx, board.centre, board.normal) - board.centre, axis=1)
-    seen = on_board < radius
-    view_radiance = view_img.reshape(-1, 3)[seen].astype(np.float64).mean(0)
-    radiance = model.decoder(4, 4).radiance_image(raw)                   # per pixel, with the model's exposure
+    # the LF camera rays that meet the board within the disc, and the view pixels that see the disc
     cam = model.camera.device
     step = max(1, int(np.sqrt(cam.width * cam.height / 400_000)))
     ys, xs = np.mgrid[0:cam.height:step, 0:cam.width:step]
@@ -285,14 +270,46 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     lam = ((board.centre - origin) @ board.normal) / np.where(dn != 0, dn, np.nan)
     hit = origin + lam[:, None] * d[ok]
     near = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
-    if near.sum() < 20 or seen.sum() < 20 or not np.all(view_radiance > 0):
-        raise ValueError("camera exposure: the board's centre is not seen by both cameras")
     sel = px[ok][near].astype(int)
+    vw, vh = scene.view.resolution
+    vy, vx = np.mgrid[0:vh, 0:vw]
+    vpx = np.stack([vx.ravel(), vy.ravel()], 1).astype(np.float64)
+    seen = np.linalg.norm(backproject(scene.view, vpx, board.centre, board.normal) - board.centre, axis=1) < radius
+    if near.sum() < 20 or seen.sum() < 20:
+        raise ValueError("camera exposure: the board's centre is not seen by both cameras")
+    # light from the lenslets that reach the board's centre (within the lenslets' window), the others dark:
+    # the measurement needs one uniformly lit spot, and dark lenslets cost the simulated capture nothing. A level
+    # that makes the LF camera clip on the disc would read its exposure low: the level is lowered until none does.
+    n = scene.rig.angular_samples
+    reach = depth * 1.2 * model.array.half_width + model.array.pitch + radius
+    near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
+    full = 2 ** rig.info.lf_camera_bits - 1
+    rig.setup(Board(centre=board.centre, normal=board.normal, size=(0.2, 0.2), albedo=albedo))
+    level = EXPOSURE_LEVEL
+    for _ in range(EXPOSURE_TRIES):
+        lf = LightField.zeros(model.array, n, n)
+        lf.data[near_axis] = level * model.projector.max_radiance
+        rig.project(model.encoder(n, n)(lf))
+        raw = rig.capture_lf().codes
+        clipped = float(np.mean(np.any(raw[sel[:, 1], sel[:, 0]] >= full, axis=-1)))
+        if clipped == 0:
+            break
+        level /= 4
+    else:
+        rig.project(rig.info.black())
+        raise ValueError(f"camera exposure: the LF camera clips on the lit board even with the projector at "
+                         f"{level * 4:.2g} of its range ({100 * clipped:.0f} % of the rays); lower [rig] exposure")
+    view_img = rig.capture_view().radiance
+    rig.project(rig.info.black())
+    view_radiance = view_img.reshape(-1, 3)[seen].astype(np.float64).mean(0)
+    if not np.all(view_radiance > 0):
+        raise ValueError("camera exposure: the board's centre is not seen by both cameras")
+    radiance = model.decoder(4, 4).radiance_image(raw)                   # per pixel, with the model's exposure
     lf_radiance = radiance[sel[:, 1], sel[:, 0]].astype(np.float64).mean(0)
     ratio = float(np.mean(lf_radiance / view_radiance))
     return model.camera.exposure * ratio, {"view_radiance": view_radiance.tolist(),
                                            "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum()),
-                                           "view_pixels": int(seen.sum())}
+                                           "view_pixels": int(seen.sum()), "projector_level": level}
 
 
 def _as_projector_image(pattern: np.ndarray, rig: Rig) -> np.ndarray:

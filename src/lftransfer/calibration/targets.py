@@ -49,6 +49,7 @@ TARGETS: tuple[Target, ...] = (
     Target("pose_rotation_deg", 0.2, "deg", "global pose: array orientation"),
     Target("camera_response_error", 0.01, "of full scale", "camera response curves, max"),
     Target("projector_response_error", 0.01, "of full scale", "projector response curves, max"),
+    Target("exposure_rel_error", 0.01, "relative", "LF camera exposure"),
     Target("light_position_error_mm", 1.0, "mm", "point light position"),
 )
 
