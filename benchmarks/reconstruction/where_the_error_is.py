@@ -48,10 +48,9 @@ def main() -> None:
     for name, scene, reconstruction in variants(base):
         opened = open_rig(scene, RunOptions(truth_seed=1))
         known = knowledge(opened, scene, "oracle")
-        ps = with_overrides(known.scene, render={"reconstruction": reconstruction})
         settings = replace(transfer_settings(scene), bounces=2, reconstruction=reconstruction)
         opened.start_frame(0)
-        result = run_transfer(opened.rig, known.model, ps, settings)
+        result = run_transfer(opened.rig, known.model, known.scene, settings)
         m = evaluate(result, render_ground_truth(opened.world, spp=GT_SPP))
         real, syn = m.cross_by_side["real"], m.cross_by_side["synthetic"]
         print(f"| {name} | {m.cross_transfer_rel_error:.3f} "

@@ -284,12 +284,13 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     reach = depth * 1.2 * model.array.half_width + model.array.pitch + radius
     near_axis = np.linalg.norm(model.array.centres, axis=1) < reach
     full = 2 ** rig.info.lf_camera_bits - 1
+    lit = LightField.zeros(model.array, n, n)
+    lit.data[near_axis] = model.projector.max_radiance
+    encode = model.encoder(n, n)
     rig.setup(Board(centre=board.centre, normal=board.normal, size=(0.2, 0.2), albedo=albedo))
     level = EXPOSURE_LEVEL
     for _ in range(EXPOSURE_TRIES):
-        lf = LightField.zeros(model.array, n, n)
-        lf.data[near_axis] = level * model.projector.max_radiance
-        rig.project(model.encoder(n, n)(lf))
+        rig.project(encode(lit * level))
         raw = rig.capture_lf().codes
         clipped = float(np.mean(np.any(raw[sel[:, 1], sel[:, 0]] >= full, axis=-1)))
         if clipped == 0:
@@ -419,10 +420,11 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
     model = apply_pose(model, pose)
 
     # 6. the point lights, one by one (their black level's light taken out with the calibrated projector)
-    lights = []
+    lights, diag["lights"] = [], []
     for i in range(len(scene.lights)):
-        fit, diag["light" if i == 0 else f"light_{i}"] = calibrate_light(rig, model, scene, light=i, progress=say)
+        fit, light_diag = calibrate_light(rig, model, scene, light=i, progress=say)
         lights.append(fit)
+        diag["lights"].append(light_diag)
     rig.project(rig.info.black())
     rig.setup(RealScene())
     return Calibration(model=model, lattice=lattice, distortion=distortion, projector_fit=prj_fit,
