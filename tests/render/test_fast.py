@@ -311,3 +311,38 @@ def test_12_lenslet_visibility_is_cached_until_objects_move(variant):
     assert _rel(blocked.rgb, exact.rgb, mask) < 0.08
     assert fast.update([plate, blocker.model_copy(update={"translate": [0.0, 0.03, -0.04]})])
     assert (ARRAY, "synthetic") not in fast._visibility
+
+
+def test_15_shared_corners_and_moves(variant):
+    """Cache vertices of one (position, normal) pair share their irradiance; a moved object is its refined local
+    mesh moved (no new refinement), and the cache relit after a move is the cache of a fresh renderer."""
+    from lftransfer.render.fast import tessellation
+
+    cube, ball = _objects()
+    for obj, fewer in ((cube, 5.0), (ball, 5.0)):
+        cut = tessellation(obj, 0.006)
+        for arr in (cut.vertices, cut.normals):        # one value per pair
+            first = np.zeros((cut.distinct, 3), np.float32)
+            first[cut.shared] = arr
+            np.testing.assert_allclose(first[cut.shared], arr, atol=1e-6)
+        assert len(cut.vertices) / cut.distinct > fewer
+    # a box edge's corner is not shared across faces (the normals differ)
+    cut = tessellation(cube, 0.006)
+    assert cut.distinct > len(np.unique(np.round(cut.vertices, 5), axis=0))
+    moved = cube.model_copy(update={"translate": [0.01, 0.02, -0.09], "rotate_deg": [10, 50, 0]})
+    a, b = tessellation(cube, 0.006), tessellation(moved, 0.006)
+    r0, r1 = cube.to_world(), moved.to_world()
+    back = (b.vertices - r1[:3, 3]) @ np.linalg.inv(r1[:3, :3]).T @ r0[:3, :3].T + r0[:3, 3]
+    np.testing.assert_allclose(back, a.vertices, atol=1e-6)
+    np.testing.assert_array_equal(a.shared, b.shared)
+    light = [PointLight(np.array([0.2, 0.15, 0.0]), np.array([1.0, 0.8, 0.6])), LightFieldLight(
+        _incident(), side="synthetic", model="area", reconstruction="linear")]
+    r = CachedRenderer(_objects())
+    r.relight(light)
+    r.update([moved, ball])
+    r.relight(light)
+    fresh = CachedRenderer([moved, ball])
+    fresh.relight(light)
+    for e, f in zip(r._irradiance, fresh._irradiance):
+        np.testing.assert_allclose(np.array(e), np.array(f), rtol=1e-5, atol=1e-7)
+    assert np.array(r._irradiance[0]).max() > 0

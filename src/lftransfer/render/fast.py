@@ -48,14 +48,17 @@ light field.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.render.culling import TILE, RayTiles, bounding_spheres
 from lftransfer.render.integrator import Light
 from lftransfer.render.lights import jit_array, jit_rays, to_numpy
-from lftransfer.render.renderer import HalfSpaceRenderer
+from lftransfer.render.renderer import HalfSpaceRenderer, SampleMeans, mean_depth
 from lftransfer.render.shapes import bsdf_dict, emitter_dict, object_keys, shape_dict
 
 DEFAULT_MAX_EDGE = 0.006  # m
@@ -64,6 +67,7 @@ LOBE_ROUGHNESS = 0.15       # lobes up to this roughness take lobe_samples direc
 VISIBILITY_POINTS = 4       # aperture points per lenslet of the glossy lobes' visibility cache
 TABLE_NODES = 64            # nodes of the diffuse lobe's cosine table (Mitsuba's roughplastic tabulates 64)
 MATERIALS = ("diffuse", "glossy", "metal", "emitter")
+CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
 
 
 #: Glossy and metal lobes at least this rough were measured against the exact path (tests/render/
@@ -173,19 +177,59 @@ def texcoords(obj, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return uv.reshape(-1, 2).astype(np.float32)
 
 
-def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.ndarray]:
-    """World-space triangle soup of a scene object, refined to edges of at most ``max_edge``.
+@dataclass(frozen=True)
+class Tessellation:
+    """A scene object as the cache's triangle soup.
 
-    Args:
-        obj: ``lftransfer.scenes.ObjectConfig``.
-        max_edge: longest triangle edge, metres.
-
-    Returns:
-        vertices (3F, 3) float32 (triangle f owns vertices 3f, 3f+1, 3f+2), normals (3F, 3) float32 unit
-        (smooth on spheres, flat elsewhere).
+    Attributes:
+        vertices: (3F, 3) float32 world positions, metres (triangle f owns vertices 3f, 3f+1, 3f+2).
+        normals: (3F, 3) float32 unit normals (smooth on spheres, flat elsewhere).
+        shared: (3F,) int64 index of each soup vertex among the object's distinct (position, normal) pairs
+            (neighbouring triangles of one face share their corners): a quantity of the position and normal
+            alone, such as irradiance, is computed once per distinct pair and read back as ``values[shared]``.
+        distinct: number of distinct pairs (``shared.max() + 1``).
     """
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    shared: np.ndarray
+    distinct: int
+
+
+@dataclass(frozen=True)
+class _LocalMesh:
+    """An object's refined mesh in its local frame (before ``to_world``): what moving it does not change."""
+
+    points: np.ndarray      # (P, 3) float64 local vertex positions
+    faces: np.ndarray       # (F, 3) int64
+    smooth: bool            # normals from the surface (sphere) rather than per face
+    shared: np.ndarray      # (3F,) int64
+    distinct: int
+
+
+def _geometry_key(obj, max_edge: float) -> tuple:
+    """What the local refined mesh depends on: the shape, its extent, the scale, the edge bound (not the pose)."""
+    file = getattr(obj, "file", None)
+    stamp = None
+    if file is not None:       # a mesh file edited in place is read again
+        st = Path(file).stat()
+        stamp = (str(Path(file).resolve()), st.st_mtime_ns, st.st_size)
+    return (obj.shape, tuple(np.atleast_1d(getattr(obj, "size", None) or ()).tolist()),
+            getattr(obj, "radius", None), getattr(obj, "height", None), stamp, tuple(obj.scale3.tolist()),
+            float(max_edge))
+
+
+_LOCAL_MESHES: dict[tuple, _LocalMesh] = {}
+
+
+def _local_mesh(obj, max_edge: float) -> _LocalMesh:
+    """The object's local mesh refined until every edge is at most ``max_edge`` long in the world (memoised per
+    geometry: an animation frame moves the object and re-uses it)."""
     import trimesh
 
+    key = _geometry_key(obj, max_edge)
+    if key in _LOCAL_MESHES:
+        return _LOCAL_MESHES[key]
     smooth = obj.shape == "sphere"
     if obj.shape == "box":
         mesh = trimesh.creation.box(extents=obj.size)
@@ -205,14 +249,60 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
         mesh = mesh.subdivide()
         if smooth:   # keep subdivided vertices on the sphere
             mesh.vertices = mesh.vertices * (obj.radius / np.linalg.norm(mesh.vertices, axis=1, keepdims=True))
-    mesh.apply_transform(obj.to_world())
-    faces = mesh.faces.reshape(-1)
-    vertices = mesh.vertices[faces]
+    faces = np.asarray(mesh.faces, np.int64)
+    corner = faces.reshape(-1)
     if smooth:
-        normals = mesh.vertex_normals[faces]
+        key_rows = corner[:, None]
+    else:   # a corner is shared by the triangles of one face, not across an edge between faces
+        normal_id = np.unique(np.round(np.asarray(mesh.face_normals), 4), axis=0, return_inverse=True)[1]
+        key_rows = np.stack([corner, np.repeat(normal_id.reshape(-1), 3)], axis=1)
+    _, shared = np.unique(key_rows, axis=0, return_inverse=True)
+    shared = shared.reshape(-1).astype(np.int64)
+    local = _LocalMesh(points=np.array(mesh.vertices, np.float64), faces=faces, smooth=smooth, shared=shared,
+                       distinct=int(shared.max()) + 1 if len(shared) else 0)
+    if len(_LOCAL_MESHES) >= 64:
+        _LOCAL_MESHES.pop(next(iter(_LOCAL_MESHES)))
+    _LOCAL_MESHES[key] = local
+    return local
+
+
+def tessellation(obj, max_edge: float = DEFAULT_MAX_EDGE) -> Tessellation:
+    """World-space triangle soup of a scene object, refined to edges of at most ``max_edge``, with its shared
+    corners (:class:`Tessellation`). The refinement is done once per geometry; a moved object is its local mesh
+    transformed (normals by the inverse transpose: on a sphere the exact normals of the scaled surface).
+
+    Args:
+        obj: ``lftransfer.scenes.ObjectConfig``.
+        max_edge: longest triangle edge, metres.
+
+    Returns:
+        :class:`Tessellation`.
+    """
+    local = _local_mesh(obj, max_edge)
+    m = obj.to_world()
+    linear, shift = m[:3, :3], m[:3, 3]
+    normal_map = np.linalg.inv(linear).T
+    points = local.points @ linear.T + shift
+    vertices = points[local.faces.reshape(-1)]
+    if local.smooth:
+        normals = local.points[local.faces.reshape(-1)] @ normal_map.T       # radial in the local frame
     else:
-        normals = np.repeat(mesh.face_normals, 3, axis=0)
-    return np.array(vertices, dtype=np.float32), np.array(normals, dtype=np.float32)
+        tri = local.points[local.faces]
+        face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normals = np.repeat(face_n @ normal_map.T, 3, axis=0)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)   # degenerate faces: 0
+    return Tessellation(vertices=vertices.astype(np.float32), normals=normals.astype(np.float32),
+                        shared=local.shared, distinct=local.distinct)
+
+
+def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.ndarray]:
+    """World-space triangle soup of a scene object (:func:`tessellation` without the shared corners).
+
+    Returns:
+        vertices (3F, 3) float32 (triangle f owns vertices 3f, 3f+1, 3f+2), normals (3F, 3) float32 unit.
+    """
+    t = tessellation(obj, max_edge)
+    return t.vertices, t.normals
 
 
 class CachedRenderer(HalfSpaceRenderer):
@@ -253,8 +343,8 @@ class CachedRenderer(HalfSpaceRenderer):
 
         max_edge = self.max_edge
         self.objects = objects
-        shapes, verts, norms, rows, tables = {}, [], [], [], []
-        base = 0
+        shapes, verts, norms, rows, tables, shared = {}, [], [], [], [], []
+        base = distinct = 0
         bases = []
         info = []          # per object: (has cache vertices, glossy lobe, smooth lobe)
         for i, (key, obj) in enumerate(zip(object_keys(self.objects), self.objects)):
@@ -266,7 +356,8 @@ class CachedRenderer(HalfSpaceRenderer):
                 bases.append(base)
                 info.append((False, False, False))
                 continue
-            v, n = tessellate(obj, max_edge)
+            cut = tessellation(obj, max_edge)
+            v, n = cut.vertices, cut.normals
             textured = getattr(obj.material, "texture", None) is not None
             props = mi.Properties()
             props["bsdf"] = mi.load_dict(bsdf_dict(obj.material))
@@ -283,6 +374,8 @@ class CachedRenderer(HalfSpaceRenderer):
             verts.append(v)
             norms.append(n)
             rows.append(np.full(len(v), i, np.uint32))
+            shared.append(cut.shared + distinct)
+            distinct += cut.distinct
             bases.append(base)
             info.append((True, _glossy(obj.material), _glossy(obj.material) and obj.material.roughness == 0))
             base += len(v)
@@ -290,6 +383,10 @@ class CachedRenderer(HalfSpaceRenderer):
         self.vertices = np.concatenate(verts) if verts else np.zeros((0, 3), np.float32)   # (M, 3) cache points
         self.normals = np.concatenate(norms) if norms else np.zeros((0, 3), np.float32)    # (M, 3)
         self._rows = np.concatenate(rows) if rows else np.zeros(0, np.uint32)              # (M,) object index
+        # (M,) index of each cache vertex among the distinct (position, normal) pairs, and (D,) one vertex of each:
+        # irradiance and visibility are computed once per pair
+        self._shared = np.concatenate(shared) if shared else np.zeros(0, np.int64)
+        self._one_of = np.unique(self._shared, return_index=True)[1] if distinct else np.zeros(0, np.int64)
         self._tables = np.stack(tables).astype(np.float32)                                 # (objects, TABLE_NODES)
         self._reflects_diffuse = self._tables[:, -1] > 0                                   # (objects,)
         # Registry id of each loaded shape -> its first cache vertex and what its material does.
@@ -346,9 +443,11 @@ class CachedRenderer(HalfSpaceRenderer):
             self._build(objects)
             return True
         for i in moved:
-            v, n = tessellate(objects[i], self.max_edge)
+            cut = tessellation(objects[i], self.max_edge)
+            v, n = cut.vertices, cut.normals
             end = self._bases[i + 1] if i + 1 < len(self._bases) else len(self.vertices)
-            if len(v) != end - self._bases[i]:
+            old = self._shared[self._bases[i]:end]
+            if len(v) != end - self._bases[i] or not np.array_equal(cut.shared, old - (old.min() if len(old) else 0)):
                 self._build(objects)
                 return True
             params[f"{self._keys[i]}.vertex_positions"] = mi.Float(v.ravel())
@@ -387,18 +486,20 @@ class CachedRenderer(HalfSpaceRenderer):
 
     def _irradiance_of(self, light: Light, seed: int) -> list[np.ndarray]:
         """(3,) arrays (M,) of one light's diffuse irradiance at the cache vertices: each direction weighted by
-        its cosine times the vertex's material's :func:`diffuse_lobe_table` (zero for metals)."""
+        its cosine times the vertex's material's :func:`diffuse_lobe_table` (zero for metals). It is computed once
+        per distinct (position, normal) pair and read back at every cache vertex of the pair."""
         mi = mitsuba()
         import drjit as dr
 
         m = len(self.vertices)
         total = [np.zeros(m, np.float32) for _ in range(3)]
+        one = self._one_of                      # (D,) a cache vertex of every distinct pair
         # Shade only the vertices with a diffuse lobe that this light can reach (a light field through the array
         # reaches those facing it on its side of the plane).
-        wanted = self._reflects_diffuse[self._rows] if m else np.zeros(0, bool)
+        wanted = self._reflects_diffuse[self._rows[one]] if m else np.zeros(0, bool)
         if hasattr(light, "may_light"):
-            wanted &= light.may_light(self.vertices, self.normals)
-        idx = np.flatnonzero(wanted)
+            wanted &= light.may_light(self.vertices[one], self.normals[one])
+        idx = one[wanted]
         if len(idx) == 0:
             return total
         v, n = self.vertices[idx], self.normals[idx]
@@ -409,9 +510,9 @@ class CachedRenderer(HalfSpaceRenderer):
         si.wi = mi.Vector3f(0, 0, 1)
         weight = self._cosine_weight(self._rows[idx])
         e = np.array(light.illuminate(self.scene, si, mi.Bool(True), seed=seed, irradiance=weight), np.float32)
-        for c in range(3):
-            total[c][idx] = e[c]
-        return total
+        per_pair = np.zeros((3, len(one)), np.float32)
+        per_pair[:, wanted] = e
+        return [per_pair[c][self._shared] for c in range(3)]
 
     def _cosine_weight(self, rows: np.ndarray):
         """weight(cosine) -> cosine * table(cosine) per shading point, for shading points of objects ``rows``."""
@@ -431,30 +532,78 @@ class CachedRenderer(HalfSpaceRenderer):
                              + f * dr.gather(mi.Float, tables, start + i + 1))
         return weight
 
-    def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
-                    seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Radiance (N, 3), hit mask (N,) and distance (N,): one ray cast and a cache lookup per ray (and the
-        glossy lobe at rays that meet a glossy object)."""
+    def _ray_tiles(self, origins: np.ndarray, directions: np.ndarray) -> RayTiles | None:
+        """The cones around tiles of a constant ray set (the memoised primary rays, read-only), built once per set
+        (a few per renderer); None for other rays (cast whole)."""
+        if origins.flags.writeable or directions.flags.writeable or len(origins) < 64 * TILE:
+            return None
+        kept = self.__dict__.setdefault("_tile_memo", [])
+        for o, d, tiles in kept:
+            if o is origins and d is directions:
+                return tiles
+        tiles = RayTiles.of(origins, directions)
+        if len(kept) >= 4:
+            kept.pop(0)
+        kept.append((origins, directions, tiles))
+        return tiles
+
+    def _hits(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], seed: int
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One ray cast per ray and the cache lookup (and glossy lobe) at the hits only: (H,) int64 indices of the
+        rays that hit, (H, 3) float32 their radiance and (H,) float32 their hit distances.
+
+        Of a constant ray set (the primary rays) only the tiles whose cone meets an object's bounding sphere are
+        cast (:mod:`lftransfer.render.culling`: the rays left out miss, so the result is the same)."""
         mi = mitsuba()
         import drjit as dr
 
         if self._lit_by is None or len(self._lit_by) != len(lights) or \
                 any(a is not b for a, b in zip(self._lit_by, lights)):
             self.relight(lights, seed=seed)
-        n = len(origins)
         rays = self.jit_rays(origins, directions)
+        cast = None                                    # indices of the rays cast (None: all of them)
+        tiles = self._ray_tiles(origins, directions)
+        if tiles is not None:
+            chosen = tiles.meeting(*bounding_spheres(self.scene))
+            if chosen.mean() < CULL_BELOW:
+                cast = tiles.rays(chosen)
+                rays = dr.gather(mi.Ray3f, rays, jit_array(mi.UInt32, cast.astype(np.uint32)))
         pi = self.scene.ray_intersect_preliminary(rays)
         dr.eval(pi)          # every field in one kernel (read apart, each would intersect again)
         t = np.array(pi.t, dtype=np.float32)
-        hit = np.isfinite(t)
-        radiance = np.zeros((n, 3), np.float32)
-        idx = np.flatnonzero(hit)
-        if len(idx):
-            index = jit_array(mi.UInt32, idx.astype(np.uint32))
-            pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
-            rays = dr.gather(mi.Ray3f, rays, index)
-            radiance[idx] = to_numpy(self._shade(rays, pi, lights, seed))
-        return radiance, hit, t
+        local = np.flatnonzero(np.isfinite(t))
+        idx = local if cast is None else cast[local]
+        if not len(idx):
+            return idx, np.zeros((0, 3), np.float32), np.zeros(0, np.float32)
+        index = jit_array(mi.UInt32, local.astype(np.uint32))
+        pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
+        rays = dr.gather(mi.Ray3f, rays, index)
+        return idx, to_numpy(self._shade(rays, pi, lights, seed)), t[local]
+
+    def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
+                    seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Radiance (N, 3), hit mask (N,) and distance (N,): one ray cast and a cache lookup per ray (and the
+        glossy lobe at rays that meet a glossy object)."""
+        idx, colour, t_hit = self._hits(origins, directions, lights, seed)
+        radiance = np.zeros((len(origins), 3), np.float32)
+        radiance[idx] = colour
+        t = np.full(len(origins), np.inf, np.float32)
+        t[idx] = t_hit
+        return radiance, np.isfinite(t), t
+
+    def render_samples(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], spp: int, *,
+                       seed: int = 0) -> SampleMeans:
+        """:meth:`HalfSpaceRenderer.render_samples`, summed over the rays that hit only (a view's objects cover a
+        few per cent of its rays, so full-size passes over every ray's radiance were most of a view render)."""
+        idx, colour, t_hit = self._hits(origins, directions, lights, seed)
+        groups = len(origins) // spp
+        group = idx // spp
+        scale = 1.0 / spp
+        radiance = np.stack([np.bincount(group, weights=colour[:, c], minlength=groups) for c in range(3)], axis=1)
+        hits = np.bincount(group, minlength=groups).astype(np.float32)
+        near = np.bincount(group, weights=t_hit, minlength=groups)
+        return SampleMeans(radiance=(radiance * scale).astype(np.float32), coverage=hits * np.float32(scale),
+                           depth=mean_depth(near, hits))
 
     def _shade(self, rays, pi, lights: Sequence[Light], seed: int):
         """Radiance (mi.Color3f, (N,)) leaving the hits ``pi`` of ``rays`` (all valid) back along the rays."""
@@ -584,10 +733,11 @@ class CachedRenderer(HalfSpaceRenderer):
         if key in self._visibility:
             return self._visibility[key]
         m, K = len(self.vertices), array.K
-        wanted = self._glossy_objects[self._rows] & light.may_light(self.vertices, self.normals) if m \
-            else np.zeros(0, bool)
-        idx = np.flatnonzero(wanted)
-        seen = np.zeros((m, K), np.float32)
+        one = self._one_of                      # once per distinct (position, normal) pair
+        wanted = self._glossy_objects[self._rows[one]] & light.may_light(self.vertices[one], self.normals[one]) \
+            if m else np.zeros(0, bool)
+        idx = one[wanted]
+        seen = np.zeros((len(one), K), np.float32)
         if len(idx):
             x = np.repeat(self.vertices[idx], K, axis=0)                  # (len(idx) * K, 3), k fastest
             nrm = np.repeat(self.normals[idx], K, axis=0)
@@ -601,7 +751,7 @@ class CachedRenderer(HalfSpaceRenderer):
                 p = mi.Point3f(jit_array(mi.Float, target[:, 0]), jit_array(mi.Float, target[:, 1]), 0.0)
                 total += dr.select(self.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
                 dr.eval(total)
-            seen[idx] = (np.array(total, np.float32) / VISIBILITY_POINTS).reshape(len(idx), K)
-        table = jit_array(mi.Float, seen)
+            seen[wanted] = (np.array(total, np.float32) / VISIBILITY_POINTS).reshape(len(idx), K)
+        table = jit_array(mi.Float, seen[self._shared])
         self._visibility[key] = table
         return table

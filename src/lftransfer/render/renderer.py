@@ -68,6 +68,27 @@ def sample_mean(values: np.ndarray, spp: int) -> np.ndarray:
     return total
 
 
+@dataclass
+class SampleMeans:
+    """Means over groups of ``spp`` consecutive rays (the samples of one pixel or one light field entry).
+
+    Attributes:
+        radiance: (G, 3) float32 mean radiance, W m^-2 sr^-1 (rays that miss count as zero).
+        coverage: (G,) float32 fraction of the group's rays that hit an object.
+        depth: (G,) float32 mean hit distance over the rays that hit, metres; inf where none hit.
+    """
+
+    radiance: np.ndarray
+    coverage: np.ndarray
+    depth: np.ndarray
+
+
+def mean_depth(distance_sum: np.ndarray, hits: np.ndarray) -> np.ndarray:
+    """Mean hit distance (G,) float32 from the sum of hit distances and the hit count; inf where nothing hit."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(hits > 0, distance_sum / np.maximum(hits, 1), np.inf).astype(np.float32)
+
+
 class HalfSpaceRenderer:
     """Renders the objects of one half-space lit by a list of lights.
 
@@ -144,6 +165,26 @@ class HalfSpaceRenderer:
         """Radiance (N, 3), hit mask (N,) and distance (N,) for arbitrary rays (see :func:`trace`)."""
         return trace(self.scene, origins, directions, lights, max_depth=self.max_depth, seed=seed)
 
+    def render_samples(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], spp: int, *,
+                       seed: int = 0) -> SampleMeans:
+        """Radiance, coverage and depth averaged over every ``spp`` consecutive rays (a pixel's or a light field
+        entry's samples, stored sample-fastest): what the light field and view renders need. Every primary ray of
+        those renders goes through here.
+
+        Args:
+            origins, directions: (G * spp, 3) rays.
+            lights: the lights.
+            spp: rays per group.
+            seed: Monte Carlo seed.
+
+        Returns:
+            :class:`SampleMeans` of G groups.
+        """
+        radiance, hit, dist = self.render_rays(origins, directions, lights, seed=seed)
+        hits = sample_mean(hit.astype(np.float32), spp)
+        near = sample_mean(np.where(hit, dist, np.float32(0.0)).astype(np.float32), spp)
+        return SampleMeans(radiance=sample_mean(radiance, spp), coverage=hits, depth=mean_depth(near, hits))
+
     def render_lightfield(self, array: LensArray, lights: Sequence[Light], U: int, V: int, *,
                           side: Literal["synthetic", "real"] = "synthetic",
                           model: Literal["point", "area", "prefiltered"] = "area",
@@ -173,8 +214,7 @@ class HalfSpaceRenderer:
             return origins.reshape(-1, 3), np.ascontiguousarray(directions.reshape(-1, 3))
 
         origins, directions = self._rays(("lf", array, U, V, side, model == "area", spp, seed), make)
-        radiance, _, _ = self.render_rays(origins, directions, lights, seed=seed)
-        data = sample_mean(radiance, S).reshape(K, V, U, 3)
+        data = self.render_samples(origins, directions, lights, S, seed=seed).radiance.reshape(K, V, U, 3)
         data *= lf.mask()[None, :, :, None]
         lf.data[...] = data
         return lf
@@ -186,10 +226,6 @@ class HalfSpaceRenderer:
 
         o, d = self._rays(("view", id(sensor), width, height, spp, seed),
                           lambda: view_rays(sensor, width, height, spp, seed))
-        radiance, hit, dist = self.render_rays(o, d, lights, seed=seed)
-        rgb = sample_mean(radiance, spp).reshape(height, width, 3)
-        alpha = sample_mean(hit.astype(np.float32), spp).reshape(height, width)
-        near = sample_mean(np.where(hit, dist, np.float32(0.0)).astype(np.float32), spp).reshape(height, width)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            depth = np.where(alpha > 0, near / np.maximum(alpha, np.float32(1e-30)), np.float32(np.inf))
-        return ViewImage(rgb=rgb, alpha=alpha, depth=depth.astype(np.float32))
+        means = self.render_samples(o, d, lights, spp, seed=seed)
+        return ViewImage(rgb=means.radiance.reshape(height, width, 3), alpha=means.coverage.reshape(height, width),
+                         depth=means.depth.reshape(height, width))

@@ -18,7 +18,7 @@ def test_01_records_the_rays_as_cast_and_unwraps(variant):
     light = PointLight(np.array([0.3, 0.1, 0.0]), np.array([1.0, 1.0, 1.0]))
     with RayRecorder(renderer) as rec:
         renderer.render_lightfield(array, [light], 6, 6, model="area", spp=2)
-    assert "render_rays" not in renderer.__dict__                     # the class's method again
+    assert "render_samples" not in renderer.__dict__                    # the class's method again
     (batch,) = rec.batches
     assert batch.count == array.K * 6 * 6 * 2 and batch.origins.shape == batch.directions.shape == (batch.count, 3)
     timing = ray_floor(renderer.objects, rec.batches, repeats=2, renderer_scene=renderer.scene)

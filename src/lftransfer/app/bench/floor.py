@@ -45,11 +45,11 @@ class RayBatch:
 class RayRecorder:
     """Records the rays a renderer casts while it is active: ``with RayRecorder(renderer) as rec: side.render(...)``.
 
-    The renderer's ``render_rays`` is wrapped on the instance (the class is untouched) and unwrapped on exit; the
-    rays are kept by reference (the renderers build primary rays once and reuse them, so nothing is copied).
+    The renderer's ``render_samples`` (through which every primary ray of a light field or view render goes) is
+    wrapped on the instance (the class is untouched) and unwrapped on exit; the rays are kept by reference (the renderers build primary rays once and reuse them, so nothing is copied).
 
     Attributes:
-        batches: one :class:`RayBatch` per ``render_rays`` call, in call order (the step renders the light field
+        batches: one :class:`RayBatch` per ``render_samples`` call, in call order (the step renders the light field
             first, then the view).
     """
 
@@ -58,17 +58,17 @@ class RayRecorder:
         self.batches: list[RayBatch] = []
 
     def __enter__(self) -> "RayRecorder":
-        inner = self.renderer.render_rays
+        inner = self.renderer.render_samples
 
-        def recording(origins, directions, lights, **kwargs):
+        def recording(origins, directions, lights, spp, **kwargs):
             self.batches.append(RayBatch(np.asarray(origins), np.asarray(directions)))
-            return inner(origins, directions, lights, **kwargs)
+            return inner(origins, directions, lights, spp, **kwargs)
 
-        self.renderer.render_rays = recording
+        self.renderer.render_samples = recording
         return self
 
     def __exit__(self, *exc) -> None:
-        self.renderer.__dict__.pop("render_rays", None)
+        self.renderer.__dict__.pop("render_samples", None)
 
 
 @dataclass(frozen=True)
