@@ -162,19 +162,24 @@ def test_06_irradiance_is_kept_per_light(variant, monkeypatch):
     assert computed[3:] == [point, second]
 
 
-def test_07_auto_never_drops_light_between_synthetic_objects(variant):
-    """Two reflecting synthetic objects exchange light the fast path does not render: "auto" takes the exact
-    path for them, and a forced fast path says what it drops; an emitter beside one reflecting object is fine."""
+def test_07_auto_renders_light_between_synthetic_objects(variant):
+    """Two diffuse synthetic objects light each other: "auto" takes the fast path, which renders it (test_16),
+    and the report says what it leaves out; with a glossy one among them "auto" takes the exact path; an emitter
+    beside one reflecting object exchanges nothing."""
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-    from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
+    from lftransfer.transfer.synthetic_side import approximations, resolve_renderer, synthetic_renderer
 
     scene = load_scene(builtin_scene("fig4"))
     cube = scene.synthetic[0].model_dump(mode="json")
     ball = {"name": "ball", "shape": "sphere", "radius": 0.01, "translate": [0.05, 0.0, -0.1]}
     two = with_overrides(scene, synthetic=[cube, ball])
-    assert resolve_renderer(scene) == "fast" and resolve_renderer(two) == "exact"
-    assert any("exchange with each other" in note for note in approximations(two, "fast"))
-    assert approximations(two, "auto") == []
+    assert resolve_renderer(scene) == "fast" and resolve_renderer(two) == "fast"
+    assert any("exchange: their diffuse light" in note for note in approximations(two))
+    assert synthetic_renderer(two).bounces == scene.render.max_depth - 1
+    assert not any("exchange" in note for note in approximations(scene))
+    shiny = with_overrides(scene, synthetic=[cube, {**ball, "material": {"type": "metal", "roughness": 0.1}}])
+    assert resolve_renderer(shiny) == "exact" and resolve_renderer(shiny, "fast") == "fast"
+    assert approximations(shiny) == [] and any("glossy light" in n for n in approximations(shiny, "fast"))
     sun = {**ball, "material": {"type": "emitter", "radiance": [1.0, 1.0, 1.0]}}
     lit = with_overrides(scene, synthetic=[cube, sun])
     assert resolve_renderer(lit) == "fast" and len(approximations(lit)) == 1
@@ -346,3 +351,43 @@ def test_15_shared_corners_and_moves(variant):
     for e, f in zip(r._irradiance, fresh._irradiance):
         np.testing.assert_allclose(np.array(e), np.array(f), rtol=1e-5, atol=1e-7)
     assert np.array(r._irradiance[0]).max() > 0
+
+
+def _facing_panels(material):
+    """Two panels in a V opening towards the camera, 8 cm apart, a point light between them: each is lit by the
+    light and by the other (the light they exchange is about 15 % of what the camera sees)."""
+    return [ObjectConfig.model_validate({"name": "left", "shape": "rectangle", "size": [0.1, 0.1],
+                                         "translate": [-0.04, 0.0, -0.12], "rotate_deg": [0, 60, 0],
+                                         "material": {"type": "diffuse", "albedo": [0.2, 0.9, 0.3]}}),
+            ObjectConfig.model_validate({"name": "right", "shape": "box", "size": [0.1, 0.1, 0.01],
+                                         "translate": [0.04, 0.0, -0.12], "rotate_deg": [0, -60, 0],
+                                         "material": material})]
+
+
+@pytest.mark.parametrize("material", [{"type": "diffuse", "albedo": [0.9, 0.9, 0.9]},
+                                      {"type": "glossy", "albedo": [0.5, 0.5, 0.6], "roughness": 0.1}],
+                         ids=["diffuse", "glossy"])
+def test_16_interreflection_between_synthetic_objects(variant, material):
+    """The fast path's gather renders the light two synthetic objects exchange (diffuse, and seen in a glossy
+    lobe) as the converged exact path does; without its bounces (the control) that light is missing."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    w, h = 96, 72
+    sensor = mi.load_dict(sensor_dict([0.0, 0.04, 0.0], [0.0, 0.0, -0.12], [0, 1, 0], 40.0, w, h))
+    light = [PointLight(np.array([0.0, 0.03, -0.09]), np.array([1.0, 1.0, 1.0]))]
+    objects = _facing_panels(material)
+    reference = HalfSpaceRenderer(objects, max_depth=3).render_view(sensor, w, h, light, spp=512, seed=1)
+    direct = HalfSpaceRenderer(objects, max_depth=1).render_view(sensor, w, h, light, spp=64, seed=1)
+    exact = HalfSpaceRenderer(objects, max_depth=3).render_view(sensor, w, h, light, spp=4)
+    seen = reference.alpha > 0.99
+
+    def error(image):
+        return np.abs(image.rgb - reference.rgb)[seen].sum() / reference.rgb[seen].sum()
+
+    share = 1.0 - direct.rgb[seen].sum() / reference.rgb[seen].sum()
+    assert share > 0.1                                                       # the effect is there to miss
+    with_bounces = CachedRenderer(objects, bounces=2).render_view(sensor, w, h, light, spp=4)
+    without = CachedRenderer(objects, bounces=0).render_view(sensor, w, h, light, spp=4)
+    assert error(with_bounces) < 0.04 and error(with_bounces) < error(exact)
+    assert error(without) > 0.8 * share                                      # the control misses it

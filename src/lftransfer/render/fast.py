@@ -4,7 +4,9 @@ Light field transfer is low-pass (one spatial sample per lenslet), and the diffu
 irradiance only, so the expensive part of relighting, the sum over K lenslets with shadow rays, is done once per
 *cache vertex* instead of once per ray: every synthetic object becomes a triangle mesh with edges of at most
 ``max_edge``, each triangle with its own three vertices (so sharp edges stay sharp), and the diffuse irradiance at
-every vertex is computed with the same lights as the exact path (area, point or prefiltered model, shadow rays).
+every vertex is computed with the same lights as the exact path (area, point or prefiltered model, shadow rays),
+once per distinct (position, normal) pair (the triangles of one face share their corners: about a fifth of the
+vertices, :class:`Tessellation`).
 A light field or view render is then one ray cast per ray, a barycentric interpolation of the three vertex
 irradiances and one evaluation of the material's diffuse lobe at the hit (its albedo texture at the hit's
 texture coordinates).
@@ -26,19 +28,29 @@ split into their two lobes:
   the two are weighted by multiple importance sampling (balance heuristic). Neither casts rays: occlusion
   between a glossy object and the array comes from a second cache, the fraction of each lenslet's aperture
   (``VISIBILITY_POINTS`` points) that each cache vertex sees, interpolated like the irradiance and computed once
-  per lens array while nothing moves. A smooth lobe (roughness 0) takes its one mirror direction. Under the
+  per lens array while nothing moves (shadow rays only from points whose hemisphere holds another shape; the
+  others see what lies in front of their tangent plane). A smooth lobe (roughness 0) takes its one mirror direction. Under the
   point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is the
   exact path's lenslet sum with the cached visibility.
 
+Synthetic objects that light each other (two or more reflecting objects, or a mesh) exchange light through an
+interreflection gather (:class:`Interreflection`, ``bounces`` = the scene's ``max_depth`` - 1): every distinct
+cache point casts ``GATHER_RAYS`` cosine-weighted directions once per arrangement of the objects, and each that
+meets a cached surface reads the diffuse radiance leaving it from the cache, so a bounce is one sparse
+matrix-vector product per colour channel; a glossy lobe at a point whose gather met a surface also casts its lobe
+directions and reads the diffuse radiance of the surfaces they meet. The glossy light the objects reflect onto
+each other is left out (reports say so).
+
 When objects move (an animation frame, :meth:`CachedRenderer.update`), the moved objects' cache vertices are
-re-tessellated in place (the acceleration structure is rebuilt over the new vertex positions) and every light's
-irradiance is computed again (a moved object can shadow any other); while nothing moves, the irradiance of each
+moved in place (the refined local mesh is kept, the acceleration structure is rebuilt over the new vertex
+positions; objects that move together keep their interreflection gather) and every light's irradiance is
+computed again (a moved object can shadow any other); while nothing moves, the irradiance of each
 light is kept per light object, so a live loop that keeps its point light and swaps the captured light field
 each frame relights only for the new light field.
 
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`
-with ``max_depth=1``): one reflection inside the half-space (interreflections between synthetic objects are
-dropped), diffuse irradiance varies linearly across triangles of size ``max_edge`` (6 mm by default, four times
+with the scene's ``max_depth``): the light synthetic objects exchange is their diffuse light only, gathered over
+``GATHER_RAYS`` directions per cache point; diffuse irradiance varies linearly across triangles of size ``max_edge`` (6 mm by default, four times
 finer than a lenslet), so diffuse shadow edges, and the light field's shadows in glossy lobes, are blurred over
 one triangle; the glossy lobe is a Monte Carlo estimate with its own noise (measured no larger than the exact
 path's at its default samples, for roughness >= :data:`MIN_ROUGHNESS`); where the exact path (next-event
@@ -67,6 +79,7 @@ LOBE_ROUGHNESS = 0.15       # lobes up to this roughness take lobe_samples direc
 VISIBILITY_POINTS = 4       # aperture points per lenslet of the glossy lobes' visibility cache
 TABLE_NODES = 64            # nodes of the diffuse lobe's cosine table (Mitsuba's roughplastic tabulates 64)
 MATERIALS = ("diffuse", "glossy", "metal", "emitter")
+GATHER_RAYS = 64            # cosine-weighted directions per cache point of the interreflection gather (8 x 8 strata)
 CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
 
 
@@ -305,6 +318,55 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
     return t.vertices, t.normals
 
 
+def exchanges_light(objects: Sequence) -> bool:
+    """Whether the fast path's cached surfaces can light each other: two or more objects that reflect light, or a
+    reflecting mesh (which may be concave); spheres, boxes, rectangles and cylinders alone cannot."""
+    reflecting = [o for o in objects if o.material.type != "emitter"]
+    return len(reflecting) > 1 or any(o.shape == "mesh" for o in reflecting)
+
+
+def _moved_together(before: Sequence, after: Sequence) -> bool:
+    """Whether every reflecting object moved by one common rigid motion (then the light they exchange is
+    unchanged: the interreflection gather is kept)."""
+    pairs = [(a, b) for a, b in zip(before, after) if a.material.type != "emitter"]
+    if not pairs:
+        return True
+    deltas = [b.to_world() @ np.linalg.inv(a.to_world()) for a, b in pairs]
+    return all(np.allclose(d, deltas[0], rtol=0.0, atol=1e-9) for d in deltas[1:])
+
+
+def _tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (N, 3) completing each unit normal (N, 3) to a right-handed frame."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(helper, normals)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(normals, t)
+
+
+@dataclass(frozen=True)
+class Interreflection:
+    """The diffuse light the cached surfaces send each other, as a linear map of the cache's irradiance.
+
+    Every distinct cache point d gathers ``rays`` cosine-weighted directions (stratified); a direction that meets
+    a cached surface at barycentrics b on triangle f reads the diffuse radiance leaving it, f_d(hit) * sum_c b_c
+    E[3f + c] (the cache's own lookup), so the irradiance d receives is (pi / rays) * sum over its hits of
+    w_d(cos) f_d b_c E[3f + c], w_d the receiver's :func:`diffuse_lobe_table`. One application is one bounce.
+
+    Attributes:
+        matrices: per channel a ``scipy.sparse.csr_matrix`` (D, M): distinct points x cache vertices.
+        sees: (M,) float32 share of each cache vertex's directions that meet a cached surface.
+        meets: (M,) float32 share that meet any shape (an emitter's too).
+    """
+
+    matrices: tuple
+    sees: np.ndarray
+    meets: np.ndarray
+
+    def bounce(self, irradiance: np.ndarray, channel: int, shared: np.ndarray) -> np.ndarray:
+        """(M,) float32: the irradiance one bounce adds, from the cache's (M,) ``irradiance`` of ``channel``."""
+        return np.asarray(self.matrices[channel] @ irradiance, np.float32)[shared]
+
+
 class CachedRenderer(HalfSpaceRenderer):
     """Renders objects from a diffuse irradiance cache at the vertices of a fine tessellation, with glossy lobes
     evaluated per ray (module docs).
@@ -326,15 +388,20 @@ class CachedRenderer(HalfSpaceRenderer):
     """
 
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE,
-                 lobe_samples: int = DEFAULT_LOBE_SAMPLES, glossy: bool = True) -> None:
+                 lobe_samples: int = DEFAULT_LOBE_SAMPLES, glossy: bool = True, bounces: int = 0,
+                 gather_rays: int = GATHER_RAYS) -> None:
         if not supports(objects):
             raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
         if lobe_samples < 1:
             raise ValueError(f"lobe_samples must be >= 1, got {lobe_samples}")
+        if bounces < 0 or gather_rays < 1:
+            raise ValueError(f"bounces must be >= 0 and gather_rays >= 1, got {bounces} and {gather_rays}")
         self.max_edge = float(max_edge)
         self.lobe_samples = int(lobe_samples)
         self.glossy = bool(glossy)
-        self.max_depth = 1
+        self.bounces = int(bounces)
+        self.gather_rays = int(gather_rays)
+        self.max_depth = 1 + self.bounces
         self._build(list(objects))
 
     def _build(self, objects: list) -> None:
@@ -387,6 +454,7 @@ class CachedRenderer(HalfSpaceRenderer):
         # irradiance and visibility are computed once per pair
         self._shared = np.concatenate(shared) if shared else np.zeros(0, np.int64)
         self._one_of = np.unique(self._shared, return_index=True)[1] if distinct else np.zeros(0, np.int64)
+        self._pair = jit_array(mi.UInt32, self._shared.astype(np.uint32))
         self._tables = np.stack(tables).astype(np.float32)                                 # (objects, TABLE_NODES)
         self._reflects_diffuse = self._tables[:, -1] > 0                                   # (objects,)
         # Registry id of each loaded shape -> its first cache vertex and what its material does.
@@ -412,6 +480,7 @@ class CachedRenderer(HalfSpaceRenderer):
         self._irradiance = None
         self._lit_by: tuple | None = None
         self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
+        self._gather: Interreflection | None = None
 
     def update(self, objects: Sequence) -> bool:
         """Move to new poses of the same objects (an animation frame).
@@ -455,11 +524,86 @@ class CachedRenderer(HalfSpaceRenderer):
             self.vertices[self._bases[i]:end] = v
             self.normals[self._bases[i]:end] = n
         params.update()
+        if not _moved_together(self.objects, objects):
+            self._gather = None
         self.objects = objects
         self._visibility.clear()
         self._per_light.clear()
         self._lit_by = None
         return True
+
+    @property
+    def exchanges(self) -> bool:
+        """Whether this renderer's surfaces light each other (:func:`exchanges_light`)."""
+        return exchanges_light(self.objects)
+
+    def _interreflection(self) -> Interreflection:
+        """The gather of :class:`Interreflection`, cast once per arrangement of the objects (kept while they move
+        together)."""
+        mi = mitsuba()
+        import drjit as dr
+        from scipy import sparse
+
+        if self._gather is not None:
+            return self._gather
+        one = self._one_of
+        m, count = len(self.vertices), len(one)
+        rows_obj = self._rows[one]
+        wanted = np.flatnonzero(self._reflects_diffuse[rows_obj] | self._glossy_objects[rows_obj])
+        side = max(1, int(round(np.sqrt(self.gather_rays))))
+        n = side * side
+        rng = np.random.default_rng(0)
+        j = np.arange(n)
+        sx = (j % side + rng.random((len(wanted), n))) / side
+        sy = (j // side + rng.random((len(wanted), n))) / side
+        radius, phi = np.sqrt(sx), 2.0 * np.pi * sy
+        cos_z = np.sqrt(np.maximum(1.0 - sx, 0.0))                       # (P, n) cosine to the normal
+        normal = self.normals[one[wanted]].astype(np.float64)
+        t, b = _tangents(normal)
+        dirs = ((radius * np.cos(phi))[..., None] * t[:, None] + (radius * np.sin(phi))[..., None] * b[:, None]
+                + cos_z[..., None] * normal[:, None]).reshape(-1, 3)
+        origins = np.repeat(self.vertices[one[wanted]] + 1e-5 * normal, n, axis=0)
+        rays = jit_rays(origins, dirs)
+        pi = self.scene.ray_intersect_preliminary(rays)
+        dr.eval(pi)
+        hit = np.flatnonzero(np.isfinite(np.array(pi.t, np.float32)))
+        matrices = [sparse.csr_matrix((count, m), dtype=np.float32) for _ in range(3)]
+        sees = np.zeros(count, np.float32)
+        meets = np.zeros(count, np.float32)
+        np.add.at(meets, wanted[hit // n], 1.0 / n)
+        if len(hit):
+            index = jit_array(mi.UInt32, hit.astype(np.uint32))
+            pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
+            rays = dr.gather(mi.Ray3f, rays, index)
+            si = pi.compute_surface_interaction(rays, mi.RayFlags.All)
+            sid = dr.reinterpret_array(mi.UInt32, pi.shape)
+            cached = (dr.gather(mi.UInt32, self._flags, sid) & 1) != 0
+            first = dr.gather(mi.UInt32, self._base, sid, cached) + pi.prim_index * 3
+            f = si.bsdf().eval(_context("diffuse"), si, mi.Vector3f(0.0, 0.0, 1.0), cached)
+            cached = np.array(cached, bool)
+            f = to_numpy(f).astype(np.float64)                             # (H, 3) diffuse radiance per irradiance
+            first = np.array(first, np.int64)
+            b1, b2 = np.array(pi.prim_uv.x, np.float64), np.array(pi.prim_uv.y, np.float64)
+            ray = hit[cached]
+            point = wanted[ray // n]                                        # receiving distinct point
+            np.add.at(sees, point, 1.0 / n)
+            cos = cos_z.reshape(-1)[ray]
+            tables = self._tables[rows_obj[point]]                          # (H', TABLE_NODES)
+            x = np.clip(cos, 0.0, 1.0) * (TABLE_NODES - 1)
+            i0 = np.minimum(x.astype(np.int64), TABLE_NODES - 2)
+            frac = x - i0
+            w = (1.0 - frac) * np.take_along_axis(tables, i0[:, None], 1)[:, 0] \
+                + frac * np.take_along_axis(tables, i0[:, None] + 1, 1)[:, 0]
+            weight = (np.pi / n) * w
+            bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)[cached]       # (H', 3)
+            rows = np.repeat(point, 3)
+            cols = (first[cached][:, None] + np.arange(3)[None, :]).reshape(-1)
+            for c in range(3):
+                vals = ((weight * f[cached, c])[:, None] * bary).reshape(-1)
+                matrices[c] = sparse.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(count, m))
+        self._gather = Interreflection(matrices=tuple(matrices), sees=sees[self._shared], meets=meets[self._shared])
+        self._sees = jit_array(mi.Float, self._gather.sees)
+        return self._gather
 
     @property
     def cache_size(self) -> int:
@@ -481,6 +625,12 @@ class CachedRenderer(HalfSpaceRenderer):
             for c in range(3):
                 total[c] += e[c]
         self._per_light = kept
+        if self.bounces and self.exchanges:
+            gather = self._interreflection()
+            bounce = total
+            for _ in range(self.bounces):
+                bounce = [gather.bounce(bounce[c], c, self._shared) for c in range(3)]
+                total = [t + b for t, b in zip(total, bounce)]
         self._irradiance = [jit_array(mi.Float, t) for t in total]
         self._lit_by = tuple(lights)
 
@@ -631,7 +781,8 @@ class CachedRenderer(HalfSpaceRenderer):
             glossy = cached & ((flags & 2) != 0)
             smooth = (flags & 4) != 0
             ctx = _context("glossy")
-            corners = [first + c for c in range(3)]
+            # the distinct cache point of each corner (the visibility tables hold one row per point)
+            corners = [dr.gather(mi.UInt32, self._pair, first + c, glossy) for c in range(3)]
             for light in lights:
                 if not hasattr(light, "reflect"):       # point lights, emitters: their own sampling
                     out += light.illuminate(self.scene, si, glossy, seed=seed, ctx=ctx)
@@ -654,7 +805,57 @@ class CachedRenderer(HalfSpaceRenderer):
                 if any_summed:
                     out += light.reflect(si, by_lenslet, ctx, seen, self._base_samples(), seed=seed)
                 out += self._lobe(si, glossy, by_lenslet, side, light, seen, seed)
+            if self.bounces and self.exchanges:       # the other objects' diffuse light in the lobe
+                self._interreflection()
+                sees_of = self._sees
+                sees = (b0 * dr.gather(mi.Float, sees_of, first, glossy)
+                        + b1 * dr.gather(mi.Float, sees_of, first + 1, glossy)
+                        + b2 * dr.gather(mi.Float, sees_of, first + 2, glossy))
+                out += self._lobe_neighbours(si, glossy & (sees > 0.0), seed)
         return out
+
+    def _lobe_neighbours(self, si, active, seed: int):
+        """The diffuse light of the other cached surfaces that a glossy lobe reflects (mi.Color3f, (N,)):
+        ``lobe_samples`` directions drawn from the lobe (stratified), each cast against the scene; a direction that
+        meets a cached surface reads its diffuse radiance (irradiance cache times its diffuse lobe), one that meets
+        nothing or the array is the light field's share (:meth:`_lobe`)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        n = dr.width(si.p)
+        ctx = _context("glossy")
+        diffuse = _context("diffuse")
+        bsdf = si.bsdf()
+        side = int(round(np.sqrt(self._base_samples())))
+        count = side * side
+        rng = mi.PCG32(n, dr.opaque(mi.UInt64, seed * 1000003 + 29), dr.arange(mi.UInt64, n))
+        irradiance = self._irradiance
+
+        def cond(j, rng, acc):
+            return active & (j < count)
+
+        def body(j, rng, acc):
+            r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
+            sample = mi.Point2f((mi.Float(j % side) + r2) / side, (mi.Float(j // side) + r3) / side)
+            bs, weight = bsdf.sample(ctx, si, r1, sample, active)
+            ok = active & dr.any(weight != 0.0)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            pi = self.scene.ray_intersect_preliminary(ray, active=ok)
+            sid = dr.reinterpret_array(mi.UInt32, pi.shape)
+            met = ok & pi.is_valid()
+            met &= (dr.gather(mi.UInt32, self._flags, sid, met) & 1) != 0
+            hit = pi.compute_surface_interaction(ray, mi.RayFlags.All, met)
+            first = dr.gather(mi.UInt32, self._base, sid, met) + pi.prim_index * 3
+            b1, b2 = pi.prim_uv.x, pi.prim_uv.y
+            b0 = 1.0 - b1 - b2
+            e = [b0 * dr.gather(mi.Float, x, first, met) + b1 * dr.gather(mi.Float, x, first + 1, met)
+                 + b2 * dr.gather(mi.Float, x, first + 2, met) for x in irradiance]
+            f = hit.bsdf().eval(diffuse, hit, mi.Vector3f(0.0, 0.0, 1.0), met)
+            acc += dr.select(met, weight * f * mi.Color3f(e[0], e[1], e[2]), 0.0)
+            return j + 1, rng, acc
+
+        _, _, acc = dr.while_loop((mi.UInt32(0), rng, mi.Color3f(0.0)), cond, body)
+        return dr.select(active, acc / count, 0.0)
 
     def _base_samples(self) -> int:
         side0 = max(1, int(round(np.sqrt(self.lobe_samples))))
@@ -722,9 +923,13 @@ class CachedRenderer(HalfSpaceRenderer):
         return dr.select(active, acc / n_f, 0.0)
 
     def _lenslet_visibility(self, light):
-        """mi.Float (M * K,): the fraction of each lenslet k's aperture (``VISIBILITY_POINTS`` stratified points)
-        that cache vertex v sees, at [v * K + k]; computed for the vertices of glossy objects that the light may
-        reach, once per lens array and side while nothing moves."""
+        """mi.Float (D * K,): the fraction of each lenslet k's aperture (``VISIBILITY_POINTS`` stratified points)
+        that distinct cache point d sees, at [d * K + k]; computed for the points of glossy objects that the light
+        may reach, once per lens array and side while nothing moves.
+
+        A point whose hemisphere holds no other shape (a convex object alone, or none of the interreflection
+        gather's directions met a shape) sees exactly the aperture points in front of its tangent plane; only the
+        others cast shadow rays."""
         mi = mitsuba()
         import drjit as dr
 
@@ -736,8 +941,27 @@ class CachedRenderer(HalfSpaceRenderer):
         one = self._one_of                      # once per distinct (position, normal) pair
         wanted = self._glossy_objects[self._rows[one]] & light.may_light(self.vertices[one], self.normals[one]) \
             if m else np.zeros(0, bool)
-        idx = one[wanted]
+        if len(self.objects) == 1 and self.objects[0].shape != "mesh":
+            free = np.ones(len(one), bool)
+        elif self.bounces and self.exchanges:
+            free = self._interreflection().meets[one] == 0
+        else:
+            free = np.zeros(len(one), bool)
         seen = np.zeros((len(one), K), np.float32)
+        offsets = array.sample_aperture(VISIBILITY_POINTS, seed=0)
+        open_ = wanted & free
+        if open_.any():
+            x = self.vertices[one[open_]].astype(np.float64)
+            n = self.normals[one[open_]].astype(np.float64)
+            height = np.einsum("fk,fk->f", n, x)[:, None]
+            front = np.zeros((len(x), K), np.float32)
+            for offset in offsets:
+                target = np.zeros((K, 3))
+                target[:, :2] = array.centres + offset
+                front += (n @ target.T > height).astype(np.float32)
+            seen[open_] = front / len(offsets)
+        shadowed = wanted & ~free
+        idx = one[shadowed]
         if len(idx):
             x = np.repeat(self.vertices[idx], K, axis=0)                  # (len(idx) * K, 3), k fastest
             nrm = np.repeat(self.normals[idx], K, axis=0)
@@ -746,12 +970,12 @@ class CachedRenderer(HalfSpaceRenderer):
             si.n = mi.Normal3f(*(jit_array(mi.Float, nrm[:, i]) for i in range(3)))
             centres = np.tile(array.centres, (len(idx), 1))
             total = mi.Float(0.0)
-            for offset in array.sample_aperture(VISIBILITY_POINTS, seed=0):
+            for offset in offsets:
                 target = centres + offset
                 p = mi.Point3f(jit_array(mi.Float, target[:, 0]), jit_array(mi.Float, target[:, 1]), 0.0)
                 total += dr.select(self.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
                 dr.eval(total)
-            seen[wanted] = (np.array(total, np.float32) / VISIBILITY_POINTS).reshape(len(idx), K)
-        table = jit_array(mi.Float, seen[self._shared])
+            seen[shadowed] = (np.array(total, np.float32) / len(offsets)).reshape(len(idx), K)
+        table = jit_array(mi.Float, seen)
         self._visibility[key] = table
         return table
