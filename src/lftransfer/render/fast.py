@@ -318,6 +318,18 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
     return t.vertices, t.normals
 
 
+def _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active):
+    """Direction j of ``strata`` x ``strata`` stratified directions drawn from the lobe ``ctx`` enables (Mitsuba's
+    own sampling; ``side`` is ``strata`` as a float): (BSDF sample, its weight, the lanes where it carries light)."""
+    mi = mitsuba()
+    import drjit as dr
+
+    r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
+    sample = mi.Point2f((mi.Float(j % strata) + r2) / side, (mi.Float(j // strata) + r3) / side)
+    bs, weight = bsdf.sample(ctx, si, r1, sample, active)
+    return bs, weight, active & dr.any(weight != 0.0)
+
+
 def exchanges_light(objects: Sequence) -> bool:
     """Whether the fast path's cached surfaces can light each other: two or more objects that reflect light, or a
     reflecting mesh (which may be concave); spheres, boxes, rectangles and cylinders alone cannot."""
@@ -835,10 +847,7 @@ class CachedRenderer(HalfSpaceRenderer):
             return active & (j < count)
 
         def body(j, rng, acc):
-            r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
-            sample = mi.Point2f((mi.Float(j % side) + r2) / side, (mi.Float(j // side) + r3) / side)
-            bs, weight = bsdf.sample(ctx, si, r1, sample, active)
-            ok = active & dr.any(weight != 0.0)
+            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, side, float(side), active)
             ray = si.spawn_ray(si.to_world(bs.wo))
             pi = self.scene.ray_intersect_preliminary(ray, active=ok)
             sid = dr.reinterpret_array(mi.UInt32, pi.shape)
@@ -909,11 +918,8 @@ class CachedRenderer(HalfSpaceRenderer):
             return active & (j < count)
 
         def body(j, rng, acc):
-            r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
-            sample = mi.Point2f((mi.Float(j % strata) + r2) / side, (mi.Float(j // strata) + r3) / side)
-            bs, weight = bsdf.sample(ctx, si, r1, sample, active)
+            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active)
             w = si.to_world(bs.wo)
-            ok = active & dr.any(weight != 0.0)
             radiance, k, p_l = light.incident(si.p, w, ok)
             mis = dr.select(summed, n_f * bs.pdf / dr.maximum(n_f * bs.pdf + p_l, 1e-30), 1.0)
             acc += dr.select(ok, weight * radiance * (seen(k) * mis), 0.0)
