@@ -63,6 +63,8 @@ def test_02_rays_of_the_last_short_tile():
 
 
 def test_03_culled_renders_equal_whole_ones(variant, monkeypatch):
+    """A second render of the same rays (a live loop's next frame) casts only the tiles that can meet an object,
+    and equals a render that casts every ray."""
     from lftransfer.backend import mitsuba
 
     mi = mitsuba()
@@ -81,8 +83,9 @@ def test_03_culled_renders_equal_whole_ones(variant, monkeypatch):
         monkeypatch.setattr(fast, "CULL_BELOW", cull)
         r = CachedRenderer(_objects())
         ball = CachedRenderer(_objects()[1:])            # small: most light field tiles miss it
-        renders[cull] = (r.render_view(sensor, 192, 144, light, spp=4),
-                         ball.render_lightfield(ARRAY, light, 24, 24, model="area", spp=4))
+        for _ in range(2):           # the tiles are built at a ray set's second render
+            renders[cull] = (r.render_view(sensor, 192, 144, light, spp=4),
+                             ball.render_lightfield(ARRAY, light, 24, 24, model="area", spp=4))
     (view_c, lf_c), (view, lf) = renders[1.0], renders[0.0]
     assert max(shares[:2]) < 1.0                     # both renders were culled (the view and the light field)
     assert view.alpha.mean() > 0.02 and lf.data.max() > 0

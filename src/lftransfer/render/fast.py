@@ -29,7 +29,11 @@ split into their two lobes:
   between a glossy object and the array comes from a second cache, the fraction of each lenslet's aperture
   (``VISIBILITY_POINTS`` points) that each cache vertex sees, interpolated like the irradiance and computed once
   per lens array while nothing moves (shadow rays only from points whose hemisphere holds another shape; the
-  others see what lies in front of their tangent plane). A smooth lobe (roughness 0) takes its one mirror direction. Under the
+  others see what lies in front of their tangent plane). A view camera's rays all start at its centre, so a lobe
+  of roughness at least ``PINHOLE_ROUGHNESS`` is not sampled at every view ray: its radiance towards the camera
+  is computed once per distinct cache point with ``PINHOLE_SAMPLES`` times the directions (the same estimators)
+  and interpolated like the irradiance (:meth:`CachedRenderer._pinhole_glossy`); light field rays, which start
+  all over the apertures, sample the lobe per ray. A smooth lobe (roughness 0) takes its one mirror direction. Under the
   point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is the
   exact path's lenslet sum with the cached visibility.
 
@@ -79,6 +83,8 @@ LOBE_ROUGHNESS = 0.15       # lobes up to this roughness take lobe_samples direc
 VISIBILITY_POINTS = 4       # aperture points per lenslet of the glossy lobes' visibility cache
 TABLE_NODES = 64            # nodes of the diffuse lobe's cosine table (Mitsuba's roughplastic tabulates 64)
 MATERIALS = ("diffuse", "glossy", "metal", "emitter")
+PINHOLE_ROUGHNESS = 0.15    # glossy lobes at least this rough are read from the cache points in a view render
+PINHOLE_SAMPLES = 4         # ... with this many times the lobe directions of a ray (the points are few)
 GATHER_RAYS = 64            # cosine-weighted directions per cache point of the interreflection gather (8 x 8 strata)
 CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
 
@@ -474,13 +480,21 @@ class CachedRenderer(HalfSpaceRenderer):
         order = {s.id(): i for i, s in enumerate(self.scene.shapes())}
         keys = list(shapes)
         table_base = np.zeros(max(ids) + 1, np.uint32)
-        table_flags = np.zeros(max(ids) + 1, np.uint32)        # bit 0: cached, bit 1: glossy, bit 2: smooth
+        table_flags = np.zeros(max(ids) + 1, np.uint32)        # bit 0: cached, bit 1: glossy, bit 2: smooth,
+        # bit 3: a glossy lobe rough enough to be read from the cache points towards a pinhole
         self._sids = np.zeros(len(keys), np.int64)              # registry id of each object's shape
+        self._scene_index = np.zeros(len(keys), np.int64)       # its index in scene.shapes()
+        self._pinhole_objects = np.array([_glossy(o.material) and o.material.roughness >= PINHOLE_ROUGHNESS
+                                          for o in self.objects], bool)
+        self._any_pinhole = self.glossy and bool(self._pinhole_objects.any())
+        self._pinhole_memo = None
         for i, (key, b, (cached, glossy, smooth)) in enumerate(zip(keys, bases, info)):
             sid = ids[order[key]]
             self._sids[i] = sid
             table_base[sid] = b
-            table_flags[sid] = int(cached) | (int(glossy) << 1) | (int(smooth) << 2)
+            table_flags[sid] = int(cached) | (int(glossy) << 1) | (int(smooth) << 2) \
+                | (int(bool(self._pinhole_objects[i])) << 3)
+            self._scene_index[i] = order[key]
         self._flags_size = len(table_flags)
         self._base = jit_array(mi.UInt32, table_base)
         self._flags = jit_array(mi.UInt32, table_flags)
@@ -540,6 +554,7 @@ class CachedRenderer(HalfSpaceRenderer):
             self._gather = None
         self.objects = objects
         self._visibility.clear()
+        self._pinhole_memo = None
         self._per_light.clear()
         self._lit_by = None
         return True
@@ -695,19 +710,23 @@ class CachedRenderer(HalfSpaceRenderer):
         return weight
 
     def _ray_tiles(self, origins: np.ndarray, directions: np.ndarray) -> RayTiles | None:
-        """The cones around tiles of a constant ray set (the memoised primary rays, read-only), built once per set
-        (a few per renderer); None for other rays (cast whole)."""
+        """The cones around tiles of a constant ray set (the memoised primary rays, read-only), built at the set's
+        second render (a live loop renders the same rays every frame; the bounce loop draws new ones per bounce,
+        where building the tiles would cost more than they save) and kept (a few per renderer); None for other
+        rays and at a set's first render (cast whole)."""
         if origins.flags.writeable or directions.flags.writeable or len(origins) < 64 * TILE:
             return None
         kept = self.__dict__.setdefault("_tile_memo", [])
-        for o, d, tiles in kept:
+        for i, (o, d, tiles) in enumerate(kept):
             if o is origins and d is directions:
+                if tiles is None:
+                    tiles = RayTiles.of(origins, directions)
+                    kept[i] = (o, d, tiles)
                 return tiles
-        tiles = RayTiles.of(origins, directions)
-        if len(kept) >= 4:
+        if len(kept) >= 8:
             kept.pop(0)
-        kept.append((origins, directions, tiles))
-        return tiles
+        kept.append((origins, directions, None))
+        return None
 
     def _hits(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], seed: int
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -740,7 +759,21 @@ class CachedRenderer(HalfSpaceRenderer):
         index = jit_array(mi.UInt32, local.astype(np.uint32))
         pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
         rays = dr.gather(mi.Ray3f, rays, index)
-        return idx, to_numpy(self._shade(rays, pi, lights, seed)), t[local]
+        return idx, to_numpy(self._shade(rays, pi, lights, seed, self._pinhole(origins))), t[local]
+
+    def _pinhole(self, origins: np.ndarray) -> np.ndarray | None:
+        """The one origin (3,) of a constant ray set whose rays all start there (a view camera), else None."""
+        if origins.flags.writeable or not len(origins):
+            return None
+        kept = self.__dict__.setdefault("_pinhole_rays", [])
+        for o, centre in kept:
+            if o is origins:
+                return centre
+        centre = np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None
+        if len(kept) >= 4:
+            kept.pop(0)
+        kept.append((origins, centre))
+        return centre
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -767,8 +800,13 @@ class CachedRenderer(HalfSpaceRenderer):
         return SampleMeans(radiance=(radiance * scale).astype(np.float32), coverage=hits * np.float32(scale),
                            depth=mean_depth(near, hits))
 
-    def _shade(self, rays, pi, lights: Sequence[Light], seed: int):
-        """Radiance (mi.Color3f, (N,)) leaving the hits ``pi`` of ``rays`` (all valid) back along the rays."""
+    def _shade(self, rays, pi, lights: Sequence[Light], seed: int, pinhole: np.ndarray | None = None):
+        """Radiance (mi.Color3f, (N,)) leaving the hits ``pi`` of ``rays`` (all valid) back along the rays.
+
+        ``pinhole``: the one origin (3,) of every ray (a view camera), or None; then glossy lobes rough enough
+        (:data:`PINHOLE_ROUGHNESS`) are read from their radiance towards that point at the cache points
+        (:meth:`_pinhole_glossy`), interpolated like the irradiance, instead of being sampled at every ray (not
+        under a light field of the point or prefiltered model, whose point lenslets make sharp highlights)."""
         mi = mitsuba()
         import drjit as dr
 
@@ -778,9 +816,8 @@ class CachedRenderer(HalfSpaceRenderer):
         cached = (flags & 1) != 0
         first = dr.gather(mi.UInt32, self._base, sid, cached) + pi.prim_index * 3
         b1, b2 = pi.prim_uv.x, pi.prim_uv.y
-        b0 = 1.0 - b1 - b2
-        e = [b0 * dr.gather(mi.Float, x, first, cached) + b1 * dr.gather(mi.Float, x, first + 1, cached)
-             + b2 * dr.gather(mi.Float, x, first + 2, cached) for x in self._irradiance]
+        bary = (1.0 - b1 - b2, b1, b2)
+        e = [self._interpolate(x, first, bary, cached) for x in self._irradiance]
         bsdf = si.bsdf()
         # the diffuse lobe towards the normal: albedo(uv) / pi for a diffuse material, A(uv) t(cos_i) t(1) for a
         # glossy one (module docs)
@@ -791,40 +828,110 @@ class CachedRenderer(HalfSpaceRenderer):
                 out += light.emitted(self.scene, si, mi.Bool(True))
         if self._any_glossy:
             glossy = cached & ((flags & 2) != 0)
-            smooth = (flags & 4) != 0
-            ctx = _context("glossy")
-            # the distinct cache point of each corner (the visibility tables hold one row per point)
-            corners = [dr.gather(mi.UInt32, self._pair, first + c, glossy) for c in range(3)]
-            for light in lights:
-                if not hasattr(light, "reflect"):       # point lights, emitters: their own sampling
-                    out += light.illuminate(self.scene, si, glossy, seed=seed, ctx=ctx)
-                    continue
-                table = self._lenslet_visibility(light)
-                K = light.K
-
-                def seen(k, table=table, K=K):
-                    ok = glossy & (k < K)
-                    return (b0 * dr.gather(mi.Float, table, corners[0] * K + k, ok)
-                            + b1 * dr.gather(mi.Float, table, corners[1] * K + k, ok)
-                            + b2 * dr.gather(mi.Float, table, corners[2] * K + k, ok))
-
-                if light.model != "area":         # lenslets are points: summed, as the exact path does
-                    out += light.reflect(si, glossy & ~smooth, ctx, seen, seed=seed)
-                    continue
-                strata, summed, any_summed = self._strategies(light)
-                side = dr.gather(mi.UInt32, strata, sid, glossy)
-                by_lenslet = glossy & (dr.gather(mi.UInt32, summed, sid, glossy) != 0)
-                if any_summed:
-                    out += light.reflect(si, by_lenslet, ctx, seen, self._base_samples(), seed=seed)
-                out += self._lobe(si, glossy, by_lenslet, side, light, seen, seed)
-            if self.bounces and self.exchanges:       # the other objects' diffuse light in the lobe
-                self._interreflection()
-                sees_of = self._sees
-                sees = (b0 * dr.gather(mi.Float, sees_of, first, glossy)
-                        + b1 * dr.gather(mi.Float, sees_of, first + 1, glossy)
-                        + b2 * dr.gather(mi.Float, sees_of, first + 2, glossy))
-                out += self._lobe_neighbours(si, glossy & (sees > 0.0), seed)
+            # a light field of point lenslets makes sharp highlights (one per lenslet): those stay per ray
+            if pinhole is not None and self._any_pinhole and all(getattr(x, "model", "area") == "area"
+                                                                 for x in lights):
+                at_points = glossy & ((flags & 8) != 0)
+                g = [self._interpolate(x, first, bary, at_points) for x in self._pinhole_glossy(pinhole, lights, seed)]
+                out += dr.select(at_points, mi.Color3f(g[0], g[1], g[2]), 0.0)
+                glossy &= ~at_points
+            out += self._glossy(si, glossy, sid, flags, first, bary, lights, seed)
         return out
+
+    @staticmethod
+    def _interpolate(values, first, bary, active):
+        """Barycentric interpolation of (M,) per-vertex ``values`` over the triangles starting at ``first``."""
+        mi = mitsuba()
+        import drjit as dr
+
+        return (bary[0] * dr.gather(mi.Float, values, first, active)
+                + bary[1] * dr.gather(mi.Float, values, first + 1, active)
+                + bary[2] * dr.gather(mi.Float, values, first + 2, active))
+
+    def _glossy(self, si, glossy, sid, flags, first, bary, lights: Sequence[Light], seed: int):
+        """The glossy and metal lobes' light at the shading points ``si`` where ``glossy`` (mi.Color3f): point lights
+        and emitters by their own sampling, a light field by :meth:`_lobe` (and the lenslet sum where it pays), the
+        other cached surfaces by :meth:`_lobe_neighbours`; ``first`` and ``bary`` place each point in its cache
+        triangle (for the visibility and gather tables)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        out = mi.Color3f(0.0)
+        smooth = (flags & 4) != 0
+        ctx = _context("glossy")
+        # the distinct cache point of each corner (the visibility tables hold one row per point)
+        corners = [dr.gather(mi.UInt32, self._pair, first + c, glossy) for c in range(3)]
+        b0, b1, b2 = bary
+        for light in lights:
+            if not hasattr(light, "reflect"):       # point lights, emitters: their own sampling
+                out += light.illuminate(self.scene, si, glossy, seed=seed, ctx=ctx)
+                continue
+            table = self._lenslet_visibility(light)
+            K = light.K
+
+            def seen(k, table=table, K=K):
+                ok = glossy & (k < K)
+                return (b0 * dr.gather(mi.Float, table, corners[0] * K + k, ok)
+                        + b1 * dr.gather(mi.Float, table, corners[1] * K + k, ok)
+                        + b2 * dr.gather(mi.Float, table, corners[2] * K + k, ok))
+
+            if light.model != "area":         # lenslets are points: summed, as the exact path does
+                out += light.reflect(si, glossy & ~smooth, ctx, seen, seed=seed)
+                continue
+            strata, summed, any_summed = self._strategies(light)
+            side = dr.gather(mi.UInt32, strata, sid, glossy)
+            by_lenslet = glossy & (dr.gather(mi.UInt32, summed, sid, glossy) != 0)
+            if any_summed:
+                out += light.reflect(si, by_lenslet, ctx, seen, self._base_samples(), seed=seed)
+            out += self._lobe(si, glossy, by_lenslet, side, light, seen, seed)
+        if self.bounces and self.exchanges:       # the other objects' diffuse light in the lobe
+            self._interreflection()
+            sees = self._interpolate(self._sees, first, bary, glossy)
+            out += self._lobe_neighbours(si, glossy & (sees > 0.0), seed)
+        return out
+
+    def _pinhole_glossy(self, origin: np.ndarray, lights: Sequence[Light], seed: int) -> list:
+        """(3,) mi.Float (M,): the glossy lobes' radiance from every cache point of an object rough enough
+        (:data:`PINHOLE_ROUGHNESS`) towards the point ``origin`` (a view camera's centre), zero elsewhere and at
+        points facing away; computed by :meth:`_glossy` once per distinct cache point and kept while the lights,
+        the seed and the objects stay."""
+        mi = mitsuba()
+        import drjit as dr
+
+        key = (tuple(np.round(np.asarray(origin, np.float64), 9)), tuple(id(x) for x in lights), seed)
+        kept = self.__dict__.get("_pinhole_memo")
+        if kept is not None and kept[0] == key and all(a is b for a, b in zip(kept[1], lights)):
+            return kept[2]
+        one = self._one_of
+        m = len(self.vertices)
+        rows = self._rows[one]
+        x, n = self.vertices[one].astype(np.float64), self.normals[one].astype(np.float64)
+        towards = np.asarray(origin, np.float64)[None, :] - x
+        want = self._pinhole_objects[rows] & (np.einsum("dk,dk->d", towards, n) > 0) if m else np.zeros(0, bool)
+        per_pair = np.zeros((len(one), 3), np.float32)
+        if want.any():
+            v = one[want]                                        # a cache vertex of each point
+            w = towards[want] / np.linalg.norm(towards[want], axis=1, keepdims=True)
+            si = dr.zeros(mi.SurfaceInteraction3f, len(v))
+            si.p = mi.Point3f(*(jit_array(mi.Float, x[want][:, i]) for i in range(3)))
+            si.n = mi.Normal3f(*(jit_array(mi.Float, n[want][:, i]) for i in range(3)))
+            si.sh_frame = mi.Frame3f(si.n)
+            si.wi = si.sh_frame.to_local(mi.Vector3f(*(jit_array(mi.Float, w[:, i]) for i in range(3))))
+            si.shape = dr.gather(mi.ShapePtr, self.scene.shapes_dr(),
+                                 jit_array(mi.UInt32, self._scene_index[rows[want]].astype(np.uint32)))
+            sid = jit_array(mi.UInt32, self._sids[rows[want]].astype(np.uint32))
+            flags = dr.gather(mi.UInt32, self._flags, sid)
+            first = jit_array(mi.UInt32, (v - v % 3).astype(np.uint32))
+            corner = v % 3
+            bary = tuple(jit_array(mi.Float, (corner == c).astype(np.float32)) for c in range(3))
+            samples, self.lobe_samples = self.lobe_samples, self.lobe_samples * PINHOLE_SAMPLES
+            try:
+                per_pair[want] = to_numpy(self._glossy(si, mi.Bool(True), sid, flags, first, bary, lights, seed))
+            finally:
+                self.lobe_samples = samples
+        values = [jit_array(mi.Float, per_pair[self._shared, c]) for c in range(3)]
+        self._pinhole_memo = (key, tuple(lights), values)
+        return values
 
     def _lobe_neighbours(self, si, active, seed: int):
         """The diffuse light of the other cached surfaces that a glossy lobe reflects (mi.Color3f, (N,)):

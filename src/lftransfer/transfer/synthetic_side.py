@@ -32,14 +32,14 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
     Monte Carlo error: diffuse, glossy and metal materials (glossy and metal of roughness at least
     ``fast.MIN_ROUGHNESS`` = 0.02, where the fast path's error against the converged exact path was measured to
     be no larger than the exact path's at its default samples; below it neither path converges, and the exact
-    path stays the reference) and emitters; otherwise the exact path. Diffuse synthetic objects that light each
-    other take the fast path, whose interreflection gather renders the light they exchange (measured against the
-    converged exact path, tests/render/test_fast.py::test_16); two or more reflecting objects of which one is
-    glossy or metal take the exact path: the gather leaves out the glossy light they reflect onto each other, and
-    on Fig. 1b's gold frame and coated photograph the fast path was measured 1.8 dB worse than the exact path
-    against ground truth (benchmarks/glossy/fast_vs_exact.py). A half-space where nothing reflects light (no
-    objects, or emitters only) always takes the exact path: there is no irradiance to cache, and the exact path
-    only shows the emitters.
+    path stays the reference) and emitters; otherwise the exact path. Synthetic objects that light each other
+    take the fast path, whose interreflection gather renders the diffuse light they exchange (measured against
+    the converged exact path, tests/render/test_fast.py::test_16), where their glossy and metal lobes are at least
+    ``fast.PINHOLE_ROUGHNESS`` rough (Fig. 6's frame: the same cross error and PSNR over the objects as the exact
+    path against ground truth, benchmarks/glossy/fast_vs_exact.py); smoother lobes among several reflecting
+    objects take the exact path (Fig. 1b's gold frame and coated photograph: the fast path measured 1.8 dB worse
+    over the synthetic objects). A half-space where nothing reflects light (no objects, or emitters only) always
+    takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters.
     """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
@@ -48,7 +48,9 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
     if kind == "auto":
         ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
         reflecting = _reflecting(scene)
-        glossy_exchange = len(reflecting) > 1 and any(o.material.type in ("glossy", "metal") for o in reflecting)
+        glossy_exchange = len(reflecting) > 1 and any(o.material.type in ("glossy", "metal")
+                                                      and o.material.roughness < fast.PINHOLE_ROUGHNESS
+                                                      for o in reflecting)
         return "fast" if ok and not glossy_exchange else "exact"
     return kind
 
