@@ -108,6 +108,8 @@ def test_04_glossy_and_metal_take_the_fast_path_where_verified(variant):
         shiny = with_material(material)
         assert resolve_renderer(shiny) == "fast" and isinstance(synthetic_renderer(shiny), CachedRenderer)
         assert any("glossy and metal lobes" in note for note in approximations(shiny))
+        assert any("at the cache points towards the camera" in note
+                   for note in approximations(shiny)) == (material["roughness"] >= 0.15)
     for roughness, words in ((0.01, "not verified"), (0.0, "mirror the captured light field")):
         rough = with_material({"type": "metal", "roughness": roughness})
         assert resolve_renderer(rough) == "exact" and type(synthetic_renderer(rough)) is HalfSpaceRenderer

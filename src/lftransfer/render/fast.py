@@ -33,9 +33,9 @@ split into their two lobes:
   of roughness at least ``PINHOLE_ROUGHNESS`` is not sampled at every view ray: its radiance towards the camera
   is computed once per distinct cache point with ``PINHOLE_SAMPLES`` times the directions (the same estimators)
   and interpolated like the irradiance (:meth:`CachedRenderer._pinhole_glossy`); light field rays, which start
-  all over the apertures, sample the lobe per ray. A smooth lobe (roughness 0) takes its one mirror direction. Under the
-  point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is the
-  exact path's lenslet sum with the cached visibility.
+  all over the apertures, sample the lobe per ray. A smooth lobe (roughness 0) takes its one mirror direction.
+  Under the point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is
+  the exact path's lenslet sum with the cached visibility.
 
 Synthetic objects that light each other (two or more reflecting objects, or a mesh) exchange light through an
 interreflection gather (:class:`Interreflection`, ``bounces`` = the scene's ``max_depth`` - 1): every distinct
@@ -54,12 +54,12 @@ each frame relights only for the new light field.
 
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`
 with the scene's ``max_depth``): the light synthetic objects exchange is their diffuse light only, gathered over
-``GATHER_RAYS`` directions per cache point; diffuse irradiance varies linearly across triangles of size ``max_edge`` (6 mm by default, four times
-finer than a lenslet), so diffuse shadow edges, and the light field's shadows in glossy lobes, are blurred over
-one triangle; the glossy lobe is a Monte Carlo estimate with its own noise (measured no larger than the exact
-path's at its default samples, for roughness >= :data:`MIN_ROUGHNESS`); where the exact path (next-event
-estimation only) renders no light in a smooth (roughness 0) lobe, the fast path renders the mirror image of the
-light field.
+``GATHER_RAYS`` directions per cache point; diffuse irradiance varies linearly across triangles of size
+``max_edge`` (6 mm by default, four times finer than a lenslet), so diffuse shadow edges, and the light field's
+shadows in glossy lobes, are blurred over one triangle; the glossy lobe is a Monte Carlo estimate with its own
+noise (measured no larger than the exact path's at its default samples, for roughness >= :data:`MIN_ROUGHNESS`);
+where the exact path (next-event estimation only) renders no light in a smooth (roughness 0) lobe, the fast path
+renders the mirror image of the light field.
 """
 
 from __future__ import annotations

@@ -67,6 +67,11 @@ def approximations(scene, kind: str = "auto") -> list[str]:
         notes.append("fast path: glossy and metal lobes evaluated per ray, the light field's share by "
                      f"{fast.DEFAULT_LOBE_SAMPLES} or more directions drawn from the lobe, its occlusion read from the "
                      "cache (shadows of lenslets blurred across a cache triangle)")
+    at_points = [o.name for o in glossy if o.material.roughness >= fast.PINHOLE_ROUGHNESS]
+    if at_points:
+        notes.append(f"fast path: in the view, the lobes of roughness >= {fast.PINHOLE_ROUGHNESS} "
+                     f"({', '.join(at_points)}) computed at the cache points towards the camera "
+                     f"({fast.PINHOLE_SAMPLES} x the directions) and interpolated across each triangle")
     rough = [o.name for o in glossy if 0 < o.material.roughness < fast.MIN_ROUGHNESS]
     if rough:
         notes.append(f"fast path: roughness below {fast.MIN_ROUGHNESS} ({', '.join(rough)}) is not verified against "

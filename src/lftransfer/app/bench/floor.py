@@ -46,7 +46,8 @@ class RayRecorder:
     """Records the rays a renderer casts while it is active: ``with RayRecorder(renderer) as rec: side.render(...)``.
 
     The renderer's ``render_samples`` (through which every primary ray of a light field or view render goes) is
-    wrapped on the instance (the class is untouched) and unwrapped on exit; the rays are kept by reference (the renderers build primary rays once and reuse them, so nothing is copied).
+    wrapped on the instance (the class is untouched) and unwrapped on exit; the rays are kept by reference (the
+    renderers build primary rays once and reuse them, so nothing is copied).
 
     Attributes:
         batches: one :class:`RayBatch` per ``render_samples`` call, in call order (the step renders the light field
