@@ -717,16 +717,18 @@ class CachedRenderer(HalfSpaceRenderer):
         if origins.flags.writeable or directions.flags.writeable or len(origins) < 64 * TILE:
             return None
         kept = self.__dict__.setdefault("_tile_memo", [])
-        for i, (o, d, tiles) in enumerate(kept):
+        for o, d, tiles in kept:
             if o is origins and d is directions:
-                if tiles is None:
-                    tiles = RayTiles.of(origins, directions)
-                    kept[i] = (o, d, tiles)
                 return tiles
-        if len(kept) >= 8:
+        seen = self.__dict__.setdefault("_rays_seen", [])     # ids only: a first sighting holds no arrays
+        if (id(origins), id(directions)) not in seen:
+            seen[:] = [*seen[-7:], (id(origins), id(directions))]
+            return None
+        tiles = RayTiles.of(origins, directions)
+        if len(kept) >= 4:
             kept.pop(0)
-        kept.append((origins, directions, None))
-        return None
+        kept.append((origins, directions, tiles))
+        return tiles
 
     def _hits(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], seed: int
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -770,7 +772,7 @@ class CachedRenderer(HalfSpaceRenderer):
             if o is origins:
                 return centre
         centre = np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None
-        if len(kept) >= 4:
+        if len(kept) >= 2:
             kept.pop(0)
         kept.append((origins, centre))
         return centre

@@ -27,7 +27,7 @@ def test_01_quick_bench_writes_json_with_settings(tmp_path, monkeypatch):
     result = _invoke(["bench", "--quick", "--rig-model", "oracle", "--iterations", "1", "--no-peer", "--no-accuracy",
                       "--json", out])
     assert result.exit_code == 0, (result.output, result.exception)
-    assert len(calls) == 2                                             # warm-up + 1 timed frame
+    assert len(calls) == 3                                             # 2 warm-up + 1 timed frame
     data = json.loads(out.read_text())
     assert data["pipeline_iteration_ms"] >= data["floor_ms"] > 0
     s = data["settings"]

@@ -124,7 +124,7 @@ def test_05_calibrates_first_without_a_file(tiny, monkeypatch):
     calls = _counting_step(monkeypatch)
     result = run_bench(tiny, BenchOptions(iterations=1, peer=False, accuracy=False))
     assert len(done) == 1 and not hasattr(done[0], "real")                      # the synthetic part only
-    assert len(calls) == 2
+    assert len(calls) == 3                                                     # 2 warm-up + 1 timed
     assert result.settings["rig_model"].startswith("calibrated (by the bench")
     assert result.settings["calibration_file"] is None and result.fast_vs_exact is None
 

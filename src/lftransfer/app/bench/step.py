@@ -7,7 +7,8 @@ samples, reconstruction, ``render.spp`` rays per light field sample and per view
 
 - the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
   render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
-  frame, median over the timed frames after ``warmup`` frames that compile the kernels;
+  frame, median over the timed frames after ``warmup`` frames (the first compiles the kernels, the second
+  builds the primary rays' culling tiles);
 - the rig's capture (:data:`RIG_STAGES`): in the simulated rig, the simulator's rendering of the real scene;
   a physical rig's exposure instead;
 - the rest of the step's wall time (``unstaged_ms``): the rig's ``setup`` and ``project`` calls and the step's
@@ -52,7 +53,8 @@ class BenchOptions:
 
     Attributes:
         iterations: timed frames (>= 1).
-        warmup: frames run first and not timed (>= 1: the first compiles the kernels).
+        warmup: frames run first and not timed (>= 1: the first compiles the kernels, the second builds the
+            primary rays' culling tiles, :mod:`lftransfer.render.culling`).
         lighting_model: None: the scene's ``render.lighting_model`` (as the demo); else "area", "point",
             "prefiltered" (as ``lft run --lighting-model``).
         reconstruction: None: the scene's ``render.reconstruction``; else "box" or "linear" (area model only).
@@ -70,7 +72,7 @@ class BenchOptions:
     """
 
     iterations: int = 10
-    warmup: int = 1
+    warmup: int = 2
     lighting_model: str | None = None
     reconstruction: str | None = None
     renderer: str = "auto"
@@ -297,7 +299,7 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
             return live.step(times[next(frame_index) % len(times)])
 
         for i in range(options.warmup):
-            say(f"warm-up frame {i + 1}/{options.warmup} (compiles the kernels)")
+            say(f"warm-up frame {i + 1}/{options.warmup} (kernels, ray tiles)")
             with RayRecorder(live.side.renderer) as recorder:
                 step()
         frames = []
