@@ -615,12 +615,12 @@ class CachedRenderer(HalfSpaceRenderer):
             point = wanted[ray // n]                                        # receiving distinct point
             np.add.at(sees, point, 1.0 / n)
             cos = cos_z.reshape(-1)[ray]
-            tables = self._tables[rows_obj[point]]                          # (H', TABLE_NODES)
-            x = np.clip(cos, 0.0, 1.0) * (TABLE_NODES - 1)
-            i0 = np.minimum(x.astype(np.int64), TABLE_NODES - 2)
-            frac = x - i0
-            w = (1.0 - frac) * np.take_along_axis(tables, i0[:, None], 1)[:, 0] \
-                + frac * np.take_along_axis(tables, i0[:, None] + 1, 1)[:, 0]
+            receiver = rows_obj[point]                                      # the receiving object's lobe table
+            nodes = np.linspace(0.0, 1.0, TABLE_NODES)
+            w = np.empty(len(cos))
+            for obj in np.unique(receiver):
+                at = receiver == obj
+                w[at] = np.interp(cos[at], nodes, self._tables[obj])
             weight = (np.pi / n) * w
             bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)[cached]       # (H', 3)
             rows = np.repeat(point, 3)
@@ -900,9 +900,10 @@ class CachedRenderer(HalfSpaceRenderer):
         mi = mitsuba()
         import drjit as dr
 
-        key = (tuple(np.round(np.asarray(origin, np.float64), 9)), tuple(id(x) for x in lights), seed)
-        kept = self.__dict__.get("_pinhole_memo")
-        if kept is not None and kept[0] == key and all(a is b for a, b in zip(kept[1], lights)):
+        key = (tuple(np.round(np.asarray(origin, np.float64), 9)), seed)
+        kept = self._pinhole_memo
+        if kept is not None and kept[0] == key and len(kept[1]) == len(lights) \
+                and all(a is b for a, b in zip(kept[1], lights)):
             return kept[2]
         one = self._one_of
         m = len(self.vertices)
@@ -964,10 +965,8 @@ class CachedRenderer(HalfSpaceRenderer):
             met &= (dr.gather(mi.UInt32, self._flags, sid, met) & 1) != 0
             hit = pi.compute_surface_interaction(ray, mi.RayFlags.All, met)
             first = dr.gather(mi.UInt32, self._base, sid, met) + pi.prim_index * 3
-            b1, b2 = pi.prim_uv.x, pi.prim_uv.y
-            b0 = 1.0 - b1 - b2
-            e = [b0 * dr.gather(mi.Float, x, first, met) + b1 * dr.gather(mi.Float, x, first + 1, met)
-                 + b2 * dr.gather(mi.Float, x, first + 2, met) for x in irradiance]
+            bary = (1.0 - pi.prim_uv.x - pi.prim_uv.y, pi.prim_uv.x, pi.prim_uv.y)
+            e = [self._interpolate(x, first, bary, met) for x in irradiance]
             f = hit.bsdf().eval(diffuse, hit, mi.Vector3f(0.0, 0.0, 1.0), met)
             acc += dr.select(met, weight * f * mi.Color3f(e[0], e[1], e[2]), 0.0)
             return j + 1, rng, acc
