@@ -171,7 +171,7 @@ def test_08_cross_by_side_splits_where_the_error_is():
     ones has error 0 and energy ratio 1 there, 0.2 and 0.8 here, and no error left after the best scale (a pure
     energy loss); a wrong shape of the same energy keeps its error after scaling. The two halves' squared errors
     add up to the whole cross error's."""
-    from lftransfer.sim.verify import GroundTruth, cross_by_side
+    from lftransfer.sim.verify import GroundTruth, cross_by_side, object_mask
 
     rng = np.random.default_rng(3)
     h, w = 8, 12
@@ -186,7 +186,8 @@ def test_08_cross_by_side_splits_where_the_error_is():
     pair = [c + noise, c - noise]
     lft = c.copy()
     lft[:, 5:] *= 0.8
-    split = cross_by_side(lft, pair, gt, 1)
+    covered, synthetic = object_mask(gt, 1), alpha_syn > 0.5
+    split = cross_by_side(lft, pair, covered, synthetic)
     assert split["synthetic"].rel_error == pytest.approx(0, abs=1e-6) and split["synthetic"].energy_ratio == \
         pytest.approx(1)
     assert split["real"].rel_error == pytest.approx(0.2, rel=1e-4) and split["real"].energy_ratio == \
@@ -196,7 +197,7 @@ def test_08_cross_by_side_splits_where_the_error_is():
     assert 0 < split["real"].gt_noise_rel < 0.01
     flipped = c.copy()
     flipped[:, 5:] = c[:, 5:][:, ::-1]                       # the same light, in the wrong places
-    assert cross_by_side(flipped, pair, gt, 1)["real"].rel_error_shape > 0.1
+    assert cross_by_side(flipped, pair, covered, synthetic)["real"].rel_error_shape > 0.1
     total = np.sqrt(np.sum((lft - c) ** 2) / np.sum(c ** 2))
     parts = [split[s].rel_error ** 2 * np.sum(c[m] ** 2) for s, m in (("real", alpha_real > 0), ("synthetic", alpha_syn > 0))]
     assert np.sqrt(sum(parts) / np.sum(c ** 2)) == pytest.approx(total, rel=1e-5)

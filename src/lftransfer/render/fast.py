@@ -64,6 +64,7 @@ renders the mirror image of the light field.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -383,6 +384,24 @@ class Interreflection:
     def bounce(self, irradiance: np.ndarray, channel: int, shared: np.ndarray) -> np.ndarray:
         """(M,) float32: the irradiance one bounce adds, from the cache's (M,) ``irradiance`` of ``channel``."""
         return np.asarray(self.matrices[channel] @ irradiance, np.float32)[shared]
+
+
+@dataclass(eq=False)
+class _RaySet:
+    """A constant ray set a renderer has cast (the memoised primary rays of a view or light field render).
+
+    Attributes:
+        origins, directions: weak references to its (N, 3) float32 arrays (identity is the key).
+        centre: (3,) the one origin every ray starts from (a view camera), or None.
+        renders: how many renders cast it.
+        tiles: its cones for culling, once built (:meth:`CachedRenderer._ray_tiles`).
+    """
+
+    origins: weakref.ref
+    directions: weakref.ref
+    centre: np.ndarray | None
+    renders: int = 0
+    tiles: RayTiles | None = None
 
 
 class CachedRenderer(HalfSpaceRenderer):
@@ -709,26 +728,32 @@ class CachedRenderer(HalfSpaceRenderer):
                              + f * dr.gather(mi.Float, tables, start + i + 1))
         return weight
 
-    def _ray_tiles(self, origins: np.ndarray, directions: np.ndarray) -> RayTiles | None:
-        """The cones around tiles of a constant ray set (the memoised primary rays, read-only), built at the set's
-        second render (a live loop renders the same rays every frame; the bounce loop draws new ones per bounce,
-        where building the tiles would cost more than they save) and kept (a few per renderer); None for other
-        rays and at a set's first render (cast whole)."""
-        if origins.flags.writeable or directions.flags.writeable or len(origins) < 64 * TILE:
+    def _ray_set(self, origins: np.ndarray, directions: np.ndarray) -> _RaySet | None:
+        """What this renderer knows of a constant ray set (the memoised primary rays, read-only, recognised by
+        identity), with this render counted; None for other rays. A few sets are kept, by weak reference."""
+        if origins.flags.writeable or directions.flags.writeable or not len(origins):
             return None
-        kept = self.__dict__.setdefault("_tile_memo", [])
-        for o, d, tiles in kept:
-            if o is origins and d is directions:
-                return tiles
-        seen = self.__dict__.setdefault("_rays_seen", [])     # ids only: a first sighting holds no arrays
-        if (id(origins), id(directions)) not in seen:
-            seen[:] = [*seen[-7:], (id(origins), id(directions))]
+        sets = [r for r in self.__dict__.get("_ray_sets", []) if r.origins() is not None]
+        found = next((r for r in sets if r.origins() is origins and r.directions() is directions), None)
+        if found is None:
+            centre = np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None
+            found = _RaySet(weakref.ref(origins), weakref.ref(directions), centre)
+            sets = [*sets[-7:], found]
+        self.__dict__["_ray_sets"] = sets
+        found.renders += 1
+        return found
+
+    @staticmethod
+    def _ray_tiles(ray_set: _RaySet | None, origins: np.ndarray, directions: np.ndarray) -> RayTiles | None:
+        """The cones around tiles of a constant ray set, built at the set's second render (a live loop renders the
+        same rays every frame; the bounce loop draws new ones per bounce, where building the tiles would cost more
+        than they save) and kept with the set; None for other rays, small sets and at a set's first render (cast
+        whole)."""
+        if ray_set is None or ray_set.renders < 2 or len(origins) < 64 * TILE:
             return None
-        tiles = RayTiles.of(origins, directions)
-        if len(kept) >= 4:
-            kept.pop(0)
-        kept.append((origins, directions, tiles))
-        return tiles
+        if ray_set.tiles is None:
+            ray_set.tiles = RayTiles.of(origins, directions)
+        return ray_set.tiles
 
     def _hits(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], seed: int
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -745,7 +770,8 @@ class CachedRenderer(HalfSpaceRenderer):
             self.relight(lights, seed=seed)
         rays = self.jit_rays(origins, directions)
         cast = None                                    # indices of the rays cast (None: all of them)
-        tiles = self._ray_tiles(origins, directions)
+        ray_set = self._ray_set(origins, directions)
+        tiles = self._ray_tiles(ray_set, origins, directions)
         if tiles is not None:
             chosen = tiles.meeting(*bounding_spheres(self.scene))
             if chosen.mean() < CULL_BELOW:
@@ -761,21 +787,7 @@ class CachedRenderer(HalfSpaceRenderer):
         index = jit_array(mi.UInt32, local.astype(np.uint32))
         pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
         rays = dr.gather(mi.Ray3f, rays, index)
-        return idx, to_numpy(self._shade(rays, pi, lights, seed, self._pinhole(origins))), t[local]
-
-    def _pinhole(self, origins: np.ndarray) -> np.ndarray | None:
-        """The one origin (3,) of a constant ray set whose rays all start there (a view camera), else None."""
-        if origins.flags.writeable or not len(origins):
-            return None
-        kept = self.__dict__.setdefault("_pinhole_rays", [])
-        for o, centre in kept:
-            if o is origins:
-                return centre
-        centre = np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None
-        if len(kept) >= 2:
-            kept.pop(0)
-        kept.append((origins, centre))
-        return centre
+        return idx, to_numpy(self._shade(rays, pi, lights, seed, None if ray_set is None else ray_set.centre)), t[local]
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

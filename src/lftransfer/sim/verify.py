@@ -305,22 +305,21 @@ class CrossSide:
     pixels: int
 
 
-def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], gt: GroundTruth, factor: int) -> dict[str, CrossSide]:
+def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], covered: np.ndarray,
+                  synthetic: np.ndarray) -> dict[str, CrossSide]:
     """The cross term's error split into the pixels where a synthetic object is seen (lit by the captured light
     field) and those where only real objects are (lit through the projector).
 
     Args:
         c_lft: (h, w, 3) the transfer's cross term at the metrics' resolution.
-        c_gt_pair: the two ground truths' cross terms (:func:`cross_term_truth`).
-        gt: the ground truth (its object masks).
-        factor: the metrics' downsampling factor.
+        c_gt_pair: the two ground truths' cross terms (:func:`cross_term_truth`), (h, w, 3) each.
+        covered: (h, w) bool, the pixels the objects cover (:func:`object_mask`).
+        synthetic: (h, w) bool, the pixels where a synthetic object is seen.
 
     Returns:
         ``{"real": CrossSide, "synthetic": CrossSide}``.
     """
     c_gt = 0.5 * (c_gt_pair[0] + c_gt_pair[1])
-    synthetic = downsample(gt.alpha_synthetic, factor) > 0.5
-    covered = object_mask(gt, factor)
     out = {}
     for side, where in (("real", covered & ~synthetic), ("synthetic", covered & synthetic)):
         g, l_ = c_gt[where], c_lft[where]
@@ -396,7 +395,8 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
         metric_resolution=(int(union.shape[1]), int(union.shape[0])),
         metric_pixels=int(mask.sum()),
         undefined=undefined,
-        cross_by_side=cross_by_side(c_lft, c_gt_pair, gt, f) if mask.any() and c_norm > 0 else {},
+        cross_by_side=(cross_by_side(c_lft, c_gt_pair, mask, ds(gt.alpha_synthetic) > 0.5)
+                       if mask.any() and c_norm > 0 else {}),
     )
 
 
