@@ -24,8 +24,13 @@ Variants run Fig. 4 and three scenes of this folder (quarter resolution, true ri
 reconstruction, 2 bounces, ground truth 8192 samples per pixel) and print ``cross_by_side`` as
 ``where_the_error_is.py`` does.
 
-Run: python benchmarks/reconstruction/projector_prefilter.py   (about 1 minute once the ground truths are
-cached). The table is in docs/architecture.md ("The projector's side").
+``--fig5`` measures instead the planet's shadow on the head in Fig. 5 (quarter resolution, converged 2-bounce
+transfers at frames 24, 32 and 40, true rig model, truth seed 0) with the box light field and the prefilter from
+the true geometry, beside the ground truth's (:mod:`lftransfer.sim.effects`): the projector carries the sun's
+light to the head, so the shadow's edge is where the aperture's blur shows.
+
+Run: python benchmarks/reconstruction/projector_prefilter.py [--fig5]   (about 1 minute once the ground truths
+are cached; --fig5 about 5). The tables are in docs/architecture.md ("The projector's side").
 """
 
 from __future__ import annotations
@@ -166,8 +171,8 @@ def projecting(landing):
         SyntheticSide.render = plain
 
 
-def true_landing(opened):
-    real = opened.rig._real_renderer(0.0)        # the simulator's hidden real objects: the oracle
+def true_landing(opened, time_s: float = 0.0):
+    real = opened.rig._real_renderer(time_s)        # the simulator's hidden real objects: the oracle
 
     def landing(origins, dirs, _pixel):
         _, hit, dist = real.render_rays(origins, dirs, [])
@@ -185,7 +190,50 @@ def depth_landing(depth: np.ndarray, mask: np.ndarray):
     return landing
 
 
+def fig5_shadow() -> None:
+    from lftransfer.app.effects import _without
+    from lftransfer.composite import composite
+    from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
+
+    scene = quick_scene(load_scene(builtin_scene("fig5")))
+    effect = scene.effect
+    print("| frame | planet to head (m) | projected light field | contrast | penumbra (mm) | area taking half the "
+          "light (cm^2) |")
+    print("|---|---|---|---|---|---|")
+    for frame in (24, 32, 40):
+        opened = open_rig(scene, RunOptions(truth_seed=0))
+        known = knowledge(opened, scene, "oracle")
+        t = frame / scene.animation.fps
+        world = opened.world.at(t)
+        pixels = object_pixels(world, effect.on)
+        distance = object_distance(world, effect.on, effect.by)
+        gt = render_ground_truth(world, spp=scene.render.gt_spp).image
+        gt_without = render_ground_truth(_without(world, effect.by), spp=scene.render.gt_spp).image
+        rows = [("ground truth", measure_effect("shadow", gt, gt_without, pixels))]
+        settings = replace(transfer_settings(scene), bounces=2, bounce_views=False)
+        for variant in ("box", "true geometry"):
+            images = []
+            for synthetic in (known.scene, _without(known.scene, effect.by)):
+                opened.start_frame(frame)
+                if variant == "box":
+                    r = run_transfer(opened.rig, known.model, synthetic, settings, time_s=t)
+                else:
+                    with projecting(true_landing(opened, t)):
+                        r = run_transfer(opened.rig, known.model, synthetic, settings, time_s=t)
+                images.append(composite(r.synthetic_view.rgb, r.synthetic_view.alpha, r.real_view))
+            rows.append((variant, measure_effect("shadow", images[0], images[1], pixels)))
+        for name, m in rows:
+            pen = f"{1e3 * m.penumbra_m:.1f}" if m.penumbra_m is not None else "-"
+            print(f"| {frame} | {distance:.3f} | {name} | {m.contrast:.3f} | {pen} | {1e4 * m.area_m2:.1f} |",
+                  flush=True)
+
+
 def main() -> None:
+    import sys
+
+    if "--fig5" in sys.argv[1:]:
+        fig5_shadow()
+        return
     scenes = [("fig4", builtin_scene("fig4")), *[(n, HERE / f"{n}.toml") for n in ("spheres", "cylinders", "far")]]
     print("| scene | projected light field | cross error | real side: error, energy ratio, error after best scale "
           "| synthetic side: error | ground truth's noise (real) |")
