@@ -47,14 +47,17 @@ def plane_axes(normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-handed in-plane axes of a plane with this normal: ``ex`` horizontal (perpendicular to world y where
     the normal allows), ``ey = normal x ex``.
 
+    Args:
+        normal: (3,) or (N, 3) normals (need not be unit).
+
     Returns:
-        ex, ey, n: (3,) unit vectors.
+        ex, ey, n: unit vectors of the normal's shape.
     """
     n = np.asarray(normal, np.float64)
-    n = n / np.linalg.norm(n)
-    helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    helper = np.where(np.abs(n[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
     ex = np.cross(helper, n)
-    ex /= np.linalg.norm(ex)
+    ex /= np.linalg.norm(ex, axis=-1, keepdims=True)
     return ex, np.cross(n, ex), n
 
 

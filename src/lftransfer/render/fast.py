@@ -72,6 +72,7 @@ from typing import Sequence
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.optics.geometry import plane_axes
 from lftransfer.render.culling import TILE, RayTiles, bounding_spheres
 from lftransfer.render.integrator import Light
 from lftransfer.render.lights import jit_array, jit_rays, to_numpy
@@ -354,14 +355,6 @@ def _moved_together(before: Sequence, after: Sequence) -> bool:
     return all(np.allclose(d, deltas[0], rtol=0.0, atol=1e-9) for d in deltas[1:])
 
 
-def _tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors (N, 3) completing each unit normal (N, 3) to a right-handed frame."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t = np.cross(helper, normals)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(normals, t)
-
-
 @dataclass(frozen=True)
 class Interreflection:
     """The diffuse light the cached surfaces send each other, as a linear map of the cache's irradiance.
@@ -392,16 +385,23 @@ class _RaySet:
 
     Attributes:
         origins, directions: weak references to its (N, 3) float32 arrays (identity is the key).
-        centre: (3,) the one origin every ray starts from (a view camera), or None.
         renders: how many renders cast it.
         tiles: its cones for culling, once built (:meth:`CachedRenderer._ray_tiles`).
     """
 
     origins: weakref.ref
     directions: weakref.ref
-    centre: np.ndarray | None
     renders: int = 0
     tiles: RayTiles | None = None
+    _centre: tuple = ()        # (centre,) once looked for
+
+    def centre(self) -> np.ndarray | None:
+        """(3,) the one origin every ray starts from (a view camera), or None; looked for once, when first asked
+        (a pass over every origin, which only glossy lobes read from the cache points need)."""
+        if not self._centre:
+            origins = self.origins()
+            self._centre = (np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None,)
+        return self._centre[0]
 
 
 class CachedRenderer(HalfSpaceRenderer):
@@ -605,7 +605,7 @@ class CachedRenderer(HalfSpaceRenderer):
         radius, phi = np.sqrt(sx), 2.0 * np.pi * sy
         cos_z = np.sqrt(np.maximum(1.0 - sx, 0.0))                       # (P, n) cosine to the normal
         normal = self.normals[one[wanted]].astype(np.float64)
-        t, b = _tangents(normal)
+        t, b, _ = plane_axes(normal)
         dirs = ((radius * np.cos(phi))[..., None] * t[:, None] + (radius * np.sin(phi))[..., None] * b[:, None]
                 + cos_z[..., None] * normal[:, None]).reshape(-1, 3)
         origins = np.repeat(self.vertices[one[wanted]] + 1e-5 * normal, n, axis=0)
@@ -736,8 +736,7 @@ class CachedRenderer(HalfSpaceRenderer):
         sets = [r for r in self.__dict__.get("_ray_sets", []) if r.origins() is not None]
         found = next((r for r in sets if r.origins() is origins and r.directions() is directions), None)
         if found is None:
-            centre = np.array(origins[0], np.float64) if np.all(origins == origins[0]) else None
-            found = _RaySet(weakref.ref(origins), weakref.ref(directions), centre)
+            found = _RaySet(weakref.ref(origins), weakref.ref(directions))
             sets = [*sets[-7:], found]
         self.__dict__["_ray_sets"] = sets
         found.renders += 1
@@ -787,7 +786,8 @@ class CachedRenderer(HalfSpaceRenderer):
         index = jit_array(mi.UInt32, local.astype(np.uint32))
         pi = dr.gather(mi.PreliminaryIntersection3f, pi, index)
         rays = dr.gather(mi.Ray3f, rays, index)
-        return idx, to_numpy(self._shade(rays, pi, lights, seed, None if ray_set is None else ray_set.centre)), t[local]
+        pinhole = ray_set.centre() if ray_set is not None and self._any_pinhole else None
+        return idx, to_numpy(self._shade(rays, pi, lights, seed, pinhole)), t[local]
 
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
