@@ -47,7 +47,7 @@ from scipy.spatial import cKDTree
 from lftransfer.app.bench.step import transfer_settings
 from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
 from lftransfer.lightfield.lightfield import LightField
-from lftransfer.render.renderer import aperture_offsets
+from lftransfer.render.renderer import lightfield_rays
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.sim.verify import evaluate, render_ground_truth
@@ -124,16 +124,16 @@ def prefiltered(box: LightField, renderer, lights, seed: int, landing) -> LightF
     array, mask = box.array, box.mask()
     K, V, U = box.data.shape[:3]
     n = int(mask.sum())
-    d = box.directions()[mask]                                               # (n, 3)
-    origins = np.zeros((K, n, RAYS, 3), np.float32)
-    origins[..., :2] = array.centres.astype(np.float32)[:, None, None, :]
-    origins[..., :2] += aperture_offsets(array, K * n, RAYS, seed + 7).reshape(K, n, RAYS, 2)
-    dirs = np.ascontiguousarray(np.broadcast_to(d[None, :, None, :], origins.shape).reshape(-1, 3), np.float32)
-    origins = origins.reshape(-1, 3)
-    pixel = np.broadcast_to(np.arange(K * n).reshape(K, n, 1), (K, n, RAYS)).reshape(-1)
-    radiance, _, _ = renderer.render_rays(origins, -dirs, lights, seed=seed + 11)
-    hit, points = landing(origins, dirs, pixel)
-    w = np.broadcast_to(box.solid_angle_weights()[mask][None, :, None], (K, n, RAYS)).reshape(-1)[hit] / RAYS
+    origins, looking = lightfield_rays(array, U, V, spp=RAYS, seed=seed + 7)     # looking into z < 0
+    data = np.broadcast_to(mask, (K, V, U)).reshape(-1)
+    pixel = np.full(K * V * U, -1)
+    pixel[data] = np.arange(K * n)                               # (k, j, i) -> its index among the data entries
+    pixel = np.repeat(pixel, RAYS)
+    ours = pixel >= 0
+    origins, looking, pixel = origins[ours], looking[ours], pixel[ours]
+    radiance, _, _ = renderer.render_rays(origins, looking, lights, seed=seed + 11)
+    hit, points = landing(origins, -looking, pixel)
+    w = np.tile(box.solid_angle_weights()[mask], K)[pixel[hit]] / RAYS
     cells = np.floor(points[hit] / BIN).astype(np.int64)
     bins = np.unique(cells, axis=0, return_inverse=True)[1].ravel()
     target = np.zeros((bins.max() + 1, 3))

@@ -68,6 +68,28 @@ def sample_mean(values: np.ndarray, spp: int) -> np.ndarray:
     return total
 
 
+def lightfield_rays(array: LensArray, U: int, V: int, *, side: Literal["synthetic", "real"] = "synthetic",
+                    area: bool = True, spp: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The primary rays of a light field render: for every lenslet k and grid direction d_ij, ``spp`` rays from
+    stratified points of the aperture (:func:`aperture_offsets`; the lenslet centre when not ``area``) along
+    -d_ij (``side="synthetic"``: looking into z < 0) or +d_ij (``side="real"``).
+
+    Returns:
+        origins (K * V * U * spp, 3) float32 in the array plane and directions (the same shape) float32 unit,
+        ordered lenslet, direction (row-major over (V, U)), sample.
+    """
+    K, N, S = array.K, V * U, spp
+    dirs = LightField.zeros(array, U, V).directions().reshape(-1, 3).astype(np.float32)       # (V*U, 3)
+    if side == "synthetic":
+        dirs = -dirs
+    origins = np.zeros((K, N, S, 3), np.float32)
+    origins[..., :2] = array.centres.astype(np.float32)[:, None, None, :]
+    if area:
+        origins[..., :2] += aperture_offsets(array, K * N, S, seed).reshape(K, N, S, 2)
+    directions = np.broadcast_to(dirs[None, :, None, :], origins.shape)
+    return origins.reshape(-1, 3), np.ascontiguousarray(directions.reshape(-1, 3))
+
+
 @dataclass
 class SampleMeans:
     """Means over groups of ``spp`` consecutive rays (the samples of one pixel or one light field entry).
@@ -200,20 +222,10 @@ class HalfSpaceRenderer:
             LightField (K, V, U, 3) float32, masked samples zero.
         """
         lf = LightField.zeros(array, U, V)
-        K, S, N = array.K, spp, V * U
-
-        def make():
-            dirs = lf.directions().reshape(-1, 3).astype(np.float32)             # (V*U, 3)
-            if side == "synthetic":
-                dirs = -dirs
-            origins = np.zeros((K, N, S, 3), np.float32)
-            origins[..., :2] = array.centres.astype(np.float32)[:, None, None, :]
-            if model == "area":
-                origins[..., :2] += aperture_offsets(array, K * N, S, seed).reshape(K, N, S, 2)
-            directions = np.broadcast_to(dirs[None, :, None, :], origins.shape)
-            return origins.reshape(-1, 3), np.ascontiguousarray(directions.reshape(-1, 3))
-
-        origins, directions = self._rays(("lf", array, U, V, side, model == "area", spp, seed), make)
+        K, S = array.K, spp
+        origins, directions = self._rays(("lf", array, U, V, side, model == "area", spp, seed),
+                                         lambda: lightfield_rays(array, U, V, side=side, area=model == "area",
+                                                                 spp=spp, seed=seed))
         data = self.render_samples(origins, directions, lights, S, seed=seed).radiance.reshape(K, V, U, 3)
         data *= lf.mask()[None, :, :, None]
         lf.data[...] = data
