@@ -5,7 +5,8 @@ compared with the composite the exact path (:class:`lftransfer.render.renderer.H
 summed at every ray, shadow rays, the scene's ``max_depth``) renders from the same decoded light field, the same
 virtual point light, the same lighting model and reconstruction, over the same real view; for the area model
 with a dense aperture sampling. What differs is what the fast path approximates (irradiance interpolated over a
-cache triangle, the light synthetic objects exchange gathered per cache point and only its diffuse part) and the step's own aperture and pixel sampling.
+cache triangle, the light synthetic objects exchange gathered per cache point and only its diffuse part) and the
+step's own aperture and pixel sampling.
 """
 
 from __future__ import annotations

@@ -334,9 +334,9 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     notes = []
     if renderer == "fast":
         notes.append("the fast path approximates: irradiance cached at the vertices of a fine tessellation "
-                     "(the synthetic objects' diffuse light, glossy lobes per ray); " + ("fast_vs_exact measures what that costs in accuracy"
-                                                            if options.accuracy else
-                                                            "its accuracy was not measured (--no-accuracy)"))
+                     "(the synthetic objects' diffuse light, glossy lobes per ray); "
+                     + ("fast_vs_exact measures what that costs in accuracy" if options.accuracy else
+                        "its accuracy was not measured (--no-accuracy)"))
     if options.calibration is None and options.rig_model != "calibrated":
         notes.append(f"rig model {rig_model}")
     if options.peer:
