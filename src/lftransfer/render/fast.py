@@ -89,6 +89,8 @@ PINHOLE_ROUGHNESS = 0.15    # glossy lobes at least this rough are read from the
 PINHOLE_SAMPLES = 4         # ... with this many times the lobe directions of a ray (the points are few)
 GATHER_RAYS = 64            # cosine-weighted directions per cache point of the interreflection gather (8 x 8 strata)
 CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
+VARYING_VISIBILITY = 0.25   # a cache triangle whose corners see a lenslet this differently casts its lobes' rays
+BURIED_DEPTH = 0.25         # of max_edge: a cache point with a surface this close in front of it is buried
 
 
 #: Glossy and metal lobes at least this rough were measured against the exact path (tests/render/
@@ -526,6 +528,7 @@ class CachedRenderer(HalfSpaceRenderer):
         self._lit_by: tuple | None = None
         self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
         self._gather: Interreflection | None = None
+        self._fill = None
 
     def update(self, objects: Sequence) -> bool:
         """Move to new poses of the same objects (an animation frame).
@@ -571,6 +574,7 @@ class CachedRenderer(HalfSpaceRenderer):
         params.update()
         if not _moved_together(self.objects, objects):
             self._gather = None
+            self._fill = None
         self.objects = objects
         self._visibility.clear()
         self._pinhole_memo = None
@@ -651,6 +655,59 @@ class CachedRenderer(HalfSpaceRenderer):
         self._sees = jit_array(mi.Float, self._gather.sees)
         return self._gather
 
+    def _buried(self):
+        """The fill of buried cache points (``scipy.sparse.csr_matrix`` (D, D), or None where nothing is buried),
+        found once per arrangement of the objects (kept while they move together, like the gather).
+
+        A cache point is buried when another surface lies less than ``BURIED_DEPTH * max_edge`` in front of it
+        along its normal (the frame under a photograph laid on it): no camera sees it, but the triangles it shares
+        with visible points would interpolate its darkness (or, in the gather, the light of the surface on top of
+        it) into a band along the covering object's edge. The fill replaces a buried point's values by the mean of
+        the unburied points it shares a triangle with (rows of the identity elsewhere; a point with no unburied
+        neighbour takes its filled neighbours' mean, up to three rings, else keeps its own value).
+        """
+        mi = mitsuba()
+        import drjit as dr
+        from scipy import sparse
+
+        if self._fill is not None:
+            return self._fill[0]
+        one, count = self._one_of, len(self._one_of)
+        matrix = None
+        if count and exchanges_light(self.objects):
+            n = self.normals[one].astype(np.float64)
+            rays = jit_rays(self.vertices[one] + 1e-5 * n, n)
+            pi = self.scene.ray_intersect_preliminary(rays)
+            buried = np.array(pi.t, np.float64) < BURIED_DEPTH * self.max_edge
+            if buried.any():
+                corners = self._shared.reshape(-1, 3)
+                edges = np.concatenate([corners[:, [a, b]] for a, b in ((0, 1), (1, 2), (2, 0))])
+                edges = np.concatenate([edges, edges[:, ::-1]])
+                adjacency = sparse.csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(count, count))
+                adjacency.data[:] = 1.0                       # duplicate edges count once
+                fill = sparse.identity(count, format="csr")
+                known = ~buried
+                for _ in range(3):                             # ring by ring away from the unburied points
+                    cols = np.flatnonzero(known)
+                    reach = np.asarray(adjacency[:, cols].sum(axis=1)).ravel()
+                    rows = np.flatnonzero(~known & (reach > 0))
+                    if not len(rows):
+                        break
+                    step = adjacency[rows][:, cols].tocoo()
+                    keep = np.setdiff1d(np.arange(count), rows)
+                    update = sparse.csr_matrix(
+                        (np.concatenate([np.ones(len(keep)), step.data / reach[rows][step.row]]),
+                         (np.concatenate([keep, rows[step.row]]), np.concatenate([keep, cols[step.col]]))),
+                        shape=(count, count))
+                    fill = update @ fill
+                    known[rows] = True
+                matrix = fill.tocsr()
+                self._buried_points = buried
+                covered = buried[self._shared.reshape(-1, 3)].any(axis=1)          # (F,) a buried corner
+                self._covered = jit_array(mi.UInt32, covered.astype(np.uint32))
+        self._fill = (matrix,)
+        return matrix
+
     @property
     def cache_size(self) -> int:
         """Number of cache vertices M."""
@@ -677,6 +734,9 @@ class CachedRenderer(HalfSpaceRenderer):
             for _ in range(self.bounces):
                 bounce = [gather.bounce(bounce[c], c, self._shared) for c in range(3)]
                 total = [t + b for t, b in zip(total, bounce)]
+        fill = self._buried()
+        if fill is not None:
+            total = [np.asarray(fill @ t[self._one_of], np.float32)[self._shared] for t in total]
         self._irradiance = [jit_array(mi.Float, t) for t in total]
         self._lit_by = tuple(lights)
 
@@ -828,6 +888,11 @@ class CachedRenderer(HalfSpaceRenderer):
         sid = dr.reinterpret_array(mi.UInt32, pi.shape)
         flags = dr.gather(mi.UInt32, self._flags, sid)
         cached = (flags & 1) != 0
+
+        def at(index):                       # the hits ``index``, computed again there (not gathered field by field)
+            return dr.gather(mi.PreliminaryIntersection3f, pi, index).compute_surface_interaction(
+                dr.gather(mi.Ray3f, rays, index), mi.RayFlags.All)
+
         first = dr.gather(mi.UInt32, self._base, sid, cached) + pi.prim_index * 3
         b1, b2 = pi.prim_uv.x, pi.prim_uv.y
         bary = (1.0 - b1 - b2, b1, b2)
@@ -849,7 +914,38 @@ class CachedRenderer(HalfSpaceRenderer):
                 g = [self._interpolate(x, first, bary, at_points) for x in self._pinhole_glossy(pinhole, lights, seed)]
                 out += dr.select(at_points, mi.Color3f(g[0], g[1], g[2]), 0.0)
                 glossy &= ~at_points
-            out += self._glossy(si, glossy, sid, flags, first, bary, lights, seed)
+            out += self._glossy(si, glossy, sid, flags, first, bary, lights, seed, at)
+        return self._shade_under(at, first, cached, out, lights, seed)
+
+    def _shade_under(self, at, first, active, out, lights: Sequence[Light], seed: int):
+        """``out`` (mi.Color3f) with the hits that lie under another surface (less than ``BURIED_DEPTH * max_edge``
+        along the normal: seen through the gap under a covering object's edge) shaded as the exact path shades
+        them, by each light's own estimate with shadow rays, instead of from the cache, which holds there the
+        values of the open surface beside them (:meth:`_buried`). Only hits on cache triangles with a buried
+        corner are tested, compacted (they are few); ``at(index)`` is the surface interaction of the hits
+        ``index``."""
+        mi = mitsuba()
+        import drjit as dr
+
+        if not self._fill or self._fill[0] is None:
+            return out
+        maybe = dr.compress(active & (dr.gather(mi.UInt32, self._covered, first // 3, active) != 0))
+        if dr.width(maybe) == 0:
+            return out
+        hit = at(maybe)
+        ray = hit.spawn_ray(mi.Vector3f(hit.n))
+        ray.maxt = BURIED_DEPTH * self.max_edge
+        under = self.scene.ray_test(ray)
+        index = dr.gather(mi.UInt32, maybe, dr.compress(under))
+        if dr.width(index) == 0:
+            return out
+        hit = at(index)
+        value = mi.Color3f(0.0)
+        for light in lights:
+            if not hasattr(light, "emitted"):
+                value += light.illuminate(self.scene, hit, mi.Bool(True), seed=seed)
+        dr.eval(out, value)                  # one kernel each (scattered channel by channel, each would recompute)
+        dr.scatter(out, value, index)
         return out
 
     @staticmethod
@@ -862,14 +958,18 @@ class CachedRenderer(HalfSpaceRenderer):
                 + bary[1] * dr.gather(mi.Float, values, first + 1, active)
                 + bary[2] * dr.gather(mi.Float, values, first + 2, active))
 
-    def _glossy(self, si, glossy, sid, flags, first, bary, lights: Sequence[Light], seed: int):
+    def _glossy(self, si, glossy, sid, flags, first, bary, lights: Sequence[Light], seed: int, at=None):
         """The glossy and metal lobes' light at the shading points ``si`` where ``glossy`` (mi.Color3f): point lights
         and emitters by their own sampling, a light field by :meth:`_lobe` (and the lenslet sum where it pays), the
         other cached surfaces by :meth:`_lobe_neighbours`; ``first`` and ``bary`` place each point in its cache
-        triangle (for the visibility and gather tables)."""
+        triangle (for the visibility and gather tables); ``at(index)``: the shading points ``index`` (by default
+        gathered from ``si``)."""
         mi = mitsuba()
         import drjit as dr
 
+        if at is None:
+            def at(index):
+                return dr.gather(mi.SurfaceInteraction3f, si, index)
         out = mi.Color3f(0.0)
         smooth = (flags & 4) != 0
         ctx = _context("glossy")
@@ -880,7 +980,7 @@ class CachedRenderer(HalfSpaceRenderer):
             if not hasattr(light, "reflect"):       # point lights, emitters: their own sampling
                 out += light.illuminate(self.scene, si, glossy, seed=seed, ctx=ctx)
                 continue
-            table = self._lenslet_visibility(light)
+            table, varying = self._lenslet_visibility(light)
             K = light.K
 
             def seen(k, table=table, K=K):
@@ -897,7 +997,10 @@ class CachedRenderer(HalfSpaceRenderer):
             by_lenslet = glossy & (dr.gather(mi.UInt32, summed, sid, glossy) != 0)
             if any_summed:
                 out += light.reflect(si, by_lenslet, ctx, seen, self._base_samples(), seed=seed)
-            out += self._lobe(si, glossy, by_lenslet, side, light, seen, seed)
+            cast = None if varying is None else glossy & (dr.gather(mi.UInt32, varying, first // 3, glossy) != 0)
+            out += self._lobe(si, glossy if cast is None else glossy & ~cast, by_lenslet, side, light, seen, seed)
+            if cast is not None:
+                out = self._lobe_cast(at, cast, by_lenslet, side, light, seed, out)
         if self.bounces and self.exchanges:       # the other objects' diffuse light in the lobe
             self._interreflection()
             sees = self._interpolate(self._sees, first, bary, glossy)
@@ -1011,6 +1114,22 @@ class CachedRenderer(HalfSpaceRenderer):
                 strata[sid] = side
         return jit_array(mi.UInt32, strata), jit_array(mi.UInt32, summed), bool(summed.any())
 
+    def _lobe_cast(self, at, cast, summed, strata, light, seed: int, out):
+        """``out`` (mi.Color3f) plus :meth:`_lobe` at the lanes ``cast`` (compacted: they are few; ``at(index)`` is
+        the surface interaction of lanes ``index``), each of whose directions is cast against the scene instead of
+        reading the cache's visibility."""
+        mi = mitsuba()
+        import drjit as dr
+
+        index = dr.compress(cast)
+        if dr.width(index) == 0:
+            return out
+        value = self._lobe(at(index), mi.Bool(True), dr.gather(mi.Bool, summed, index),
+                           dr.gather(mi.UInt32, strata, index), light, None, seed)
+        dr.eval(out, value)                  # one kernel each (scattered channel by channel, each would recompute)
+        dr.scatter_add(out, value, index)
+        return out
+
     def _lobe(self, si, active, summed, strata, light, seen, seed: int):
         """The directions drawn from a glossy lobe: its light from a light field of the area model
         (mi.Color3f, (N,)).
@@ -1020,7 +1139,7 @@ class CachedRenderer(HalfSpaceRenderer):
         cache says (``seen(k)``, the fraction of the lenslet k it meets that the shading point sees). Where
         ``summed``, the lenslet sum of :meth:`LightFieldLight.reflect` estimates the same light, and each
         direction takes the balance heuristic's share n p_b / (n p_b + p_l); a smooth lobe (one direction) and
-        the others take it all.
+        the others take it all. With ``seen`` None each direction is cast against the scene instead.
         """
         mi = mitsuba()
         import drjit as dr
@@ -1041,17 +1160,24 @@ class CachedRenderer(HalfSpaceRenderer):
             bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active)
             w = si.to_world(bs.wo)
             radiance, k, p_l = light.incident(si.p, w, ok)
+            if seen is None:
+                visible = dr.select(self.scene.ray_test(si.spawn_ray(w), ok), 0.0, 1.0)
+            else:
+                visible = seen(k)
             mis = dr.select(summed, n_f * bs.pdf / dr.maximum(n_f * bs.pdf + p_l, 1e-30), 1.0)
-            acc += dr.select(ok, weight * radiance * (seen(k) * mis), 0.0)
+            acc += dr.select(ok, weight * radiance * (visible * mis), 0.0)
             return j + 1, rng, acc
 
         _, _, acc = dr.while_loop((mi.UInt32(0), rng, mi.Color3f(0.0)), cond, body)
         return dr.select(active, acc / n_f, 0.0)
 
     def _lenslet_visibility(self, light):
-        """mi.Float (D * K,): the fraction of each lenslet k's aperture (``VISIBILITY_POINTS`` stratified points)
-        that distinct cache point d sees, at [d * K + k]; computed for the points of glossy objects that the light
-        may reach, once per lens array and side while nothing moves.
+        """(table, varying): ``table`` mi.Float (D * K,), the fraction of each lenslet k's aperture
+        (``VISIBILITY_POINTS`` stratified points) that distinct cache point d sees, at [d * K + k], computed for the
+        points of glossy objects that the light may reach, once per lens array and side while nothing moves, buried
+        points' rows filled (:meth:`_buried`); ``varying`` mi.UInt32 (F,), 1 on the cache triangles whose corners'
+        rows differ by more than ``VARYING_VISIBILITY`` for some lenslet or that have a buried corner (a shadow
+        edge or a covering object's edge crosses them: their lobes cast their directions), or None if none do.
 
         A point whose hemisphere holds no other shape (a convex object alone, or none of the interreflection
         gather's directions met a shape) sees exactly the aperture points in front of its tangent plane; only the
@@ -1102,6 +1228,13 @@ class CachedRenderer(HalfSpaceRenderer):
                 total += dr.select(self.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
                 dr.eval(total)
             seen[shadowed] = (np.array(total, np.float32) / len(offsets)).reshape(len(idx), K)
-        table = jit_array(mi.Float, seen)
-        self._visibility[key] = table
-        return table
+        fill = self._buried()
+        corners = self._shared.reshape(-1, 3)                            # (F, 3) distinct point of each corner
+        rows = seen[corners]                                             # (F, 3, K)
+        varying = (rows.max(axis=1) - rows.min(axis=1)).max(axis=1, initial=0.0) > VARYING_VISIBILITY
+        if fill is not None:
+            varying |= self._buried_points[corners].any(axis=1)
+            seen = np.asarray(fill @ seen, np.float32)
+        varying = jit_array(mi.UInt32, varying.astype(np.uint32)) if varying.any() else None
+        self._visibility[key] = (jit_array(mi.Float, seen), varying)
+        return self._visibility[key]
