@@ -14,7 +14,11 @@ traced, cached) scores both. Printed per scene and frame:
   pixels only (where the renderers differ), both with the ground truth's peak;
 - the cross-transfer error and its synthetic side (``cross_by_side``), and the ground truth's own noise on it.
 
+With ``--seeds A B ...`` the converged transfers are repeated with each render seed (the live timing is taken at
+the first): the spread of each renderer's figures over the seeds is its own Monte Carlo noise on them.
+
 Run: python benchmarks/glossy/fast_vs_exact.py [--quick] [--calibration FILE] [--frames 24 36] [--gt-spp N]
+[--seeds 0 1]
 (paper resolution with out/fullcal/calibration.json from ``lft calibrate fig4 --out out/fullcal/calibration.json``:
 about 8 minutes when the ground truths are cached by an earlier ``lft render fig6|fig1b --verify-every 12
 --gt-spp 128``; --quick: quarter resolution with the oracle rig model, about 1 minute).
@@ -67,10 +71,11 @@ def main() -> None:
     parser.add_argument("--frames", type=int, nargs="+", default=[24, 36])
     parser.add_argument("--gt-spp", type=int, default=128)
     parser.add_argument("--scenes", nargs="+", default=["fig6", "fig1b"])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="render seeds of the converged runs")
     args = parser.parse_args()
-    print("| scene, frame | renderer | render ms (speed-up) | live ms (speed-up) | psnr_objects_db | psnr_synthetic_db "
-          "| cross error | synthetic side | ground truth's noise on the cross term |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| scene, frame | renderer | seed | render ms (speed-up) | live ms (speed-up) | psnr_objects_db "
+          "| psnr_synthetic_db | cross error | synthetic side | ground truth's noise on the cross term |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
         scene = load_scene(builtin_scene(name))
         if args.quick:
@@ -85,20 +90,23 @@ def main() -> None:
             t = frame / scene.animation.fps
             gt, _ = frame_ground_truth(opened.world, t, args.gt_spp, use_cache=True)
             times, live = {}, {}
-            for renderer in ("fast", "exact"):
-                settings = replace(transfer_settings(scene), bounces=2, renderer=renderer)
-                result, _ = converged_frame(opened, known.model, known.scene, settings, frame, t)
-                ms = 1000 * sum(result.timings_s.get(k, 0.0) for k in ("render_lightfield", "render_view")) / 3
-                times[renderer] = ms
-                live[renderer] = live_render_ms(opened, known, settings, scene, frame)
-                m = evaluate(result, gt)
-                syn = m.cross_by_side["synthetic"]
-                speed = f" ({times['exact'] / times['fast']:.1f}x)" if renderer == "exact" else ""
-                live_speed = f" ({live['exact'] / live['fast']:.1f}x)" if renderer == "exact" else ""
-                print(f"| {name}, {frame} | {renderer} | {ms:.0f}{speed} | {live[renderer]:.0f}{live_speed} "
-                      f"| {m.psnr_objects_db:.2f} | {synthetic_psnr(result, gt):.2f} "
-                      f"| {m.cross_transfer_rel_error:.3f} | {syn.rel_error:.3f} | {m.cross_gt_noise_rel:.3f} |",
-                      flush=True)
+            for seed in args.seeds:
+                for renderer in ("fast", "exact"):
+                    settings = replace(transfer_settings(scene), bounces=2, renderer=renderer, seed=seed)
+                    result, _ = converged_frame(opened, known.model, known.scene, settings, frame, t)
+                    ms = 1000 * sum(result.timings_s.get(k, 0.0) for k in ("render_lightfield", "render_view")) / 3
+                    times.setdefault(renderer, ms)
+                    if renderer not in live:
+                        live[renderer] = live_render_ms(opened, known, settings, scene, frame)
+                    m = evaluate(result, gt)
+                    syn = m.cross_by_side["synthetic"]
+                    speed = f" ({times['exact'] / times['fast']:.1f}x)" if renderer == "exact" else ""
+                    live_speed = f" ({live['exact'] / live['fast']:.1f}x)" if renderer == "exact" else ""
+                    timing = f"{ms:.0f}{speed} | {live[renderer]:.0f}{live_speed}" if seed == args.seeds[0] else "|"
+                    print(f"| {name}, {frame} | {renderer} | {seed} | {timing} "
+                          f"| {m.psnr_objects_db:.2f} | {synthetic_psnr(result, gt):.2f} "
+                          f"| {m.cross_transfer_rel_error:.3f} | {syn.rel_error:.3f} | {m.cross_gt_noise_rel:.3f} |",
+                          flush=True)
         opened.rig.close()
 
 

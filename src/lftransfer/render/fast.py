@@ -20,8 +20,9 @@ split into their two lobes:
   f_d(wi, n) = A(uv) t(cos_i) t(1), with no approximation beyond the interpolation;
 - the view-dependent glossy lobe is evaluated per ray: point lights and emitters by their own next-event
   estimation restricted to the glossy lobe (one shadow ray, or the emitter samples, per ray); a light field of
-  the area model by S * S directions drawn from the lobe (Mitsuba's own visible-normal sampling, stratified;
-  S grows with the roughness, :func:`lobe_strata`), each read where it meets the array plane
+  the area model by S * S directions drawn from the lobe (Mitsuba's own visible-normal sampling, stratified and
+  multi-jittered, :func:`_lobe_direction`; S grows with the roughness, :func:`lobe_strata`; a view's rays, which
+  are few and are what one sees, take ``view_lobe_samples``), each read where it meets the array plane
   (:meth:`LightFieldLight.incident`), an unbiased estimate of what the exact path sums over the lenslets'
   apertures; where the light field's K_active * M aperture points cost no more than those directions (few
   lit lenslets, rough lobes), the exact path's own lenslet sum (:meth:`LightFieldLight.reflect`) is added and
@@ -29,11 +30,13 @@ split into their two lobes:
   between a glossy object and the array comes from a second cache, the fraction of each lenslet's aperture
   (``VISIBILITY_POINTS`` points) that each cache vertex sees, interpolated like the irradiance and computed once
   per lens array while nothing moves (shadow rays only from points whose hemisphere holds another shape; the
-  others see what lies in front of their tangent plane). A view camera's rays all start at its centre, so a lobe
-  of roughness at least ``PINHOLE_ROUGHNESS`` is not sampled at every view ray: its radiance towards the camera
-  is computed once per distinct cache point with ``PINHOLE_SAMPLES`` times the directions (the same estimators)
-  and interpolated like the irradiance (:meth:`CachedRenderer._pinhole_glossy`); light field rays, which start
-  all over the apertures, sample the lobe per ray. A smooth lobe (roughness 0) takes its one mirror direction.
+  others see what lies in front of their tangent plane); on cache triangles across which that visibility
+  changes (a shadow edge crosses them) the lobe's directions are cast against the scene instead. A view camera's
+  rays all start at its centre, so a lobe of roughness at least ``PINHOLE_ROUGHNESS`` is not sampled at every
+  view ray: its radiance towards the camera is computed once per distinct cache point with ``PINHOLE_SAMPLES``
+  times the directions (the same estimators) and interpolated like the irradiance
+  (:meth:`CachedRenderer._pinhole_glossy`); light field rays, which start all over the apertures, sample the lobe
+  per ray. A smooth lobe (roughness 0) takes its one mirror direction.
   Under the point and prefiltered models the lenslets are points that no direction meets, and the glossy lobe is
   the exact path's lenslet sum with the cached visibility.
 
@@ -45,12 +48,19 @@ matrix-vector product per colour channel; a glossy lobe at a point whose gather 
 directions and reads the diffuse radiance of the surfaces they meet. The glossy light the objects reflect onto
 each other is left out (reports say so).
 
+One object laid on another (fig1b's photograph on its frame) buries the cache points under it
+(:meth:`CachedRenderer._buried`): no camera sees them, but interpolated into the triangles they share with open
+points they would draw a dark band along the covering object's edge (or, through the gather, a bright one). Their
+irradiance and visibility are filled from the open points beside them, and the few hits in the gap under the
+edge, where the light slips in at grazing angles, are shaded by the lights' own estimates with shadow rays.
+
 When objects move (an animation frame, :meth:`CachedRenderer.update`), the moved objects' cache vertices are
 moved in place (the refined local mesh is kept, the acceleration structure is rebuilt over the new vertex
-positions; objects that move together keep their interreflection gather) and every light's irradiance is
-computed again (a moved object can shadow any other); while nothing moves, the irradiance of each
-light is kept per light object, so a live loop that keeps its point light and swaps the captured light field
-each frame relights only for the new light field.
+positions; objects that move together, to ``TOGETHER`` at their points, keep their interreflection gather and
+buried points: objects keyframed apart but meant as one drift by far less than a cache triangle) and every
+light's irradiance is computed again (a moved object can shadow any other); while nothing moves, the irradiance
+of each light is kept per light object, so a live loop that keeps its point light and swaps the captured light
+field each frame relights only for the new light field.
 
 What it keeps and what it drops against the exact path (:class:`~lftransfer.render.renderer.HalfSpaceRenderer`
 with the scene's ``max_depth``): the light synthetic objects exchange is their diffuse light only, gathered over
@@ -65,6 +75,7 @@ renders the mirror image of the light field.
 from __future__ import annotations
 
 import weakref
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -81,6 +92,7 @@ from lftransfer.render.shapes import bsdf_dict, emitter_dict, object_keys, shape
 
 DEFAULT_MAX_EDGE = 0.006  # m
 DEFAULT_LOBE_SAMPLES = 16
+DEFAULT_VIEW_LOBE_SAMPLES = 36   # ... per view ray: a view has few rays, and its pixels are what one sees
 LOBE_ROUGHNESS = 0.15       # lobes up to this roughness take lobe_samples directions; rougher ones more
 VISIBILITY_POINTS = 4       # aperture points per lenslet of the glossy lobes' visibility cache
 TABLE_NODES = 64            # nodes of the diffuse lobe's cosine table (Mitsuba's roughplastic tabulates 64)
@@ -90,6 +102,7 @@ PINHOLE_SAMPLES = 4         # ... with this many times the lobe directions of a 
 GATHER_RAYS = 64            # cosine-weighted directions per cache point of the interreflection gather (8 x 8 strata)
 CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
 VARYING_VISIBILITY = 0.25   # a cache triangle whose corners see a lenslet this differently casts its lobes' rays
+TOGETHER = 1e-4             # m: objects whose motions differ by less than this at their points move together
 BURIED_DEPTH = 0.25         # of max_edge: a cache point with a surface this close in front of it is buried
 
 
@@ -328,16 +341,32 @@ def tessellate(obj, max_edge: float = DEFAULT_MAX_EDGE) -> tuple[np.ndarray, np.
     return t.vertices, t.normals
 
 
-def _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active):
+def _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active, shift):
     """Direction j of ``strata`` x ``strata`` stratified directions drawn from the lobe ``ctx`` enables (Mitsuba's
-    own sampling; ``side`` is ``strata`` as a float): (BSDF sample, its weight, the lanes where it carries light)."""
+    own sampling; ``side`` is ``strata`` as a float): (BSDF sample, its weight, the lanes where it carries light).
+
+    The strata are also split along each axis into strata^2 fine bins that the directions fill once each
+    (correlated multi-jittered sampling, Kensler 2013): stratum (i, k) takes fine bin (k + a) mod strata of its
+    column and (i + b) mod strata of its row, ``shift`` = (a, b) drawn once per ray (mi.UInt32 each), so every
+    direction stays uniform in its stratum. Mitsuba maps the sample square onto a disk (concentric map) whose
+    rim is the lobe's tail, and a GGX lobe's tails are long (at roughness 0.08 a tenth of its microfacet normals
+    lie more than 13 degrees off, where the reflected direction leaves the lenslets' window and the light field
+    ends): along each axis the fine bins place strata^2 directions across that edge instead of strata."""
     mi = mitsuba()
     import drjit as dr
 
     r1, r2, r3 = rng.next_float32(), rng.next_float32(), rng.next_float32()
-    sample = mi.Point2f((mi.Float(j % strata) + r2) / side, (mi.Float(j // strata) + r3) / side)
+    i, k = j % strata, j // strata
+    fx, fy = (k + shift[0]) % strata, (i + shift[1]) % strata
+    sample = mi.Point2f((mi.Float(i) + (mi.Float(fx) + r2) / side) / side,
+                        (mi.Float(k) + (mi.Float(fy) + r3) / side) / side)
     bs, weight = bsdf.sample(ctx, si, r1, sample, active)
     return bs, weight, active & dr.any(weight != 0.0)
+
+
+def _shifts(rng, strata):
+    """(a, b): the per-ray offsets of :func:`_lobe_direction`'s fine bins, mi.UInt32 in [0, strata)."""
+    return rng.next_uint32() % strata, rng.next_uint32() % strata
 
 
 def exchanges_light(objects: Sequence) -> bool:
@@ -347,14 +376,28 @@ def exchanges_light(objects: Sequence) -> bool:
     return len(reflecting) > 1 or any(o.shape == "mesh" for o in reflecting)
 
 
-def _moved_together(before: Sequence, after: Sequence) -> bool:
-    """Whether every reflecting object moved by one common rigid motion (then the light they exchange is
-    unchanged: the interreflection gather is kept)."""
-    pairs = [(a, b) for a, b in zip(before, after) if a.material.type != "emitter"]
+def _moved_together(before: Sequence, after: Sequence, points: Sequence[np.ndarray]) -> bool:
+    """Whether every reflecting object moved by one common rigid motion, up to ``TOGETHER`` (then the light they
+    exchange is unchanged: the interreflection gather is kept).
+
+    Args:
+        before, after: the objects' two poses.
+        points: per object, (P, 3) points of it in the pose ``before`` (its cache vertices; emitters: any).
+
+    Objects keyframed separately but meant to move as one (fig1b's photograph on its frame) drift apart by
+    far less than a cache triangle while the motion is interpolated: each object's points are moved by every
+    object's motion and compared.
+    """
+    pairs = [(a.to_world(), b.to_world(), x) for a, b, x in zip(before, after, points)
+             if a.material.type != "emitter" and len(x)]
     if not pairs:
         return True
-    deltas = [b.to_world() @ np.linalg.inv(a.to_world()) for a, b in pairs]
-    return all(np.allclose(d, deltas[0], rtol=0.0, atol=1e-9) for d in deltas[1:])
+    deltas = [b @ np.linalg.inv(a) for a, b, _ in pairs]
+    for _, _, x in pairs:
+        h = np.c_[x, np.ones(len(x))].T                           # (4, P) homogeneous
+        if any(np.abs((d - deltas[0]) @ h).max() > TOGETHER for d in deltas[1:]):
+            return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -419,6 +462,7 @@ class CachedRenderer(HalfSpaceRenderer):
         lobe_samples: directions drawn per ray from a glossy lobe of roughness up to ``LOBE_ROUGHNESS`` for a
             light field of the area model (rounded to a square number; rougher lobes take more,
             :func:`lobe_strata`; a smooth lobe takes its one mirror direction).
+        view_lobe_samples: the same for the rays of a view render (:meth:`render_view`).
         glossy: evaluate the glossy lobes (False: the diffuse cache alone, a control for tests).
 
     Example:
@@ -427,16 +471,19 @@ class CachedRenderer(HalfSpaceRenderer):
     """
 
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE,
-                 lobe_samples: int = DEFAULT_LOBE_SAMPLES, glossy: bool = True, bounces: int = 0,
-                 gather_rays: int = GATHER_RAYS) -> None:
+                 lobe_samples: int = DEFAULT_LOBE_SAMPLES, view_lobe_samples: int = DEFAULT_VIEW_LOBE_SAMPLES,
+                 glossy: bool = True, bounces: int = 0, gather_rays: int = GATHER_RAYS) -> None:
         if not supports(objects):
             raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
-        if lobe_samples < 1:
-            raise ValueError(f"lobe_samples must be >= 1, got {lobe_samples}")
+        if lobe_samples < 1 or view_lobe_samples < 1:
+            raise ValueError(f"lobe_samples and view_lobe_samples must be >= 1, got {lobe_samples} and "
+                             f"{view_lobe_samples}")
         if bounces < 0 or gather_rays < 1:
             raise ValueError(f"bounces must be >= 0 and gather_rays >= 1, got {bounces} and {gather_rays}")
         self.max_edge = float(max_edge)
         self.lobe_samples = int(lobe_samples)
+        self.view_lobe_samples = int(view_lobe_samples)
+        self._samples = self.lobe_samples       # the lobe directions of the render under way
         self.glossy = bool(glossy)
         self.bounces = int(bounces)
         self.gather_rays = int(gather_rays)
@@ -529,6 +576,7 @@ class CachedRenderer(HalfSpaceRenderer):
         self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
         self._gather: Interreflection | None = None
         self._fill = None
+        self._arranged = self._arrangement()
 
     def update(self, objects: Sequence) -> bool:
         """Move to new poses of the same objects (an animation frame).
@@ -572,15 +620,22 @@ class CachedRenderer(HalfSpaceRenderer):
             self.vertices[self._bases[i]:end] = v
             self.normals[self._bases[i]:end] = n
         params.update()
-        if not _moved_together(self.objects, objects):
+        self.objects = objects
+        if not _moved_together(self._arranged[0], objects, self._arranged[1]):
             self._gather = None
             self._fill = None
-        self.objects = objects
+            self._arranged = self._arrangement()
         self._visibility.clear()
         self._pinhole_memo = None
         self._per_light.clear()
         self._lit_by = None
         return True
+
+    def _arrangement(self) -> tuple[list, list[np.ndarray]]:
+        """(objects, per object its cache vertices (P, 3)): the arrangement the gather and the buried points were
+        found for; each later pose is compared with it (:func:`_moved_together`), so that drifts add up."""
+        ends = [*self._bases[1:], len(self.vertices)]
+        return list(self.objects), [self.vertices[b:e].copy() for b, e in zip(self._bases, ends)]
 
     @property
     def exchanges(self) -> bool:
@@ -707,6 +762,22 @@ class CachedRenderer(HalfSpaceRenderer):
                 self._covered = jit_array(mi.UInt32, covered.astype(np.uint32))
         self._fill = (matrix,)
         return matrix
+
+    @contextmanager
+    def _lobe_samples(self, count: int):
+        """Draw ``count`` lobe directions per ray (instead of ``lobe_samples``) inside the block."""
+        kept, self._samples = self._samples, int(count)
+        try:
+            yield
+        finally:
+            self._samples = kept
+
+    def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = 4,
+                    seed: int = 0):
+        """:meth:`HalfSpaceRenderer.render_view`, its glossy lobes sampled with ``view_lobe_samples`` directions
+        per ray."""
+        with self._lobe_samples(self.view_lobe_samples):
+            return super().render_view(sensor, width, height, lights, spp=spp, seed=seed)
 
     @property
     def cache_size(self) -> int:
@@ -1042,11 +1113,8 @@ class CachedRenderer(HalfSpaceRenderer):
             first = jit_array(mi.UInt32, (v - v % 3).astype(np.uint32))
             corner = v % 3
             bary = tuple(jit_array(mi.Float, (corner == c).astype(np.float32)) for c in range(3))
-            samples, self.lobe_samples = self.lobe_samples, self.lobe_samples * PINHOLE_SAMPLES
-            try:
+            with self._lobe_samples(self.lobe_samples * PINHOLE_SAMPLES):
                 per_pair[want] = to_numpy(self._glossy(si, mi.Bool(True), sid, flags, first, bary, lights, seed))
-            finally:
-                self.lobe_samples = samples
         values = [jit_array(mi.Float, per_pair[self._shared, c]) for c in range(3)]
         self._pinhole_memo = (key, tuple(lights), values)
         return values
@@ -1066,13 +1134,14 @@ class CachedRenderer(HalfSpaceRenderer):
         side = int(round(np.sqrt(self._base_samples())))
         count = side * side
         rng = mi.PCG32(n, dr.opaque(mi.UInt64, seed * 1000003 + 29), dr.arange(mi.UInt64, n))
+        shift = _shifts(rng, mi.UInt32(side))
         irradiance = self._irradiance
 
         def cond(j, rng, acc):
             return active & (j < count)
 
         def body(j, rng, acc):
-            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, side, float(side), active)
+            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, side, float(side), active, shift)
             ray = si.spawn_ray(si.to_world(bs.wo))
             pi = self.scene.ray_intersect_preliminary(ray, active=ok)
             sid = dr.reinterpret_array(mi.UInt32, pi.shape)
@@ -1090,7 +1159,7 @@ class CachedRenderer(HalfSpaceRenderer):
         return dr.select(active, acc / count, 0.0)
 
     def _base_samples(self) -> int:
-        side0 = max(1, int(round(np.sqrt(self.lobe_samples))))
+        side0 = max(1, int(round(np.sqrt(self._samples))))
         return side0 * side0
 
     def _strategies(self, light):
@@ -1107,7 +1176,7 @@ class CachedRenderer(HalfSpaceRenderer):
         for sid, obj in zip(self._sids, self.objects):
             if not _glossy(obj.material):
                 continue
-            side = lobe_strata(obj.material.roughness, self.lobe_samples)
+            side = lobe_strata(obj.material.roughness, self._samples)
             if obj.material.roughness > 0 and cost <= side * side:
                 strata[sid], summed[sid] = side0, 1
             else:
@@ -1153,19 +1222,22 @@ class CachedRenderer(HalfSpaceRenderer):
         side = mi.Float(strata)
         n_f = mi.Float(count)
 
+        shift = _shifts(rng, strata)
+
+        def visibility(k, w, ok):
+            if seen is None:
+                return dr.select(self.scene.ray_test(si.spawn_ray(w), ok), 0.0, 1.0)
+            return seen(k)
+
         def cond(j, rng, acc):
             return active & (j < count)
 
         def body(j, rng, acc):
-            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active)
+            bs, weight, ok = _lobe_direction(bsdf, ctx, si, rng, j, strata, side, active, shift)
             w = si.to_world(bs.wo)
             radiance, k, p_l = light.incident(si.p, w, ok)
-            if seen is None:
-                visible = dr.select(self.scene.ray_test(si.spawn_ray(w), ok), 0.0, 1.0)
-            else:
-                visible = seen(k)
             mis = dr.select(summed, n_f * bs.pdf / dr.maximum(n_f * bs.pdf + p_l, 1e-30), 1.0)
-            acc += dr.select(ok, weight * radiance * (visible * mis), 0.0)
+            acc += dr.select(ok, weight * radiance * (visibility(k, w, ok) * mis), 0.0)
             return j + 1, rng, acc
 
         _, _, acc = dr.while_loop((mi.UInt32(0), rng, mi.Color3f(0.0)), cond, body)
@@ -1175,9 +1247,10 @@ class CachedRenderer(HalfSpaceRenderer):
         """(table, varying): ``table`` mi.Float (D * K,), the fraction of each lenslet k's aperture
         (``VISIBILITY_POINTS`` stratified points) that distinct cache point d sees, at [d * K + k], computed for the
         points of glossy objects that the light may reach, once per lens array and side while nothing moves, buried
-        points' rows filled (:meth:`_buried`); ``varying`` mi.UInt32 (F,), 1 on the cache triangles whose corners'
-        rows differ by more than ``VARYING_VISIBILITY`` for some lenslet or that have a buried corner (a shadow
-        edge or a covering object's edge crosses them: their lobes cast their directions), or None if none do.
+        points' rows filled (:meth:`_buried`); ``varying`` mi.UInt32 (F,), 1 on the cache triangles with a corner
+        that cast shadow rays and corners' rows that differ by more than ``VARYING_VISIBILITY`` for some lenslet,
+        or with a buried corner (a shadow edge or a covering object's edge crosses them: their lobes cast their
+        directions), or None if there are none.
 
         A point whose hemisphere holds no other shape (a convex object alone, or none of the interreflection
         gather's directions met a shape) sees exactly the aperture points in front of its tangent plane; only the
@@ -1230,8 +1303,11 @@ class CachedRenderer(HalfSpaceRenderer):
             seen[shadowed] = (np.array(total, np.float32) / len(offsets)).reshape(len(idx), K)
         fill = self._buried()
         corners = self._shared.reshape(-1, 3)                            # (F, 3) distinct point of each corner
-        rows = seen[corners]                                             # (F, 3, K)
-        varying = (rows.max(axis=1) - rows.min(axis=1)).max(axis=1, initial=0.0) > VARYING_VISIBILITY
+        varying = np.zeros(len(corners), bool)
+        check = shadowed[corners].any(axis=1)                  # triangles whose shadows came from shadow rays
+        if check.any():
+            rows = seen[corners[check]]                                  # (F', 3, K)
+            varying[check] = (rows.max(axis=1) - rows.min(axis=1)).max(axis=1) > VARYING_VISIBILITY
         if fill is not None:
             varying |= self._buried_points[corners].any(axis=1)
             seen = np.asarray(fill @ seen, np.float32)

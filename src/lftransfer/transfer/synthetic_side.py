@@ -33,13 +33,12 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
     ``fast.MIN_ROUGHNESS`` = 0.02, where the fast path's error against the converged exact path was measured to
     be no larger than the exact path's at its default samples; below it neither path converges, and the exact
     path stays the reference) and emitters; otherwise the exact path. Synthetic objects that light each other
-    take the fast path, whose interreflection gather renders the diffuse light they exchange (measured against
-    the converged exact path, tests/render/test_fast.py::test_16), where their glossy and metal lobes are at least
-    ``fast.PINHOLE_ROUGHNESS`` rough (Fig. 6's frame: the same cross error and PSNR over the objects as the exact
-    path against ground truth, benchmarks/glossy/fast_vs_exact.py); smoother lobes among several reflecting
-    objects take the exact path (Fig. 1b's gold frame and coated photograph: the fast path measured 1.8 dB worse
-    over the synthetic objects). A half-space where nothing reflects light (no objects, or emitters only) always
-    takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters.
+    take the fast path too, whose interreflection gather renders the diffuse light they exchange (measured against
+    the converged exact path, tests/render/test_fast.py::test_16) and whose glossy lobes read it; the glossy light
+    they reflect onto each other is left out, and reports say so (Figs. 6 and 1b, each a glossy photograph on a
+    glossy or metal frame: the same cross error and PSNR over the objects as the exact path against ground truth,
+    benchmarks/glossy/fast_vs_exact.py). A half-space where nothing reflects light (no objects, or emitters only)
+    always takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters.
     """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
@@ -47,11 +46,7 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
         return "exact"
     if kind == "auto":
         ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
-        reflecting = _reflecting(scene)
-        glossy_exchange = len(reflecting) > 1 and any(o.material.type in ("glossy", "metal")
-                                                      and o.material.roughness < fast.PINHOLE_ROUGHNESS
-                                                      for o in reflecting)
-        return "fast" if ok and not glossy_exchange else "exact"
+        return "fast" if ok else "exact"
     return kind
 
 
@@ -65,8 +60,9 @@ def approximations(scene, kind: str = "auto") -> list[str]:
     glossy = [o for o in scene.synthetic if o.material.type in ("glossy", "metal")]
     if glossy:
         notes.append("fast path: glossy and metal lobes evaluated per ray, the light field's share by "
-                     f"{fast.DEFAULT_LOBE_SAMPLES} or more directions drawn from the lobe, its occlusion read from the "
-                     "cache (shadows of lenslets blurred across a cache triangle)")
+                     f"{fast.DEFAULT_LOBE_SAMPLES} or more directions drawn from the lobe "
+                     f"({fast.DEFAULT_VIEW_LOBE_SAMPLES} per view ray), its occlusion read from the cache except "
+                     "on cache triangles a shadow edge crosses")
     at_points = [o.name for o in glossy if o.material.roughness >= fast.PINHOLE_ROUGHNESS]
     if at_points:
         notes.append(f"fast path: in the view, the lobes of roughness >= {fast.PINHOLE_ROUGHNESS} "
