@@ -53,6 +53,13 @@ def test_01_reflection_curve_against_ground_truth(variant, tmp_path):
     errors = {f["index"]: f["metrics"]["cross_transfer_rel_error"] for f in saved["frames"] if f["metrics"]}
     assert errors == check.cross_errors and all(0 < e < 0.5 for e in errors.values())
     assert saved["summary"]["cross_transfer_rel_error_max"] == max(errors.values())
+    # ... split by side: the two sides' squared errors, weighted by their cross terms, make up the whole
+    for f in (f for f in saved["frames"] if f["metrics"]):
+        m = f["metrics"]
+        assert all(m[f"cross_{side}_rel_error"] is not None and m[f"cross_{side}_gt_noise_rel"] is not None
+                   for side in ("real", "synthetic"))
+        assert min(m["cross_real_rel_error"], m["cross_synthetic_rel_error"]) <= m["cross_transfer_rel_error"] \
+            <= max(m["cross_real_rel_error"], m["cross_synthetic_rel_error"]) + 1e-9
 
 
 def test_02_no_verified_frame_checks_nothing(tmp_path):

@@ -162,6 +162,8 @@ def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
     check = cross_transfer_error(composite(syn, alpha, lit), none, gt)
     assert check.error == pytest.approx(expected.cross_transfer_rel_error, rel=1e-6) and check.error > 0.1
     assert check.gt_noise == expected.cross_gt_noise_rel == 0.0          # the two seeds are the same here
+    assert check.by_side == expected.cross_by_side                       # the same split as evaluate's
+    assert check.by_side["real"].rel_error == pytest.approx(0.2, rel=1e-5)   # 80 % of the exchange reached them
     assert cross_transfer_error(none + extra, none, gt).error == pytest.approx(0.0, abs=1e-6)
     assert cross_transfer_error(none + extra, none, _gt(none, real, syn, 1 - alpha, alpha)).error is None
 

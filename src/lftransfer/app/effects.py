@@ -137,7 +137,9 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     For each verified frame (after the live loop's first N frames): its cross-transfer error (the frame's
     composite against the composite without any exchange, the projector black, at the same time), written into the
     frame's metrics in ``report.json`` as ``cross_transfer_rel_error`` beside the ground truth's own noise on it,
-    ``cross_gt_noise_rel`` (and the error's range into the summary); and, for
+    ``cross_gt_noise_rel`` (and the error's range into the summary), and split by side (``cross_synthetic_rel_error``
+    and ``cross_real_rel_error``, each with its ``..._gt_noise_rel``: the synthetic objects' pixels, lit by the
+    captured light field, and the real ones', lit through the projector); and, for
     a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png.
 
     Args:
@@ -186,6 +188,9 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
             cross = cross_transfer_error(frame, no_exchange, gt)
             check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
             f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
+            for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
+                f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
+                f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
             if effect is None:
                 continue
             truth_without = render_ground_truth(_without(world, effect.by), spp=spp, use_cache=options.use_cache).image

@@ -213,10 +213,13 @@ class CrossCheck:
         error: ||C_transfer - C_truth|| / ||C_truth|| over the objects' pixels (None without a cross term).
         gt_noise: ||C_truth,1 - C_truth,2|| / ||C_truth||: the two ground-truth seeds' cross terms against each
             other; an error not well above it is the ground truth's noise, not the transfer's.
+        by_side: the same split into the synthetic objects' pixels and the real ones' (:func:`cross_by_side`),
+            or None without a cross term.
     """
 
     error: float | None
     gt_noise: float | None
+    by_side: dict | None = None
 
 
 def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: GroundTruth, *,
@@ -242,7 +245,9 @@ def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: G
     c_norm = norm(c_gt)
     if not mask.any() or not c_norm > 0:
         return CrossCheck(None, None)
-    return CrossCheck(norm(downsample(composite_n - composite_0, f) - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm)
+    c_lft = downsample(composite_n - composite_0, f)
+    return CrossCheck(norm(c_lft - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm,
+                      cross_by_side(c_lft, pair, mask, downsample(gt.alpha_synthetic, f) > 0.5))
 
 
 @dataclass(frozen=True)
