@@ -161,6 +161,30 @@ def test_05_emitting_sphere_lights_a_plane(variant, renderer):
     np.testing.assert_array_equal(dark[0], 0.0)                         # no light given, no emission seen
 
 
+def test_06_a_sun_on_the_horizon_is_sampled_along_its_edge(variant):
+    """A sun half below a point's horizon (Fig. 5's terminator on the planet): with a square number of emitter
+    samples they are stratified, so the estimate of its light varies much less between shading points than with
+    random samples (the control: one sample fewer, not a square), with the same mean."""
+    from lftransfer.render.lights import EmitterLight
+
+    L, R, n = 5.0, 0.01, 4096
+    sun = ObjectConfig.model_validate({"name": "sun", "shape": "sphere", "radius": R, "translate": [0.03, 0, -0.1],
+                                       "material": {"type": "emitter", "radiance": [L, L, L]}})
+    r = HalfSpaceRenderer([sun, _plane(-0.1, "+z")], max_depth=1)      # the sun's centre on the plane's level
+    origins = np.tile([[0.0, 0.0, -0.09]], (n, 1))                     # n shading points, each its own samples
+
+    def estimates(samples):
+        rad, hit, _ = r.render_rays(origins, np.tile([[0.0, 0.0, -1.0]], (n, 1)), [EmitterLight(samples=samples)])
+        assert hit.all()
+        return rad[:, 0]
+
+    stratified, random = estimates(16), estimates(15)
+    mean = random.mean()
+    assert mean > 0 and abs(stratified.mean() - mean) < 0.02 * mean
+    # measured: relative spread 0.18 stratified, 0.34 random
+    assert stratified.std() < 0.22 * mean and random.std() > 1.6 * stratified.std()
+
+
 def test_incident_radiance_along_a_direction(variant):
     """LightFieldLight.incident reads the lenslet whose aperture a ray meets, at the ray's direction: the disk's
     radiance through the aperture, nothing beside it or beyond the window, and the density M r^2 / (A cos) of

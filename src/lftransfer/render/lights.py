@@ -141,7 +141,9 @@ class EmitterLight:
 
     They light the other objects by next-event estimation: ``samples`` directions per shading point drawn by
     Mitsuba's emitter sampling of the scene the renderer traces (solid-angle sampling of the visible cap for
-    spheres), with shadow rays; a ray that meets an emitter sees its radiance (:meth:`emitted`). Give this light
+    spheres), stratified on a sqrt(samples) x sqrt(samples) grid of the sample square when ``samples`` is a
+    square (a sun half hidden behind the horizon of the point it lights is then sampled along its edge, not at
+    random), with shadow rays; a ray that meets an emitter sees its radiance (:meth:`emitted`). Give this light
     to a render only where the emitters' own light belongs (the direct frame), never with a captured light
     field that already carries it back.
 
@@ -177,8 +179,11 @@ class EmitterLight:
         n = dr.width(si.p)
         rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
         active = mi.Bool(active)
-        for _ in range(self.samples):
-            sample = mi.Point2f(rng.next_float32(), rng.next_float32())
+        side = int(round(np.sqrt(self.samples)))
+        strata = side if side * side == self.samples else 1
+        for j in range(self.samples):
+            x, y = (j % strata, j // strata) if strata > 1 else (0, 0)
+            sample = mi.Point2f((x + rng.next_float32()) / strata, (y + rng.next_float32()) / strata)
             ds, value = scene.sample_emitter_direction(si, sample, True, active)
             ok = active & (ds.pdf > 0.0)
             f = _weight(si, ds.d, ok, irradiance, ctx)
