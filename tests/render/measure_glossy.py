@@ -148,7 +148,7 @@ def main() -> None:
         line = (f"{name:13s} | {pair(a['fast'])}  {pair(a['exact'])}  {pair(a['diffuse_only'])} | "
                 f"{pair(p['fast'])}  {pair(p['diffuse_only'])}")
         if args.timing:
-            t = timing(material, frames=2 if args.full else 7, quick=not args.full)
+            t = timing(material, frames=4 if args.full else 7, quick=not args.full)
             line += f" | {t['fast'] * 1000:6.0f} ms {t['exact'] * 1000:6.0f} ms x{t['exact'] / t['fast']:.1f}"
         print(line, flush=True)
 
