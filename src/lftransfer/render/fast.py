@@ -1012,9 +1012,8 @@ class CachedRenderer(HalfSpaceRenderer):
             return out
         hit = at(index)
         value = mi.Color3f(0.0)
-        for light in lights:
-            if not hasattr(light, "emitted"):
-                value += light.illuminate(self.scene, hit, mi.Bool(True), seed=seed)
+        for light in lights:                 # emitters too: the hits are on reflecting surfaces
+            value += light.illuminate(self.scene, hit, mi.Bool(True), seed=seed)
         dr.eval(out, value)                  # one kernel each (scattered channel by channel, each would recompute)
         dr.scatter(out, value, index)
         return out
