@@ -501,4 +501,3 @@ def test_19_objects_that_move_as_one_keep_their_gather(variant):
     assert fast_module.TOGETHER == pytest.approx(1e-4)
     gather = r._interreflection()
     assert r.update(moved(0.001, 0.0)) and r._interreflection() is not gather
-
