@@ -424,6 +424,22 @@ class Interreflection:
         return np.asarray(self.matrices[channel] @ irradiance, np.float32)[shared]
 
 
+@dataclass(frozen=True)
+class _Burial:
+    """The cache points buried under another surface (:meth:`CachedRenderer._buried`).
+
+    Attributes:
+        fill: ``scipy.sparse.csr_matrix`` (D, D) over the distinct points: a buried point's row averages the open
+            points beside it, the others' rows are the identity's.
+        covered: (F,) bool, the cache triangles with a buried corner.
+        covered_jit: ``covered`` as mi.UInt32 (F,), for the renders.
+    """
+
+    fill: object
+    covered: np.ndarray
+    covered_jit: object
+
+
 @dataclass(eq=False)
 class _RaySet:
     """A constant ray set a renderer has cast (the memoised primary rays of a view or light field render).
@@ -575,7 +591,7 @@ class CachedRenderer(HalfSpaceRenderer):
         self._lit_by: tuple | None = None
         self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
         self._gather: Interreflection | None = None
-        self._fill = None
+        self._burial: tuple = ()        # (the _Burial, or None where nothing is buried,) once found
         self._arranged = self._arrangement()
 
     def update(self, objects: Sequence) -> bool:
@@ -623,7 +639,7 @@ class CachedRenderer(HalfSpaceRenderer):
         self.objects = objects
         if not _moved_together(self._arranged[0], objects, self._arranged[1]):
             self._gather = None
-            self._fill = None
+            self._burial = ()
             self._arranged = self._arrangement()
         self._visibility.clear()
         self._pinhole_memo = None
@@ -710,9 +726,9 @@ class CachedRenderer(HalfSpaceRenderer):
         self._sees = jit_array(mi.Float, self._gather.sees)
         return self._gather
 
-    def _buried(self):
-        """The fill of buried cache points (``scipy.sparse.csr_matrix`` (D, D), or None where nothing is buried),
-        found once per arrangement of the objects (kept while they move together, like the gather).
+    def _buried(self) -> _Burial | None:
+        """The buried cache points and their fill (:class:`_Burial`, or None where nothing is buried), found once
+        per arrangement of the objects (kept while they move together, like the gather).
 
         A cache point is buried when another surface lies less than ``BURIED_DEPTH * max_edge`` in front of it
         along its normal (the frame under a photograph laid on it): no camera sees it, but the triangles it shares
@@ -722,13 +738,12 @@ class CachedRenderer(HalfSpaceRenderer):
         neighbour takes its filled neighbours' mean, up to three rings, else keeps its own value).
         """
         mi = mitsuba()
-        import drjit as dr
         from scipy import sparse
 
-        if self._fill is not None:
-            return self._fill[0]
+        if self._burial:
+            return self._burial[0]
         one, count = self._one_of, len(self._one_of)
-        matrix = None
+        burial = None
         if count and exchanges_light(self.objects):
             n = self.normals[one].astype(np.float64)
             rays = jit_rays(self.vertices[one] + 1e-5 * n, n)
@@ -756,12 +771,10 @@ class CachedRenderer(HalfSpaceRenderer):
                         shape=(count, count))
                     fill = update @ fill
                     known[rows] = True
-                matrix = fill.tocsr()
-                self._buried_points = buried
-                covered = buried[self._shared.reshape(-1, 3)].any(axis=1)          # (F,) a buried corner
-                self._covered = jit_array(mi.UInt32, covered.astype(np.uint32))
-        self._fill = (matrix,)
-        return matrix
+                covered = buried[corners].any(axis=1)
+                burial = _Burial(fill.tocsr(), covered, jit_array(mi.UInt32, covered.astype(np.uint32)))
+        self._burial = (burial,)
+        return burial
 
     @contextmanager
     def _lobe_samples(self, count: int):
@@ -805,9 +818,9 @@ class CachedRenderer(HalfSpaceRenderer):
             for _ in range(self.bounces):
                 bounce = [gather.bounce(bounce[c], c, self._shared) for c in range(3)]
                 total = [t + b for t, b in zip(total, bounce)]
-        fill = self._buried()
-        if fill is not None:
-            total = [np.asarray(fill @ t[self._one_of], np.float32)[self._shared] for t in total]
+        burial = self._buried()
+        if burial is not None:
+            total = [np.asarray(burial.fill @ t[self._one_of], np.float32)[self._shared] for t in total]
         self._irradiance = [jit_array(mi.Float, t) for t in total]
         self._lit_by = tuple(lights)
 
@@ -998,9 +1011,10 @@ class CachedRenderer(HalfSpaceRenderer):
         mi = mitsuba()
         import drjit as dr
 
-        if not self._fill or self._fill[0] is None:
+        burial = self._buried()
+        if burial is None:
             return out
-        maybe = dr.compress(active & (dr.gather(mi.UInt32, self._covered, first // 3, active) != 0))
+        maybe = dr.compress(active & (dr.gather(mi.UInt32, burial.covered_jit, first // 3, active) != 0))
         if dr.width(maybe) == 0:
             return out
         hit = at(maybe)
@@ -1300,16 +1314,16 @@ class CachedRenderer(HalfSpaceRenderer):
                 total += dr.select(self.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
                 dr.eval(total)
             seen[shadowed] = (np.array(total, np.float32) / len(offsets)).reshape(len(idx), K)
-        fill = self._buried()
+        burial = self._buried()
         corners = self._shared.reshape(-1, 3)                            # (F, 3) distinct point of each corner
         varying = np.zeros(len(corners), bool)
         check = shadowed[corners].any(axis=1)                  # triangles whose shadows came from shadow rays
         if check.any():
             rows = seen[corners[check]]                                  # (F', 3, K)
             varying[check] = (rows.max(axis=1) - rows.min(axis=1)).max(axis=1) > VARYING_VISIBILITY
-        if fill is not None:
-            varying |= self._buried_points[corners].any(axis=1)
-            seen = np.asarray(fill @ seen, np.float32)
+        if burial is not None:
+            varying |= burial.covered
+            seen = np.asarray(burial.fill @ seen, np.float32)
         varying = jit_array(mi.UInt32, varying.astype(np.uint32)) if varying.any() else None
         self._visibility[key] = (jit_array(mi.Float, seen), varying)
         return self._visibility[key]
