@@ -215,11 +215,13 @@ class CrossCheck:
             other; an error not well above it is the ground truth's noise, not the transfer's.
         by_side: the same split into the synthetic objects' pixels and the real ones' (:func:`cross_by_side`),
             or None without a cross term.
+        truth_norm: ||C_truth|| over the objects' pixels (0.0 without a cross term, None without such pixels).
     """
 
     error: float | None
     gt_noise: float | None
     by_side: dict | None = None
+    truth_norm: float | None = None
 
 
 def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: GroundTruth, *,
@@ -241,13 +243,15 @@ def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: G
     pair = cross_term_truth(gt, f)
     c_gt = 0.5 * (pair[0] + pair[1])
     mask = object_mask(gt, f)
+    if not mask.any():
+        return CrossCheck(None, None)
     norm = lambda x: float(np.sqrt(np.sum(x[mask] ** 2)))  # noqa: E731
     c_norm = norm(c_gt)
-    if not mask.any() or not c_norm > 0:
-        return CrossCheck(None, None)
+    if not c_norm > 0:
+        return CrossCheck(None, None, truth_norm=c_norm)
     c_lft = downsample(composite_n - composite_0, f)
     return CrossCheck(norm(c_lft - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm,
-                      cross_by_side(c_lft, pair, mask, downsample(gt.alpha_synthetic, f) > 0.5))
+                      cross_by_side(c_lft, pair, mask, downsample(gt.alpha_synthetic, f) > 0.5), c_norm)
 
 
 @dataclass(frozen=True)
@@ -364,13 +368,9 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
     ds = lambda x: downsample(x, f)  # noqa: E731
     union = ds(gt.image)
     peak = float(union.max())
-    # Cross-transfer terms: what the objects add to each other's appearance.
-    c_gt_pair = cross_term_truth(gt, f)
-    c_gt = 0.5 * (c_gt_pair[0] + c_gt_pair[1])
-    c_lft = ds(comp_n - comp_0)
+    cross = cross_transfer_error(comp_n, comp_0, gt, target_width=target_width)   # what the objects add to each other
     mask = object_mask(gt, f)
-    norm = lambda x: float(np.sqrt(np.sum(x[mask] ** 2)))  # noqa: E731
-    c_norm, u_norm = norm(c_gt), norm(union)
+    u_norm = float(np.sqrt(np.sum(union[mask] ** 2)))
     undefined: dict[str, str] = {}
 
     def defined(key: str, value: float, reason: str) -> float | None:
@@ -383,25 +383,24 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
         reason = NO_LIGHT if not peak > 0 else NO_PIXELS if where is not None and not where.any() else IDENTICAL
         return defined(key, psnr(image, reference, peak, mask=where), reason)
 
-    def ratio(key: str, num: float, den: float, reason: str) -> float | None:
-        if not mask.any():
-            return defined(key, float("nan"), NO_PIXELS)
-        return defined(key, num / den if den > 0 else float("nan"), reason)
+    def ratio(key: str, value: float | None, reason: str) -> float | None:
+        return defined(key, float("nan") if value is None else value, reason if mask.any() else NO_PIXELS)
 
     return Evaluation(
         psnr_db=psnr_of("psnr_db", ds(comp_n), union),
         psnr_db_direct_only=psnr_of("psnr_db_direct_only", ds(comp_0), union),
         psnr_objects_db=psnr_of("psnr_objects_db", ds(comp_n), union, mask),
         psnr_objects_db_direct_only=psnr_of("psnr_objects_db_direct_only", ds(comp_0), union, mask),
-        cross_transfer_rel_error=ratio("cross_transfer_rel_error", norm(c_lft - c_gt), c_norm, NO_CROSS),
+        cross_transfer_rel_error=ratio("cross_transfer_rel_error", cross.error, NO_CROSS),
         gt_noise_psnr_db=psnr_of("gt_noise_psnr_db", ds(gt.union[0]), ds(gt.union[1])),
-        cross_gt_noise_rel=ratio("cross_gt_noise_rel", norm(c_gt_pair[0] - c_gt_pair[1]), c_norm, NO_CROSS),
-        cross_term_rel_size=ratio("cross_term_rel_size", c_norm, u_norm, NO_LIGHT),
+        cross_gt_noise_rel=ratio("cross_gt_noise_rel", cross.gt_noise, NO_CROSS),
+        cross_term_rel_size=ratio("cross_term_rel_size",
+                                  cross.truth_norm / u_norm if cross.truth_norm is not None and u_norm > 0 else None,
+                                  NO_LIGHT),
         metric_resolution=(int(union.shape[1]), int(union.shape[0])),
         metric_pixels=int(mask.sum()),
         undefined=undefined,
-        cross_by_side=(cross_by_side(c_lft, c_gt_pair, mask, ds(gt.alpha_synthetic) > 0.5)
-                       if mask.any() and c_norm > 0 else {}),
+        cross_by_side=cross.by_side or {},
     )
 
 
