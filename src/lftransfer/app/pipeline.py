@@ -574,10 +574,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                                                 source=options.calibration, true_lights=true_lights)
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
-    settings = TransferSettings(bounces=options.bounces, angular_samples=scene.rig.angular_samples,
-                                lighting_model=primary, aperture_samples=render.aperture_samples,
-                                reconstruction=_reconstruction(scene, options),
-                                lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
+    settings = TransferSettings.for_scene(scene, bounces=options.bounces, lighting_model=primary,
+                                          reconstruction=_reconstruction(scene, options), renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v

@@ -283,12 +283,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     step = step or (lambda _msg: None)
     times = sequence_times(scene, seq)
     n = len(times)
-    render = scene.render
-    settings = TransferSettings(bounces=bounces, angular_samples=scene.rig.angular_samples,
-                                lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
-                                reconstruction=render.reconstruction if render.lighting_model == "area" else "box",
-                                lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer,
-                                bounce_views=seq.mode == "converged")
+    settings = TransferSettings.for_scene(scene, bounces=bounces, renderer=options.renderer,
+                                          bounce_views=seq.mode == "converged")
     if seq.cluster is not None and options.rig.kind != "sim":
         raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "
                             f"recording is one device whose frames come one after another")
@@ -329,7 +325,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                       "approximations": approximations(ps, settings.renderer)}
             writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
             verify = seq.verify_every > 0 and opened.world is not None
-            gt_spp = options.gt_spp or render.gt_spp
+            gt_spp = options.gt_spp or scene.render.gt_spp
             if seq.mode == "live":
                 _live_frames(writer, opened, model, ps, settings, times, done, out, scene,
                              lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache)

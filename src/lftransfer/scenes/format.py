@@ -209,6 +209,10 @@ class RenderConfig(_Model):
         reconstruction: area model: how the captured light field is read between lenslet centres, ``"linear"``
             (blended across the three lenslets around each aperture point, continuous in position) or ``"box"``
             (one sample per lenslet over its whole aperture).
+        projection: area model: what the projector is sent, ``"depth"`` (the projected light field prefiltered
+            from the real scene's depth, measured through the rig with one extra frame, so that each real point
+            receives the synthetic light of the rays that land on it) or ``"box"`` (each entry the mean of the
+            synthetic light over its lenslet's aperture).
         spp: samples per pixel of view renders and per light field sample.
         max_depth: path depth (surface interactions) inside each half-space.
         gt_spp: samples per pixel of the path-traced ground truth.
@@ -217,6 +221,7 @@ class RenderConfig(_Model):
     lighting_model: Literal["area", "point", "prefiltered"] = "area"
     aperture_samples: PosInt = 4
     reconstruction: Literal["box", "linear"] = "linear"
+    projection: Literal["box", "depth"] = "box"
     spp: PosInt = 4
     max_depth: PosInt = 3
     gt_spp: PosInt = 2048

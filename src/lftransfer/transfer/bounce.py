@@ -24,6 +24,7 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
+from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -41,6 +42,9 @@ class TransferSettings:
         aperture_samples: lenslet aperture points per shading point (area model).
         reconstruction: how the captured light field is read between lenslet centres when it lights the
             synthetic scene: "box" or "linear" (area model; :mod:`lftransfer.render.lights`).
+        projection: what the projector is sent: "box" (each entry the mean of the synthetic light over its
+            lenslet's aperture) or "depth" (prefiltered from the real scene's depth measured through the rig with
+            one extra frame; area model; :mod:`lftransfer.transfer.projection`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -56,12 +60,28 @@ class TransferSettings:
     lighting_model: str = "area"
     aperture_samples: int = 4
     reconstruction: str = "box"
+    projection: str = "box"
     lf_spp: int = 4
     view_spp: int = 4
     projector_fill: float = 0.95
     bounce_views: bool = True
     renderer: str = "auto"
     seed: int = 0
+
+    @classmethod
+    def for_scene(cls, scene, **changes) -> "TransferSettings":
+        """The settings a scene's ``[rig]`` and ``[render]`` ask for (angular samples, lighting model, aperture
+        samples, reconstruction, projection, ``render.spp`` rays per light field entry and per view pixel), with
+        ``changes`` applied (None values ignored); the reconstruction and the projection are "box" unless the
+        lighting model is the area model."""
+        render = scene.render
+        values = dict(angular_samples=scene.rig.angular_samples, lighting_model=render.lighting_model,
+                      aperture_samples=render.aperture_samples, reconstruction=render.reconstruction,
+                      projection=render.projection, lf_spp=render.spp, view_spp=render.spp)
+        values.update({k: v for k, v in changes.items() if v is not None})
+        if values["lighting_model"] != "area":
+            values.update(reconstruction="box", projection="box")
+        return cls(**values)
 
 
 @dataclass
@@ -112,6 +132,8 @@ class TransferResult:
         saturated_fraction: fraction of the direct frame's LF camera codes at full scale (light clipped there
             is lost to the synthetic side).
         timings_s: seconds per stage.
+        depth: (K, V, U) the real scene's depth measured for the projection prefilter, metres (NaN where none
+            was found), or None (``projection == "box"``).
     """
 
     bounces: list[Bounce]
@@ -124,6 +146,7 @@ class TransferResult:
     captured_raw: np.ndarray
     saturated_fraction: float = 0.0
     timings_s: dict[str, float] = field(default_factory=dict)
+    depth: np.ndarray | None = None
 
 
 def projector_gain(lf: LightField, max_radiance: float, fill: float = 0.95) -> float:
@@ -180,7 +203,8 @@ def final_projection(bounces: list[Bounce]) -> LightField:
 def count_steps(settings: TransferSettings) -> int:
     """Number of progress callbacks :func:`run_transfer` makes (for progress bars)."""
     per_bounce = 3 + (1 if settings.bounce_views else 0)
-    return 4 + settings.bounces * per_bounce + 2
+    depth = 1 if settings.projection == "depth" and settings.lighting_model == "area" else 0
+    return 4 + depth + settings.bounces * per_bounce + 2
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
@@ -221,6 +245,13 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
+    depth = None
+    if settings.projection == "depth" and settings.lighting_model == "area":
+        step("measure the real scene's depth (projector white)")
+        with timer("measure_depth"):
+            depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
+                                  settings.angular_samples, r0)
+        side.set_depth(depth)
     step("render synthetic direct")
     ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
@@ -266,4 +297,4 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
                           clipped_fraction=clipped, captured_raw=raw0,
                           saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
-                          timings_s=timer.totals)
+                          timings_s=timer.totals, depth=depth)

@@ -36,7 +36,8 @@ from lftransfer.transfer.timer import StageTimer
 
 __all__ = ["LiveFrame", "LiveTransfer", "LIVE_STAGES"]
 
-LIVE_STAGES = ("pose", "encode", "capture", "decode", "capture_view", "render_lightfield", "render_view", "composite")
+LIVE_STAGES = ("pose", "measure_depth", "encode", "capture", "decode", "capture_view", "render_lightfield", "prefilter",
+               "render_view", "composite")
 
 
 @dataclass
@@ -117,6 +118,17 @@ class LiveTransfer:
         self.projected = self._black_lf
         self.index = 0
 
+    def _measure_depth(self) -> None:
+        """The real scene's depth for the projection prefilter (``projection == "depth"``): two extra frames,
+        projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`). Measured once, at the
+        first step: the real objects are taken to stand still (a sequence whose real objects move projects the
+        box light field and says so)."""
+        rig, side = self.rig, self.side
+        rig.project(rig.info.black())
+        direct = side.decoder(rig.capture_lf().codes)
+        U = self.settings.angular_samples
+        side.set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U, direct))
+
     def step(self, time_s: float) -> LiveFrame:
         """Run one frame at scene time ``time_s`` (seconds); see the module docstring."""
         import time
@@ -127,6 +139,9 @@ class LiveTransfer:
         with timer("pose"):
             moved = side.pose(time_s)
         rig.setup(RealScene(time_s=time_s))
+        if side.prefilter is None and s.projection == "depth" and s.lighting_model == "area":
+            with timer("measure_depth"):
+                self._measure_depth()
         projected = self.projected
         with timer("encode"):
             pattern = side.encoder(projected) if projected is not self._black_lf else rig.info.black()

@@ -17,6 +17,7 @@ from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
 from lftransfer.scenes.frame import scene_in_frame
+from lftransfer.transfer.projection import DepthPrefilter
 
 __all__ = ["SyntheticSide", "approximations", "resolve_renderer", "synthetic_renderer"]
 
@@ -117,6 +118,8 @@ class SyntheticSide:
         point_lights: the virtual twins of the real point lights (array frame), one per light of the scene.
         direct_lights: the synthetic scene's own light: the point lights, and its emitting objects where it
             has any (:class:`~lftransfer.render.lights.EmitterLight`).
+        prefilter: the projection prefilter from the real scene's measured depth (:meth:`set_depth`), or None:
+            the box light field is projected.
     """
 
     def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0) -> None:
@@ -137,6 +140,7 @@ class SyntheticSide:
         self.width, self.height = view.resolution
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
                                                self.height))
+        self.prefilter: DepthPrefilter | None = None
 
     def _posed(self, t: float) -> SyntheticScene:
         return scene_in_frame(self.scene.at(t), self.model.world_to_array())
@@ -164,6 +168,26 @@ class SyntheticSide:
         else:
             self.renderer = synthetic_renderer(posed, settings.renderer)
         self._set_lights(posed)
+        if self.prefilter is not None:
+            self.set_depth(self.prefilter.depth)
+
+    def set_depth(self, depth: np.ndarray | None) -> None:
+        """Prefilter every outgoing light field from this depth of the real scene (:mod:`~lftransfer.transfer.
+        projection`), when the settings ask for it (``projection == "depth"``, area model); None: the box light field.
+
+        Args:
+            depth: (K, V, U) depth of each light field entry's centre ray, metres (NaN: unknown), from
+                :func:`~lftransfer.transfer.projection.measure_depth`.
+        """
+        s = self.settings
+        if depth is None or s.projection != "depth" or s.lighting_model != "area":
+            self.prefilter = None
+            return
+        U = s.angular_samples
+        old = self.prefilter
+        if old is not None and old.depth is depth and old.spp == s.lf_spp and old.seed == s.seed:
+            return
+        self.prefilter = DepthPrefilter(np.asarray(depth), self.model.array, U, U, spp=s.lf_spp, seed=s.seed)
 
     def _set_lights(self, posed: SyntheticScene) -> None:
         self.point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
@@ -179,18 +203,25 @@ class SyntheticSide:
                                seed=seed, reconstruction=s.reconstruction if s.lighting_model == "area" else "box")
 
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
-        """Ls (the light field the synthetic scene sends through the array) and S (its view image) under
-        ``lights``; ``timer(stage)`` is an optional context manager factory timing "render_lightfield" and
-        "render_view"."""
+        """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is
+        set) and S (its view image) under ``lights``; ``timer(stage)`` is an optional context manager factory timing
+        "render_lightfield", "prefilter" and "render_view"."""
         from contextlib import nullcontext
 
         time_it = timer or (lambda _stage: nullcontext())
         s = self.settings
         U = V = s.angular_samples
+        pf = self.prefilter
         with time_it("render_lightfield"):
-            ls = self.renderer.render_lightfield(self.model.array, lights, U, V,
-                                                 model="area" if s.lighting_model == "area" else "point",
-                                                 spp=s.lf_spp, seed=seed)
+            if pf is None:
+                ls = self.renderer.render_lightfield(self.model.array, lights, U, V,
+                                                     model="area" if s.lighting_model == "area" else "point",
+                                                     spp=s.lf_spp, seed=seed)
+            else:
+                radiance = self.renderer.render_rays(pf.origins, pf.directions, lights, seed=seed)[0]
+        if pf is not None:
+            with time_it("prefilter"):
+                ls = pf.apply(radiance)
         with time_it("render_view"):
             view = self.renderer.render_view(self.sensor, self.width, self.height, lights, spp=s.view_spp, seed=seed)
         return ls, view

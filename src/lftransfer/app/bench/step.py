@@ -5,7 +5,7 @@ calls per frame, with the rig model a run uses (calibrated by default) and the s
 ``lft render`` build from the scene (:func:`transfer_settings`: angular samples, lighting model, aperture
 samples, reconstruction, ``render.spp`` rays per light field sample and per view pixel, renderer). Each frame's stages are split into:
 
-- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
+- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field, prefilter,
   render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
   frame, median over the timed frames after ``warmup`` frames (the first compiles the kernels, the second
   builds the primary rays' culling tiles);
@@ -42,7 +42,7 @@ __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
-PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "render_view", "composite")
+PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "prefilter", "render_view", "composite")
 RIG_MODELS = ("calibrated", "nominal", "oracle")
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
@@ -199,15 +199,11 @@ def with_moving_object(scene, frames: int):
 
 def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> TransferSettings:
     """The live loop's settings as the demo builds them from the scene (``lftransfer.app.pipeline._run``):
-    the rig's angular samples, the scene's lighting model, aperture samples and reconstruction, ``render.spp``
+    the rig's angular samples, the scene's lighting model, aperture samples, reconstruction and projection, ``render.spp``
     rays per light field sample and per view pixel; ``options`` may pick another lighting model,
     reconstruction or renderer, as ``lft run`` may."""
-    render = scene.render
-    model = options.lighting_model or render.lighting_model
-    reconstruction = (options.reconstruction or render.reconstruction) if model == "area" else "box"
-    return TransferSettings(angular_samples=scene.rig.angular_samples, lighting_model=model,
-                            aperture_samples=render.aperture_samples, reconstruction=reconstruction,
-                            lf_spp=render.spp, view_spp=render.spp, renderer=options.renderer)
+    return TransferSettings.for_scene(scene, lighting_model=options.lighting_model,
+                                      reconstruction=options.reconstruction, renderer=options.renderer)
 
 
 def count_bench_steps(scene, options: BenchOptions) -> int:

@@ -24,11 +24,7 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = "calibrated", cali
                          renderer=renderer)
     opened = open_rig(scene, options)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
-    r = scene.render
-    settings = TransferSettings(angular_samples=scene.rig.angular_samples, lighting_model=r.lighting_model,
-                                aperture_samples=r.aperture_samples,
-                                reconstruction=r.reconstruction if r.lighting_model == "area" else "box",
-                                lf_spp=r.spp, view_spp=r.spp, renderer=renderer)
+    settings = TransferSettings.for_scene(scene, renderer=renderer)
     live = LiveTransfer(opened.rig, known.model, known.scene, settings)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
     return LiveSession(scene, live, out, sim_rig=sim, world=opened.world)
