@@ -351,6 +351,9 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
                                                      help="Lighting model (default: the scene's)."),
         reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
             "Area model: how the captured light field is read between lenslets (default: the scene's).")),
+        projection: Optional[str] = typer.Option(None, metavar="box|depth", help=(
+            "Area model: what the projector is sent: the box light field, or one prefiltered from the real scene's "
+            "depth measured through the rig (default: the scene's).")),
         compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point) and the "
                                                   "other reconstruction (linear or box)."),
         gt_spp: Optional[int] = typer.Option(None, min=1, metavar="N", help=_GT_SPP_HELP),
@@ -368,10 +371,13 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
 
     _check_lighting_model(lighting_model)
     _check_reconstruction(reconstruction)
+    if projection is not None and projection not in ("box", "depth"):
+        fail(f"--projection: expected box or depth, got {projection!r}")
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
+                         projection=projection,
                          compare_models=("area", "point") if compare else (),
                          compare_reconstructions=("box", "linear") if compare else (), gt_spp=gt_spp,
                          use_cache=not no_cache, renderer=renderer, **rig_opts)

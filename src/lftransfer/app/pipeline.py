@@ -20,6 +20,7 @@ from lftransfer.composite import composite
 from lftransfer.app.report import emitter_ceiling, write_json, write_outputs
 from lftransfer.app.run_folder import clear_run_folder, tracked_run, write_status
 from lftransfer.render.lights import RECONSTRUCTIONS
+from lftransfer.transfer.projection import PROJECTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
@@ -78,6 +79,8 @@ class RunOptions:
         reconstruction: how the captured light field is read between lenslets ("box" or "linear"; None: the
             scene's ``render.reconstruction``), for the area lighting model.
         compare_reconstructions: further reconstructions measured beside it (full reruns, area model only).
+        projection: what the projector is sent, "box" or "depth" (None: the scene's ``render.projection``; area
+            model only; :mod:`lftransfer.transfer.projection`).
         gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
@@ -107,6 +110,7 @@ class RunOptions:
     compare_models: tuple[str, ...] = ("point",)
     reconstruction: str | None = None
     compare_reconstructions: tuple[str, ...] = ()
+    projection: str | None = None
     gt_spp: int | None = None
     capture_spp: int = 4
     use_cache: bool = True
@@ -133,6 +137,8 @@ class RunOptions:
             problems.append(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
         if self.renderer not in ("auto", "fast", "exact"):
             problems.append(f"renderer must be auto, fast or exact, got {self.renderer!r}")
+        if self.projection is not None and self.projection not in PROJECTIONS:
+            problems.append(f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}")
         for r in (self.reconstruction, *self.compare_reconstructions):
             if r is not None and r not in RECONSTRUCTIONS:
                 problems.append(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {r!r}")
@@ -575,7 +581,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings.for_scene(scene, bounces=options.bounces, lighting_model=primary,
-                                          reconstruction=_reconstruction(scene, options), renderer=options.renderer)
+                                          reconstruction=_reconstruction(scene, options),
+                                          projection=options.projection, renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
@@ -642,6 +649,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "lighting_model": primary,
         "by_lighting_model": by_model,
         "reconstruction": settings.reconstruction,
+        "projection": settings.projection,
         "by_reconstruction": by_reconstruction,
         "negative_control": control.result.to_json() if control is not None else None,
         "undefined_metrics": undefined,

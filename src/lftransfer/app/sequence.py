@@ -198,6 +198,20 @@ class ConvergedFrame:
     seconds: float
 
 
+def _projection_note(scene, seq: SequenceOptions, settings: TransferSettings) -> list[str]:
+    """What the report says of the projection prefilter (``[render] projection = "depth"``), one sentence."""
+    if settings.projection != "depth":
+        return []
+    if seq.mode != "live":
+        return ["projection: prefiltered from the real scene's depth, measured in every frame (one extra frame with "
+                "the projector white)"]
+    if any(o.moves for o in scene.real):
+        return ["projection: the box light field, not the depth prefilter the scene asks for: the real objects move, "
+                "and the live loop measures the depth once"]
+    return ["projection: prefiltered from the real scene's depth, measured once before the first frame (two extra "
+            "frames; the real objects stand still)"]
+
+
 def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float
                     ) -> tuple[TransferResult, float]:
     """Frame ``index`` of a converged sequence: an independent N-bounce transfer at ``time_s``, its random numbers
@@ -285,6 +299,9 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     n = len(times)
     settings = TransferSettings.for_scene(scene, bounces=bounces, renderer=options.renderer,
                                           bounce_views=seq.mode == "converged")
+    projection_note = _projection_note(scene, seq, settings)
+    if settings.projection == "depth" and seq.mode == "live" and any(o.moves for o in scene.real):
+        settings = replace(settings, projection="box")
     if seq.cluster is not None and options.rig.kind != "sim":
         raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "
                             f"recording is one device whose frames come one after another")
@@ -322,7 +339,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
                       "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
-                      "approximations": approximations(ps, settings.renderer)}
+                      "projection": settings.projection,
+                      "approximations": approximations(ps, settings.renderer) + projection_note}
             writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
             verify = seq.verify_every > 0 and opened.world is not None
             gt_spp = options.gt_spp or scene.render.gt_spp

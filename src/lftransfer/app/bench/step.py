@@ -5,7 +5,7 @@ calls per frame, with the rig model a run uses (calibrated by default) and the s
 ``lft render`` build from the scene (:func:`transfer_settings`: angular samples, lighting model, aperture
 samples, reconstruction, ``render.spp`` rays per light field sample and per view pixel, renderer). Each frame's stages are split into:
 
-- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field, prefilter,
+- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
   render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
   frame, median over the timed frames after ``warmup`` frames (the first compiles the kernels, the second
   builds the primary rays' culling tiles);
@@ -42,7 +42,7 @@ __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
-PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "prefilter", "render_view", "composite")
+PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "render_view", "composite")
 RIG_MODELS = ("calibrated", "nominal", "oracle")
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
@@ -250,6 +250,7 @@ def _settings_json(scene, options: BenchOptions, settings: TransferSettings, ren
         "aperture_samples": settings.aperture_samples,
         "lighting_model": settings.lighting_model,
         "reconstruction": settings.reconstruction,
+        "projection": settings.projection,
         "renderer": {"asked": settings.renderer, "used": renderer},
         "rig": "sim",
         "truth_seed": options.truth_seed,
