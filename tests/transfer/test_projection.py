@@ -77,12 +77,12 @@ def _round_trip_errors(depth_scale: float = 1.0) -> dict[str, float]:
 
 
 def test_02_round_trip_through_a_plane_beats_the_box_light_field():
-    """Measured: relative error 0.2137 (box) and 0.2028 (prefilter, 5 % lower); given a depth 50 % too far the
-    gain nearly vanishes (0.2123), so the test sees the depth. The gain is small here: the fit knows each beam's
-    footprint by its four rendered rays only (docs/architecture.md, "The projector's side")."""
+    """Measured: relative error 0.214 with the box light field, 0.182 with the prefilter (15 % lower; 0.201 when
+    the fit was only clipped at zero instead of constrained); given a depth 50 % too far the gain nearly vanishes
+    (0.212), so the test sees the depth."""
     right, wrong = _round_trip_errors(), _round_trip_errors(1.5)
-    assert right["prefilter"] < 0.96 * right["box"]
-    assert wrong["prefilter"] > right["prefilter"] + 0.005
+    assert right["prefilter"] < 0.9 * right["box"]
+    assert wrong["prefilter"] > right["prefilter"] + 0.02
 
 
 def test_03_keeps_each_lenslets_power_and_never_goes_negative():

@@ -16,8 +16,9 @@ direction can put more of the synthetic light where it belongs. Knowing where ea
 
        min_P  sum_bins (sum_{rays r in bin} w_r (P[entry(r)] - Ls(r)))^2  +  (DAMP s)^2 |P - P_box|^2,
 
-   ``w_r`` a ray's projected solid angle over ``spp``, ``s`` the RMS column norm; the damped least-squares solution
-   is exact (a sparse factorisation of the bins' normal matrix, made once per depth), clipped at zero;
+   ``w_r`` a ray's projected solid angle over ``spp``, ``s`` the RMS column norm, subject to P >= 0 (a projector
+   cannot send negative light): the unconstrained solution (a sparse factorisation of the bins' normal matrix,
+   made once per depth) clipped at zero starts an accelerated projected gradient;
 4. on each lenslet the entries whose rays land keep the box light field's power over them: the prefilter moves
    light between the directions that reach the real objects, it does not add any (where the depth is wrong, a
    fit that may add light sends too much to the real objects: 13 to 21 % on the study scenes).
@@ -42,6 +43,8 @@ from lftransfer.render.renderer import lightfield_rays, sample_mean
 BIN_M = 0.004
 #: Pull towards the box light field, relative to the RMS column norm of the bins' matrix.
 DAMP = 0.3
+#: Steps of the non-negative fit (on the study scenes at the paper's resolution 30 give what 150 give).
+ITERATIONS = 30
 #: Fraction of the projector's full radiance shown by :func:`measure_depth`'s white light field.
 WHITE_FILL = 0.5
 
@@ -132,9 +135,17 @@ class DepthPrefilter:
         self._lu = None
         if self.bins:
             norms = np.sqrt(np.asarray(self._m.multiply(self._m).sum(0)).ravel())
-            lam = self.damp * np.sqrt(np.mean(norms[norms > 0] ** 2))
-            normal = (self._m @ self._m.T + lam**2 * sp.identity(self.bins)).tocsc()
-            self._lu = splu(normal)
+            self._lam2 = (self.damp * np.sqrt(np.mean(norms[norms > 0] ** 2))) ** 2
+            self._lu = splu((self._m @ self._m.T + self._lam2 * sp.identity(self.bins)).tocsc())
+            self._cols = np.flatnonzero(self.landed.reshape(-1))
+            self._ml = self._m[:, self._cols].tocsr()
+            self._mlt = self._ml.T.tocsr()
+            v = np.random.default_rng(0).random(len(self._cols))                # power iteration: |M|^2
+            for _ in range(30):
+                v = self._mlt @ (self._ml @ v)
+                top = float(np.linalg.norm(v))
+                v /= top
+            self._lipschitz = 1.05 * top + self._lam2
 
     def _land(self, origins: np.ndarray, directions: np.ndarray, spp: int, data: np.ndarray):
         """The entry (R',) and landing point (R', 3) of every ray whose entry has a depth: each ray of entry e
@@ -171,8 +182,10 @@ class DepthPrefilter:
             return box
         K, V, U = box.data.shape[:3]
         p0 = box.data.reshape(-1, 3).astype(np.float64)
-        residual = self._gather @ radiance.astype(np.float64) - self._m @ p0
-        p = np.maximum(p0 + self._m.T @ self._lu.solve(residual), 0.0)
+        target = self._gather @ radiance.astype(np.float64)
+        p = p0.copy()
+        p[self._cols] = self._nonnegative(target, p0[self._cols],
+                                          p0 + self._m.T @ self._lu.solve(target - self._m @ p0))
         # each lenslet's landing entries keep the box power over them
         w = (self._zero.solid_angle_weights()[None] * self.landed).reshape(K, -1)
         p, p0 = p.reshape(K, V * U, 3), p0.reshape(K, V * U, 3)
@@ -183,5 +196,28 @@ class DepthPrefilter:
         out.data[...] = p.reshape(K, V, U, 3).astype(np.float32)
         return out
 
+    def _nonnegative(self, target: np.ndarray, p0: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """The damped fit restricted to P >= 0 over the landing entries: accelerated projected gradient (FISTA,
+        :data:`ITERATIONS` steps) from the unconstrained solution ``free`` clipped at zero (clipping alone leaves
+        most of the fit's gain on the table: a round trip through a plane measured 0.201 clipped, 0.182
+        constrained, against the box light field's 0.214; tests/transfer/test_projection.py).
 
-__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "PROJECTIONS", "WHITE_FILL", "measure_depth"]
+        Args:
+            target: (bins, 3) the light each bin should receive; p0: (n, 3) the box entries being fitted.
+            free: (K * V * U, 3) the unconstrained damped least-squares solution.
+
+        Returns:
+            (n, 3) float64 entries >= 0.
+        """
+        x = np.maximum(free[self._cols], 0.0)
+        y, step, momentum = x.copy(), 1.0 / self._lipschitz, 1.0
+        for _ in range(ITERATIONS):
+            gradient = self._mlt @ (self._ml @ y - target) + self._lam2 * (y - p0)
+            new = np.maximum(y - step * gradient, 0.0)
+            following = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * momentum**2))
+            y = new + (momentum - 1.0) / following * (new - x)
+            x, momentum = new, following
+        return x
+
+
+__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "PROJECTIONS", "WHITE_FILL", "measure_depth"]
