@@ -297,6 +297,10 @@ def _summary(report: dict, out: Path) -> None:
     for name, m in by_reconstruction.items():
         if len(by_reconstruction) > 1 and m.get("cross_transfer_rel_error") is not None:
             _row(table, f"cross error, {name} reconstruction", f"{m['cross_transfer_rel_error']:.4g}")
+    by_projection = report.get("by_projection") or {}
+    for name, m in by_projection.items():
+        if len(by_projection) > 1 and m.get("cross_transfer_rel_error") is not None:
+            _row(table, f"cross error, {name} projection", f"{m['cross_transfer_rel_error']:.4g}")
     control = report.get("negative_control")
     if control is not None:
         _row(table, f"negative control: {control['rig_model']}", _control_line(control))
@@ -328,15 +332,16 @@ def demo(out: Path = typer.Option(Path("out/demo"), metavar="DIR", help="Output 
          rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
          max_memory: Optional[str] = _memory_option()) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-    transfer, check against ground truth (both lighting models, both reconstructions) and against a negative
-    control (the rig file's nominal values, uncalibrated)."""
+    transfer, check against ground truth (both lighting models, both reconstructions, both projections) and against
+    a negative control (the rig file's nominal values, uncalibrated)."""
     from lftransfer.app.pipeline import RunOptions
 
     _check_renderer(renderer)
     scene = _load(None, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, compare_models=("area", "point"), compare_reconstructions=("box", "linear"),
-                         use_cache=not no_cache, renderer=renderer, negative_control=True, **rig_opts)
+                         compare_projections=("box", "depth"), use_cache=not no_cache, renderer=renderer,
+                         negative_control=True, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",
                        max_memory=max_memory)
@@ -354,8 +359,9 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
         projection: Optional[str] = typer.Option(None, metavar="box|depth", help=(
             "Area model: what the projector is sent: the box light field, or one prefiltered from the real scene's "
             "depth measured through the rig (default: the scene's).")),
-        compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point) and the "
-                                                  "other reconstruction (linear or box)."),
+        compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point), the "
+                                                  "other reconstruction (linear or box) and the other projection "
+                                                  "(depth or box)."),
         gt_spp: Optional[int] = typer.Option(None, min=1, metavar="N", help=_GT_SPP_HELP),
         quick: bool = _flag("--quick", _QUICK_HELP),
         no_cache: bool = _flag("--no-cache", "Render the ground truth again (do not read or write the cache)."),
@@ -379,7 +385,8 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
     options = RunOptions(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
                          projection=projection,
                          compare_models=("area", "point") if compare else (),
-                         compare_reconstructions=("box", "linear") if compare else (), gt_spp=gt_spp,
+                         compare_reconstructions=("box", "linear") if compare else (),
+                         compare_projections=("box", "depth") if compare else (), gt_spp=gt_spp,
                          use_cache=not no_cache, renderer=renderer, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",

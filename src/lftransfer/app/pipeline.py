@@ -81,6 +81,7 @@ class RunOptions:
         compare_reconstructions: further reconstructions measured beside it (full reruns, area model only).
         projection: what the projector is sent, "box" or "depth" (None: the scene's ``render.projection``; area
             model only; :mod:`lftransfer.transfer.projection`).
+        compare_projections: further projections measured beside it (full reruns, area model only).
         gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
@@ -111,6 +112,7 @@ class RunOptions:
     reconstruction: str | None = None
     compare_reconstructions: tuple[str, ...] = ()
     projection: str | None = None
+    compare_projections: tuple[str, ...] = ()
     gt_spp: int | None = None
     capture_spp: int = 4
     use_cache: bool = True
@@ -137,8 +139,9 @@ class RunOptions:
             problems.append(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
         if self.renderer not in ("auto", "fast", "exact"):
             problems.append(f"renderer must be auto, fast or exact, got {self.renderer!r}")
-        if self.projection is not None and self.projection not in PROJECTIONS:
-            problems.append(f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}")
+        for p in (self.projection, *self.compare_projections):
+            if p is not None and p not in PROJECTIONS:
+                problems.append(f"projection must be one of {', '.join(PROJECTIONS)}, got {p!r}")
         for r in (self.reconstruction, *self.compare_reconstructions):
             if r is not None and r not in RECONSTRUCTIONS:
                 problems.append(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {r!r}")
@@ -282,7 +285,7 @@ def count_run_steps(scene, options: RunOptions) -> int:
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
     reruns = len(_other_models(scene, options)) + len(_other_reconstructions(scene, options)) \
-        + (1 if _runs_control(options) else 0)
+        + len(_other_projections(scene, options)) + (1 if _runs_control(options) else 0)
     return 1 + calibration + primary + (6 if _verifies(options) else 0) + reruns * other + 1
 
 
@@ -296,6 +299,19 @@ def _reconstruction(scene, options: RunOptions) -> str:
     if (options.lighting_model or scene.render.lighting_model) != "area":
         return "box"
     return options.reconstruction or scene.render.reconstruction
+
+
+def _projection(scene, options: RunOptions) -> str:
+    """The run's projection: the option, else the scene's; "box" unless the area model."""
+    if (options.lighting_model or scene.render.lighting_model) != "area":
+        return "box"
+    return options.projection or scene.render.projection
+
+
+def _other_projections(scene, options: RunOptions) -> list[str]:
+    if (options.lighting_model or scene.render.lighting_model) != "area":
+        return []
+    return [p for p in options.compare_projections if p != _projection(scene, options)]
 
 
 def _other_reconstructions(scene, options: RunOptions) -> list[str]:
@@ -582,7 +598,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     render = scene.render
     settings = TransferSettings.for_scene(scene, bounces=options.bounces, lighting_model=primary,
                                           reconstruction=_reconstruction(scene, options),
-                                          projection=options.projection, renderer=options.renderer)
+                                          projection=_projection(scene, options), renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
@@ -596,6 +612,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     gt, metrics, gt_spp_needed = None, None, None
     by_model = {primary: {}}
     by_reconstruction = {settings.reconstruction: {}}
+    by_projection = {settings.projection: {}}
     if verified:
         from lftransfer.sim.verify import evaluate, gt_noise_verdict, render_ground_truth
 
@@ -606,6 +623,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         metrics = evaluate(result, gt)
         by_model[primary] = {k: getattr(metrics, k) for k in BY_MODEL_KEYS}
         by_reconstruction[settings.reconstruction] = by_model[primary]
+        by_projection[settings.projection] = by_model[primary]
         noisy = gt_noise_verdict(metrics, gt_spp)
         if noisy is not None:
             warning(noisy.message())
@@ -614,6 +632,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
               for other in _other_models(scene, options)]
     reruns += [("reconstruction", other, by_reconstruction, f"transfer_{other}_reconstruction")
                for other in _other_reconstructions(scene, options)]
+    reruns += [("projection", other, by_projection, f"transfer_{other}_projection")
+               for other in _other_projections(scene, options)]
     for field_name, other, table, timing in reruns:       # the same run with one setting changed, measured
         t = time.perf_counter()
         alt = run_transfer(rig, model, pipeline_scene, replace(settings, **{field_name: other}, bounce_views=False),
@@ -651,6 +671,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "reconstruction": settings.reconstruction,
         "projection": settings.projection,
         "by_reconstruction": by_reconstruction,
+        "by_projection": by_projection,
         "negative_control": control.result.to_json() if control is not None else None,
         "undefined_metrics": undefined,
         "warnings": warnings,

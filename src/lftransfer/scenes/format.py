@@ -221,7 +221,7 @@ class RenderConfig(_Model):
     lighting_model: Literal["area", "point", "prefiltered"] = "area"
     aperture_samples: PosInt = 4
     reconstruction: Literal["box", "linear"] = "linear"
-    projection: Literal["box", "depth"] = "box"
+    projection: Literal["box", "depth"] = "depth"
     spp: PosInt = 4
     max_depth: PosInt = 3
     gt_spp: PosInt = 2048

@@ -31,6 +31,7 @@ from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 

@@ -218,7 +218,8 @@ class SyntheticSide:
                                                      model="area" if s.lighting_model == "area" else "point",
                                                      spp=s.lf_spp, seed=seed)
             else:
-                radiance = self.renderer.render_rays(pf.origins, pf.directions, lights, seed=seed)[0]
+                # one "sample" per ray: every primary ray still goes through render_samples
+                radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
         if pf is not None:
             with time_it("prefilter"):
                 ls = pf.apply(radiance)

@@ -6,7 +6,7 @@ calls per frame, with the rig model a run uses (calibrated by default) and the s
 samples, reconstruction, ``render.spp`` rays per light field sample and per view pixel, renderer). Each frame's stages are split into:
 
 - the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
-  render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
+  the projection prefilter where the scene asks for it, render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
   frame, median over the timed frames after ``warmup`` frames (the first compiles the kernels, the second
   builds the primary rays' culling tiles);
 - the rig's capture (:data:`RIG_STAGES`): in the simulated rig, the simulator's rendering of the real scene;
@@ -42,7 +42,7 @@ __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
-PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "render_view", "composite")
+PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "prefilter", "render_view", "composite")
 RIG_MODELS = ("calibrated", "nominal", "oracle")
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
