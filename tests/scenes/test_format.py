@@ -207,6 +207,7 @@ def test_with_overrides_revalidates():
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n[[light]]\nposition = [0.1, 0.2]\n" + BOX, "light[1].position",
      "at least 3"),
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n" * 9 + BOX, "light", "at most 8"),
+    (LIGHT + "[render]\nprojection = 'prefilter'\n" + BOX, "render.projection", "'box' or 'depth'"),
 ])
 def test_bad_input_names_file_and_field(tmp_path, text, path, what):
     message = _error(tmp_path, text)
