@@ -4,7 +4,7 @@ receives closer to what the synthetic scene would have sent it than the box ligh
 
 Each scene runs twice, projecting the box light field and the prefiltered one (the depth measured through the
 rig: the projector shows white, the LF camera captures, a plane sweep finds where neighbouring lenslets agree),
-and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes: Fig. 4 and three scenes of this folder
+and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes: Fig. 4 and five scenes of this folder
 (true rig model, truth seed 2, the linear reconstruction, 2 bounces); at quarter resolution (ground truth 8192
 samples per pixel) or, with ``--full``, at the paper's (48 x 48 directions per lenslet, ground truth 512).
 
@@ -78,7 +78,8 @@ def fig5_shadow(full: bool) -> None:
 
 
 def cross_table(full: bool) -> None:
-    scenes = [("fig4", builtin_scene("fig4")), *[(n, HERE / f"{n}.toml") for n in ("spheres", "cylinders", "far")]]
+    scenes = [("fig4", builtin_scene("fig4")),
+              *[(n, HERE / f"{n}.toml") for n in ("spheres", "cylinders", "far", "rect", "glossy")]]
     print("| scene | projected light field | cross error | real side: error, energy ratio, error after best scale "
           "| synthetic side: the same | ground truth's noise (real) |")
     print("|---|---|---|---|---|---|")
