@@ -2,9 +2,10 @@
 
 A projector lenslet sends one radiance per direction over its whole aperture. The box prefilter (each entry the
 mean of the synthetic light over the aperture, what
-:meth:`~lftransfer.render.renderer.HalfSpaceRenderer.render_lightfield` renders) therefore gives a real point every direction's light blurred over a lenslet. But a real point receives
-from each lenslet a range of directions that shifts as the point moves, so a light field whose entries vary with
-direction can put more of the synthetic light where it belongs. Knowing where each projected ray lands:
+:meth:`~lftransfer.render.renderer.HalfSpaceRenderer.render_lightfield` renders) therefore gives a real point
+every direction's light blurred over a lenslet. But a real point receives from each lenslet a range of directions
+that shifts as the point moves, so a light field whose entries vary with direction can put more of the synthetic
+light where it belongs. Knowing where each projected ray lands:
 
 1. the depth of the real scene is measured through the rig (:func:`measure_depth`: the projector shows white, the
    LF camera captures, the direct frame is subtracted, and :func:`~lftransfer.lightfield.depth.plane_sweep` finds
@@ -94,8 +95,8 @@ class DepthPrefilter:
 
     Example:
         >>> pf = DepthPrefilter(depth, array, U, V, spp=4)                            # doctest: +SKIP
-        >>> radiance, _, _ = renderer.render_rays(pf.origins, pf.directions, lights)  # doctest: +SKIP
-        >>> ls = pf.apply(radiance)                                                   # doctest: +SKIP
+        >>> radiance = renderer.render_samples(pf.origins, pf.directions, lights, 1).radiance  # doctest: +SKIP
+        >>> ls = pf.apply(radiance)                                                           # doctest: +SKIP
     """
 
     depth: np.ndarray

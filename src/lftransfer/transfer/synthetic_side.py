@@ -172,8 +172,9 @@ class SyntheticSide:
             self.set_depth(self.prefilter.depth)
 
     def set_depth(self, depth: np.ndarray | None) -> None:
-        """Prefilter every outgoing light field from this depth of the real scene (:mod:`~lftransfer.transfer.
-        projection`), when the settings ask for it (``projection == "depth"``, area model); None: the box light field.
+        """Prefilter every outgoing light field from this depth of the real scene
+        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``projection == "depth"``, area
+        model); None: the box light field.
 
         Args:
             depth: (K, V, U) depth of each light field entry's centre ray, metres (NaN: unknown), from

@@ -3,12 +3,14 @@
 What is timed is :meth:`lftransfer.transfer.live.LiveTransfer.step`, the function ``lft render --mode live``
 calls per frame, with the rig model a run uses (calibrated by default) and the settings the demo and
 ``lft render`` build from the scene (:func:`transfer_settings`: angular samples, lighting model, aperture
-samples, reconstruction, ``render.spp`` rays per light field sample and per view pixel, renderer). Each frame's stages are split into:
+samples, reconstruction, projection, ``render.spp`` rays per light field sample and per view pixel, renderer).
+Each frame's stages are split into:
 
-- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field,
-  the projection prefilter where the scene asks for it, render view, composite): the work a physical rig's computer does; ``pipeline_iteration_ms`` is their sum per
-  frame, median over the timed frames after ``warmup`` frames (the first compiles the kernels, the second
-  builds the primary rays' culling tiles);
+- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field, the
+  projection prefilter where the scene asks for it, render view, composite): the work a physical rig's computer
+  does; ``pipeline_iteration_ms`` is their sum per frame, median over the timed frames after ``warmup`` frames
+  (the first compiles the kernels and measures the real scene's depth for the prefilter, the second builds the
+  primary rays' culling tiles);
 - the rig's capture (:data:`RIG_STAGES`): in the simulated rig, the simulator's rendering of the real scene;
   a physical rig's exposure instead;
 - the rest of the step's wall time (``unstaged_ms``): the rig's ``setup`` and ``project`` calls and the step's
@@ -199,8 +201,8 @@ def with_moving_object(scene, frames: int):
 
 def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> TransferSettings:
     """The live loop's settings as the demo builds them from the scene (``lftransfer.app.pipeline._run``):
-    the rig's angular samples, the scene's lighting model, aperture samples, reconstruction and projection, ``render.spp``
-    rays per light field sample and per view pixel; ``options`` may pick another lighting model,
+    the rig's angular samples, the scene's lighting model, aperture samples, reconstruction and projection,
+    ``render.spp`` rays per light field sample and per view pixel; ``options`` may pick another lighting model,
     reconstruction or renderer, as ``lft run`` may."""
     return TransferSettings.for_scene(scene, lighting_model=options.lighting_model,
                                       reconstruction=options.reconstruction, renderer=options.renderer)
