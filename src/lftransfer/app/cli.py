@@ -216,6 +216,17 @@ def _check_renderer(renderer: str) -> None:
         fail(f"--renderer: expected one of auto, fast, exact, got {renderer!r}")
 
 
+_PROJECTION_HELP = ("Area model: what the projector is sent: the light field prefiltered from the real scene's "
+                    "depth, measured through the rig, or the box light field (default: the scene's).")
+
+
+def _check_projection(projection: Optional[str]) -> None:
+    from lftransfer.transfer.projection import PROJECTIONS
+
+    if projection is not None and projection not in PROJECTIONS:
+        fail(f"--projection: expected one of {', '.join(PROJECTIONS)}, got {projection!r}")
+
+
 def _check_reconstruction(reconstruction: Optional[str]) -> None:
     from lftransfer.render.lights import RECONSTRUCTIONS
 
@@ -356,9 +367,7 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
                                                      help="Lighting model (default: the scene's)."),
         reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
             "Area model: how the captured light field is read between lenslets (default: the scene's).")),
-        projection: Optional[str] = typer.Option(None, metavar="box|depth", help=(
-            "Area model: what the projector is sent: the box light field, or one prefiltered from the real scene's "
-            "depth measured through the rig (default: the scene's).")),
+        projection: Optional[str] = typer.Option(None, metavar="box|depth", help=_PROJECTION_HELP),
         compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point), the "
                                                   "other reconstruction (linear or box) and the other projection "
                                                   "(depth or box)."),
@@ -377,8 +386,7 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
 
     _check_lighting_model(lighting_model)
     _check_reconstruction(reconstruction)
-    if projection is not None and projection not in ("box", "depth"):
-        fail(f"--projection: expected box or depth, got {projection!r}")
+    _check_projection(projection)
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
@@ -648,6 +656,7 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
                                                        help="Lighting model (default: the scene's)."),
           reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
               "Area model: how the captured light field is read between lenslets (default: the scene's).")),
+          projection: Optional[str] = typer.Option(None, metavar="box|depth", help=_PROJECTION_HELP),
           renderer: str = typer.Option("auto", metavar="auto|fast|exact", help=_RENDERER_HELP),
           accuracy: bool = typer.Option(True, "--accuracy/--no-accuracy", metavar="", help=(
               "Also render the last frame with the exact path and report the fast path's PSNR against it.")),
@@ -669,6 +678,7 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
 
     _check_lighting_model(lighting_model)
     _check_reconstruction(reconstruction)
+    _check_projection(projection)
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
     if live:
@@ -681,7 +691,7 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
     _check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
                        max_memory=max_memory)
     options = BenchOptions(iterations=iterations, lighting_model=lighting_model, reconstruction=reconstruction,
-                           renderer=renderer, truth_seed=rig_opts["truth_seed"], rig_model=rig_model,
+                           projection=projection, renderer=renderer, truth_seed=rig_opts["truth_seed"], rig_model=rig_model,
                            calibration=calibration, accuracy=accuracy, peer=peer)
     if calibrates:
         say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
@@ -698,7 +708,8 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
     data["settings"]["quick"] = quick
     data["settings"]["live"] = live
     data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed,
-                                                 lighting_model, reconstruction, renderer, accuracy, peer, live)
+                                                 lighting_model, reconstruction, renderer, accuracy, peer, live,
+                                                 projection)
     _bench_table(result)
     if json_out is not None:
         write_json(json_out, data)
@@ -721,7 +732,7 @@ def _demo_calibration_hint(scene) -> str:
 
 
 def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed, lighting_model,
-                   reconstruction, renderer, accuracy, peer, live=False) -> str:
+                   reconstruction, renderer, accuracy, peer, live=False, projection=None) -> str:
     """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
     import shlex
 
@@ -739,7 +750,8 @@ def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_
         parts += ["--rig-model", rig_model]
     if truth_seed != 0:
         parts += ["--truth-seed", str(truth_seed)]
-    for name, value in (("--lighting-model", lighting_model), ("--reconstruction", reconstruction)):
+    for name, value in (("--lighting-model", lighting_model), ("--reconstruction", reconstruction),
+                        ("--projection", projection)):
         if value is not None:
             parts += [name, value]
     if renderer != "auto":

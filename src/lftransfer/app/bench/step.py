@@ -60,6 +60,7 @@ class BenchOptions:
         lighting_model: None: the scene's ``render.lighting_model`` (as the demo); else "area", "point",
             "prefiltered" (as ``lft run --lighting-model``).
         reconstruction: None: the scene's ``render.reconstruction``; else "box" or "linear" (area model only).
+        projection: None: the scene's ``render.projection``; else "box" or "depth" (area model only).
         renderer: "auto" (as the demo), "fast" or "exact".
         truth_seed: seed of the simulated rig's hidden truth (0: the demo's rig), or None: built exactly as the
             rig file says.
@@ -77,6 +78,7 @@ class BenchOptions:
     warmup: int = 2
     lighting_model: str | None = None
     reconstruction: str | None = None
+    projection: str | None = None
     renderer: str = "auto"
     truth_seed: int | None = 0
     rig_model: str = "calibrated"
@@ -203,9 +205,10 @@ def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> Transfer
     """The live loop's settings as the demo builds them from the scene (``lftransfer.app.pipeline._run``):
     the rig's angular samples, the scene's lighting model, aperture samples, reconstruction and projection,
     ``render.spp`` rays per light field sample and per view pixel; ``options`` may pick another lighting model,
-    reconstruction or renderer, as ``lft run`` may."""
+    reconstruction, projection or renderer, as ``lft run`` may."""
     return TransferSettings.for_scene(scene, lighting_model=options.lighting_model,
-                                      reconstruction=options.reconstruction, renderer=options.renderer)
+                                      reconstruction=options.reconstruction, projection=options.projection,
+                                      renderer=options.renderer)
 
 
 def count_bench_steps(scene, options: BenchOptions) -> int:
