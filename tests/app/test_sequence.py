@@ -137,3 +137,26 @@ def test_05_the_synthetic_lights_stand_where_the_model_says(variant, tmp_path):
         assert known.rig_model == f"calibration file {path}"
     finally:
         opened.rig.close()
+
+
+def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_field():
+    """The live loop measures the real scene's depth once, so a scene whose real objects move is projected the box
+    light field, and its report says so; a converged sequence measures the depth in every frame."""
+    from lftransfer.app.sequence import _projection
+    from lftransfer.transfer.bounce import TransferSettings
+
+    still = _moving_scene()
+    block = still.real[0].model_dump()
+    x, y, z = block["translate"]
+    block["keyframes"] = [{"time_s": 0.0}, {"time_s": 0.5, "translate": [x, y + 0.01, z]}]
+    moving = with_overrides(still, real=[block])
+    settings = TransferSettings.for_scene(still)
+    assert settings.projection == "depth"                          # the scenes' default
+    kept, note = _projection(still, SequenceOptions(), settings)
+    assert kept.projection == "depth" and "measured once" in note[0]
+    box, note = _projection(moving, SequenceOptions(), settings)
+    assert box.projection == "box" and "the real objects move" in note[0]
+    converged, note = _projection(moving, SequenceOptions(mode="converged"), settings)
+    assert converged.projection == "depth" and "in every frame" in note[0]
+    plain, note = _projection(moving, SequenceOptions(), TransferSettings.for_scene(moving, projection="box"))
+    assert plain.projection == "box" and note == []

@@ -198,18 +198,21 @@ class ConvergedFrame:
     seconds: float
 
 
-def _projection_note(scene, seq: SequenceOptions, settings: TransferSettings) -> list[str]:
-    """What the report says of the projection prefilter (``[render] projection = "depth"``), one sentence."""
+def _projection(scene, seq: SequenceOptions, settings: TransferSettings) -> tuple[TransferSettings, list[str]]:
+    """The sequence's settings and what its report says of the projection prefilter (``[render] projection =
+    "depth"``, one sentence): a live loop measures the depth once, so where real objects move it projects the box
+    light field instead."""
     if settings.projection != "depth":
-        return []
+        return settings, []
     if seq.mode != "live":
-        return ["projection: prefiltered from the real scene's depth, measured in every frame (one extra frame with "
-                "the projector white)"]
+        return settings, ["projection: prefiltered from the real scene's depth, measured in every frame (one extra "
+                          "frame with the projector white)"]
     if any(o.moves for o in scene.real):
-        return ["projection: the box light field, not the depth prefilter the scene asks for: the real objects move, "
-                "and the live loop measures the depth once"]
-    return ["projection: prefiltered from the real scene's depth, measured once before the first frame (two extra "
-            "frames; the real objects stand still)"]
+        return replace(settings, projection="box"), [
+            "projection: the box light field, not the depth prefilter the scene asks for: the real objects move, "
+            "and the live loop measures the depth once"]
+    return settings, ["projection: prefiltered from the real scene's depth, measured once before the first frame "
+                      "(two extra frames; the real objects stand still)"]
 
 
 def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float
@@ -299,9 +302,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     n = len(times)
     settings = TransferSettings.for_scene(scene, bounces=bounces, renderer=options.renderer,
                                           bounce_views=seq.mode == "converged")
-    projection_note = _projection_note(scene, seq, settings)
-    if settings.projection == "depth" and seq.mode == "live" and any(o.moves for o in scene.real):
-        settings = replace(settings, projection="box")
+    settings, projection_note = _projection(scene, seq, settings)
     if seq.cluster is not None and options.rig.kind != "sim":
         raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "
                             f"recording is one device whose frames come one after another")

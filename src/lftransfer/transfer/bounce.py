@@ -3,7 +3,9 @@
 Light transport is linear, so the real scene's response to a projected light field is separated from its
 response to the real point light by differencing two captures, and each bounce can be inspected alone:
 
-- direct: R_0 = decode(capture(black)); Ls_0, S_0 rendered with the virtual point light only;
+- direct: R_0 = decode(capture(black)); Ls_0, S_0 rendered with the virtual point light only (with
+  ``projection = "depth"`` one more capture, the projector white, first gives the real scene's depth, from which
+  every Ls_n is prefiltered: :mod:`lftransfer.transfer.projection`);
 - bounce n >= 1: R_n = (decode(capture(encode(g_n Ls_{n-1}))) - R_0) / g_n, the gain g_n filling the
   projector's range; Ls_n, S_n rendered with the synthetic scene lit by R_{n-1} only;
 - final frame: real view = view camera while the projector shows encode(Ls_0 + ... + Ls_{N-1});

@@ -7,8 +7,9 @@ Frame t, with the projector showing the synthetic light field of frame t - 1 (bl
 2. project encode(Ls_{t-1}); capture the LF camera and decode it: R_t, the real scene lit by the real point light
    *and* by Ls_{t-1};
 3. capture the view camera (the real view under the same projection);
-4. render the synthetic scene lit by its own light (the virtual point light, emitting objects) and by R_t: its outgoing light field Ls_t (shown in
-   frame t + 1) and its view S_t;
+4. render the synthetic scene lit by its own light (the virtual point light, emitting objects) and by R_t: its
+   outgoing light field Ls_t (shown in frame t + 1; prefiltered from the real scene's depth where the settings ask
+   for it, the depth measured once before the first frame: :mod:`lftransfer.transfer.projection`) and its view S_t;
 5. composite S_t over the real view.
 
 Each frame carries one more exchange than the one before, so for a still scene the frames converge to the
