@@ -691,8 +691,8 @@ def bench(scene_file: Optional[Path] = typer.Option(None, "--scene", metavar="SC
     _check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
                        max_memory=max_memory)
     options = BenchOptions(iterations=iterations, lighting_model=lighting_model, reconstruction=reconstruction,
-                           projection=projection, renderer=renderer, truth_seed=rig_opts["truth_seed"], rig_model=rig_model,
-                           calibration=calibration, accuracy=accuracy, peer=peer)
+                           projection=projection, renderer=renderer, truth_seed=rig_opts["truth_seed"],
+                           rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer)
     if calibrates:
         say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
             "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."

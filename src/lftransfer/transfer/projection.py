@@ -233,5 +233,5 @@ class DepthPrefilter:
         return x
 
 
-__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "PROJECTIONS", "WARM_CHANGE", "WARM_ITERATIONS", "WHITE_FILL",
-           "measure_depth"]
+__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "PROJECTIONS", "WARM_CHANGE", "WARM_ITERATIONS",
+           "WHITE_FILL", "measure_depth"]
