@@ -284,8 +284,8 @@ def count_run_steps(scene, options: RunOptions) -> int:
     other = count_steps(TransferSettings(bounces=options.bounces, bounce_views=False))
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
-    reruns = len(_other_models(scene, options)) + len(_other_reconstructions(scene, options)) \
-        + len(_other_projections(scene, options)) + (1 if _runs_control(options) else 0)
+    reruns = len(_other_models(scene, options)) + len(_other_choices(scene, options, "reconstruction")) \
+        + len(_other_choices(scene, options, "projection")) + (1 if _runs_control(options) else 0)
     return 1 + calibration + primary + (6 if _verifies(options) else 0) + reruns * other + 1
 
 
@@ -294,31 +294,20 @@ def _other_models(scene, options: RunOptions) -> list[str]:
     return [m for m in options.compare_models if m != primary]
 
 
-def _reconstruction(scene, options: RunOptions) -> str:
-    """The run's reconstruction across lenslets: the option, else the scene's; "box" unless the area model."""
+def _area_choice(scene, options: RunOptions, name: str) -> str:
+    """The run's ``name`` ("reconstruction" or "projection"): the option, else the scene's ``render`` value; "box"
+    unless the area model."""
     if (options.lighting_model or scene.render.lighting_model) != "area":
         return "box"
-    return options.reconstruction or scene.render.reconstruction
+    return getattr(options, name) or getattr(scene.render, name)
 
 
-def _projection(scene, options: RunOptions) -> str:
-    """The run's projection: the option, else the scene's; "box" unless the area model."""
-    if (options.lighting_model or scene.render.lighting_model) != "area":
-        return "box"
-    return options.projection or scene.render.projection
-
-
-def _other_projections(scene, options: RunOptions) -> list[str]:
+def _other_choices(scene, options: RunOptions, name: str) -> list[str]:
+    """The values of ``name`` measured beside the run's (``options.compare_<name>s``; none unless the area model)."""
     if (options.lighting_model or scene.render.lighting_model) != "area":
         return []
-    return [p for p in options.compare_projections if p != _projection(scene, options)]
-
-
-def _other_reconstructions(scene, options: RunOptions) -> list[str]:
-    if (options.lighting_model or scene.render.lighting_model) != "area":
-        return []
-    primary = _reconstruction(scene, options)
-    return [r for r in options.compare_reconstructions if r != primary]
+    primary = _area_choice(scene, options, name)
+    return [v for v in getattr(options, f"compare_{name}s") if v != primary]
 
 
 def write_calibration(path: Path, calibration, truth=None, source: Path | None = None, *,
@@ -597,8 +586,9 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     primary = options.lighting_model or scene.render.lighting_model
     render = scene.render
     settings = TransferSettings.for_scene(scene, bounces=options.bounces, lighting_model=primary,
-                                          reconstruction=_reconstruction(scene, options),
-                                          projection=_projection(scene, options), renderer=options.renderer)
+                                          reconstruction=_area_choice(scene, options, "reconstruction"),
+                                          projection=_area_choice(scene, options, "projection"),
+                                          renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
         timings[k] = timings.get(k, 0.0) + v
@@ -631,9 +621,9 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     reruns = [("lighting_model", other, by_model, f"transfer_{other}_model")
               for other in _other_models(scene, options)]
     reruns += [("reconstruction", other, by_reconstruction, f"transfer_{other}_reconstruction")
-               for other in _other_reconstructions(scene, options)]
+               for other in _other_choices(scene, options, "reconstruction")]
     reruns += [("projection", other, by_projection, f"transfer_{other}_projection")
-               for other in _other_projections(scene, options)]
+               for other in _other_choices(scene, options, "projection")]
     for field_name, other, table, timing in reruns:       # the same run with one setting changed, measured
         t = time.perf_counter()
         alt = run_transfer(rig, model, pipeline_scene, replace(settings, **{field_name: other}, bounce_views=False),
