@@ -202,7 +202,7 @@ def _projection(scene, seq: SequenceOptions, settings: TransferSettings) -> tupl
     """The sequence's settings and what its report says of the projection prefilter (``[render] projection =
     "depth"``, one sentence): a live loop measures the depth once, so where real objects move it projects the box
     light field instead."""
-    if settings.projection != "depth":
+    if not settings.prefilters:
         return settings, []
     if seq.mode != "live":
         return settings, ["projection: prefiltered from the real scene's depth, measured in every frame (one extra "

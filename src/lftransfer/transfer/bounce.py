@@ -70,6 +70,12 @@ class TransferSettings:
     renderer: str = "auto"
     seed: int = 0
 
+    @property
+    def prefilters(self) -> bool:
+        """Whether the projected light field is prefiltered from a measured depth (``projection == "depth"``, which
+        needs the area model)."""
+        return self.projection == "depth" and self.lighting_model == "area"
+
     @classmethod
     def for_scene(cls, scene, **changes) -> "TransferSettings":
         """The settings a scene's ``[rig]`` and ``[render]`` ask for (angular samples, lighting model, aperture
@@ -205,8 +211,7 @@ def final_projection(bounces: list[Bounce]) -> LightField:
 def count_steps(settings: TransferSettings) -> int:
     """Number of progress callbacks :func:`run_transfer` makes (for progress bars)."""
     per_bounce = 3 + (1 if settings.bounce_views else 0)
-    depth = 1 if settings.projection == "depth" and settings.lighting_model == "area" else 0
-    return 4 + depth + settings.bounces * per_bounce + 2
+    return 4 + int(settings.prefilters) + settings.bounces * per_bounce + 2
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
@@ -248,7 +253,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     with timer("decode"):
         r0 = decoder(raw0)
     depth = None
-    if settings.projection == "depth" and settings.lighting_model == "area":
+    if settings.prefilters:
         step("measure the real scene's depth (projector white)")
         with timer("measure_depth"):
             depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,

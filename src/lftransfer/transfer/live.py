@@ -141,7 +141,7 @@ class LiveTransfer:
         with timer("pose"):
             moved = side.pose(time_s)
         rig.setup(RealScene(time_s=time_s))
-        if side.prefilter is None and s.projection == "depth" and s.lighting_model == "area":
+        if side.prefilter is None and s.prefilters:
             with timer("measure_depth"):
                 self._measure_depth()
         projected = self.projected

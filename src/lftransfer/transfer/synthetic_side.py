@@ -173,15 +173,15 @@ class SyntheticSide:
 
     def set_depth(self, depth: np.ndarray | None) -> None:
         """Prefilter every outgoing light field from this depth of the real scene
-        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``projection == "depth"``, area
-        model); None: the box light field.
+        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``settings.prefilters``); None: the
+        box light field.
 
         Args:
             depth: (K, V, U) depth of each light field entry's centre ray, metres (NaN: unknown), from
                 :func:`~lftransfer.transfer.projection.measure_depth`.
         """
         s = self.settings
-        if depth is None or s.projection != "depth" or s.lighting_model != "area":
+        if depth is None or not s.prefilters:
             self.prefilter = None
             return
         U = s.angular_samples
