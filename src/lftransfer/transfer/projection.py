@@ -123,30 +123,37 @@ class DepthPrefilter:
             raise ValueError(f"depth has shape {self.depth.shape}, the light field needs {(K, V, U)}")
         self._zero = LightField.zeros(self.array, U, V)
         mask = self._zero.mask()
+        self._mask = mask[None, :, :, None]
         self.origins, self.directions = lightfield_rays(self.array, U, V, area=True, spp=S, seed=self.seed)
         for a in (self.origins, self.directions):
             a.flags.writeable = False
         data = np.broadcast_to(mask, (K, V, U)).reshape(-1) & np.isfinite(self.depth.reshape(-1))
-        entry, points = self._land(self.origins, self.directions, S, data)
+        # every ray of an entry with a depth meets the plane at that depth, parallel to the array
         rays = np.flatnonzero(np.repeat(data, S))
-        w = self._zero.solid_angle_weights().reshape(-1)[entry % (V * U)] / S
+        entry = rays // S
+        towards = -self.directions[rays].astype(np.float64)                 # into the real half-space, z > 0
+        points = self.origins[rays] + self.depth.reshape(-1)[entry][:, None] * towards / towards[:, 2:3]
+        weights = self._zero.solid_angle_weights()                          # (V, U)
+        w = weights.reshape(-1)[entry % (V * U)] / S
         cells = np.floor(points / self.bin_m).astype(np.int64)
         bins = np.unique(cells, axis=0, return_inverse=True)[1].ravel() if len(rays) else np.zeros(0, np.int64)
         self.bins = int(bins.max() + 1) if len(bins) else 0
         self._gather = sp.csr_matrix((w.astype(np.float32), (bins, rays)),          # target = G @ Ls(r): float32,
                                      shape=(self.bins, K * V * U * S))              # as the rays' radiance is
-        self._m = sp.csr_matrix((w, (bins, entry)), shape=(self.bins, K * V * U))            # bins <- entries
+        self._cols = np.unique(entry)                                       # the landing entries, sorted
         self.landed = np.zeros(K * V * U, bool)
-        self.landed[entry] = True
+        self.landed[self._cols] = True
         self.landed = self.landed.reshape(K, V, U)
+        self._power_weights = (weights[None] * self.landed).reshape(K, -1)  # each lenslet's landing entries
         self._lu, self._last = None, None
         if self.bins:
-            norms = np.sqrt(np.asarray(self._m.multiply(self._m).sum(0)).ravel())
-            self._lam2 = (self.damp * np.sqrt(np.mean(norms[norms > 0] ** 2))) ** 2
-            self._lu = splu((self._m @ self._m.T + self._lam2 * sp.identity(self.bins)).tocsc())
-            self._cols = np.flatnonzero(self.landed.reshape(-1))
-            self._ml = self._m[:, self._cols].tocsr()
+            # bins <- landing entries (the other entries' columns would be empty)
+            self._ml = sp.csr_matrix((w, (bins, np.searchsorted(self._cols, entry))),
+                                     shape=(self.bins, len(self._cols)))
             self._mlt = self._ml.T.tocsr()
+            norms = np.sqrt(np.asarray(self._ml.multiply(self._ml).sum(0)).ravel())
+            self._lam2 = (self.damp * np.sqrt(np.mean(norms ** 2))) ** 2
+            self._lu = splu((self._ml @ self._mlt + self._lam2 * sp.identity(self.bins)).tocsc())
             v = np.random.default_rng(0).random(len(self._cols))                # power iteration: |M|^2
             for _ in range(30):
                 v = self._mlt @ (self._ml @ v)
@@ -154,21 +161,11 @@ class DepthPrefilter:
                 v /= top
             self._lipschitz = 1.05 * top + self._lam2
 
-    def _land(self, origins: np.ndarray, directions: np.ndarray, spp: int, data: np.ndarray):
-        """The entry (R',) and landing point (R', 3) of every ray whose entry has a depth: each ray of entry e
-        meets the plane at e's depth, parallel to the array."""
-        entry = np.repeat(np.arange(len(data)), spp)
-        rays = np.flatnonzero(np.repeat(data, spp))
-        entry = entry[rays]
-        z = self.depth.reshape(-1)[entry]
-        towards = -directions[rays].astype(np.float64)                      # into the real half-space, z > 0
-        return entry, origins[rays] + z[:, None] * towards / towards[:, 2:3]
-
     def box(self, radiance: np.ndarray) -> LightField:
         """The box light field of the rays' radiance: each entry the mean of its ``spp`` rays (K, V, U, 3)."""
         lf = self._zero.copy()
         K, V, U = lf.data.shape[:3]
-        lf.data[...] = sample_mean(radiance, self.spp).reshape(K, V, U, 3) * self._zero.mask()[None, :, :, None]
+        lf.data[...] = sample_mean(radiance, self.spp).reshape(K, V, U, 3) * self._mask
         return lf
 
     def apply(self, radiance: np.ndarray) -> LightField:
@@ -190,16 +187,17 @@ class DepthPrefilter:
         K, V, U = box.data.shape[:3]
         p0 = box.data.reshape(-1, 3).astype(np.float64)
         target = (self._gather @ radiance).astype(np.float64)
-        p = p0.copy()
+        fitted = p0[self._cols]
         last = self._last
         if last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target):
             start, steps = last[1], WARM_ITERATIONS
         else:
-            start, steps = (p0 + self._m.T @ self._lu.solve(target - self._m @ p0))[self._cols], ITERATIONS
-        p[self._cols] = self._nonnegative(target, p0[self._cols], start, steps)
+            start, steps = fitted + self._mlt @ self._lu.solve(target - self._ml @ fitted), ITERATIONS
+        p = p0.copy()
+        p[self._cols] = self._nonnegative(target, fitted, start, steps)
         self._last = (target, p[self._cols])
         # each lenslet's landing entries keep the box power over them
-        w = (self._zero.solid_angle_weights()[None] * self.landed).reshape(K, -1)
+        w = self._power_weights
         p, p0 = p.reshape(K, V * U, 3), p0.reshape(K, V * U, 3)
         kept, now = np.einsum("kpc,kp->kc", p0, w), np.einsum("kpc,kp->kc", p, w)
         scale = np.where(now > 0, kept / np.maximum(now, 1e-300), 1.0)
