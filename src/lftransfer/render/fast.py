@@ -948,12 +948,10 @@ class CachedRenderer(HalfSpaceRenderer):
                        seed: int = 0) -> SampleMeans:
         """:meth:`HalfSpaceRenderer.render_samples`, summed over the rays that hit only (a view's objects cover a
         few per cent of its rays, so full-size passes over every ray's radiance were most of a view render)."""
-        idx, colour, t_hit = self._hits(origins, directions, lights, seed)
         if spp == 1:                                 # one ray per group (the projection prefilter's rays)
-            radiance, coverage = np.zeros((len(origins), 3), np.float32), np.zeros(len(origins), np.float32)
-            depth = np.full(len(origins), np.inf, np.float32)
-            radiance[idx], coverage[idx], depth[idx] = colour, 1.0, t_hit
-            return SampleMeans(radiance=radiance, coverage=coverage, depth=depth)
+            radiance, hit, t = self.render_rays(origins, directions, lights, seed=seed)
+            return SampleMeans(radiance=radiance, coverage=hit.astype(np.float32), depth=t)
+        idx, colour, t_hit = self._hits(origins, directions, lights, seed)
         groups = len(origins) // spp
         group = idx // spp
         scale = 1.0 / spp
