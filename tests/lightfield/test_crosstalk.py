@@ -148,3 +148,31 @@ def test_07_cross_talk_is_copied_and_read_only():
     affine = prj.drive_affine()
     assert affine.shape == (3, 4)
     np.testing.assert_allclose(affine[:, :3] @ C0, np.eye(3) / prj.max_radiance, atol=1e-12)
+
+
+def test_08_above_black_adds_the_light_field_to_the_black_level():
+    """The transfer measures each projection against a frame with the projector black, so it encodes light to
+    add to the black level: emitted(encode(L)) - emitted(black) = L (to within the codes' steps), dim entries
+    included. Encoding L as the whole radiance (the negative control) takes the black level off every entry
+    and drops the entries below it."""
+    rng = np.random.default_rng(8)
+    black = (0.01, 0.006, 0.002)
+    prj = ProjectorModel(DEV, bits=8, response=ResponseCurve((2.2,) * 3), max_radiance=8.0, cross_talk=C0,
+                         black_level=black)
+    lf = LightField.zeros(ARR, U, V)
+    # dim light the projector can add, drives of 0 to 5 % of the maximum
+    lf.data[:] = prj.max_radiance * (0.05 * rng.random(lf.data.shape)) @ prj.cross_talk_matrix.T
+    added = LightFieldEncoder(ARR, prj, U, V, above_black=True)
+    whole = LightFieldEncoder(ARR, prj, U, V)
+    covered = added.codec.inv_norm3[..., 0] > 0
+    target = added.codec.lightfield_to_image(lf)[covered]
+    zero = np.zeros((DEV.height, DEV.width, 3), np.uint8)
+    for enc in (added, whole):
+        assert np.all(enc(LightField.zeros(ARR, U, V)) == 0)                # black is code 0 either way
+    got = (added.emitted(added(lf)) - added.emitted(zero))[covered]
+    # half a code step at 5 % of the maximum: gamma * code^(gamma - 1) * 0.5 / 255, mixed by C
+    step = prj.max_radiance * 2.2 * 0.05 ** (1.2 / 2.2) * 0.5 / 255 * np.abs(C0).sum(1).max()
+    assert np.abs(got - target).max() <= step
+    assert abs(got.sum() / target.sum() - 1) < 0.001                        # measured 0.00004
+    lost = (whole.emitted(whole(lf)) - whole.emitted(zero))[covered]
+    assert lost.sum() / target.sum() < 0.85                 # the control loses the black level: measured 0.78

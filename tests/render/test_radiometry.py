@@ -139,6 +139,35 @@ def test_04_linear_reconstruction_relights_a_gradient_exactly(variant, reconstru
         assert error > 0.006, error                                   # measured 0.94 %
 
 
+@pytest.mark.parametrize("lattice, window", [("rect", "edge"), ("hex", "edge"), ("rect", "cut")])
+def test_04b_the_window_edge_extends_a_light_field_constant_in_direction_exactly(variant, lattice, window):
+    """Under a light field whose radiance L is the same on every lenslet and in every direction (a far diffuse
+    surface), ``window="edge"`` reads what a lens array with no window limit would record, out to the reach: a
+    point at depth h receives E = pi L sin^2(theta_R), tan(theta_R) = EDGE_REACH a, whatever the lenslets'
+    shape (the hexagonal lenslet's table is filled out to the square from its window's edge). ``"cut"`` (the
+    negative control) receives the form factor of the window's square only."""
+    from lftransfer.render.lights import EDGE_REACH
+
+    pitch, h, L = 0.02, 0.03, 2.0
+    array = LensArray(lattice=lattice, rows=9, cols=9, pitch=pitch, focal_length=pitch)   # a = 0.5 across
+    lf = LightField.zeros(array, 16, 16)
+    lf.data[...] = L * lf.mask()[None, :, :, None]
+    renderer = HalfSpaceRenderer([_plane(-h, "+z")], max_depth=1)
+    light = LightFieldLight(lf, side="synthetic", model="area", aperture_samples=1024, jitter=False,
+                            reconstruction="linear", window=window)
+    x = np.array([0.3 * pitch, 0.2 * pitch])
+    measured = _radiance_at(renderer, [x[0], x[1], -h], [light], [0.0, 0.0, 1.0])[0]
+    tan_r = EDGE_REACH * array.half_width
+    disc = np.pi * L * tan_r**2 / (1 + tan_r**2) * ALBEDO / np.pi
+    half, n = array.half_width * h, 2000                                # the window's square, midpoint rule
+    s = -half + (np.arange(n) + 0.5) * 2 * half / n
+    r2 = s[:, None] ** 2 + s[None, :] ** 2 + h**2
+    square = L * float(np.sum(h**2 / r2**2) * (2 * half / n) ** 2) * ALBEDO / np.pi
+    expected, other = (disc, square) if window == "edge" else (square, disc)
+    assert abs(measured - expected) / expected < 0.005, (measured, expected)
+    assert abs(other - expected) / expected > 0.15                     # the two readings are far apart
+
+
 @pytest.mark.parametrize("renderer", ["exact", "fast"])
 def test_05_emitting_sphere_lights_a_plane(variant, renderer):
     """A sphere of radiance L and radius R lights the point of a plane at distance D under its centre with

@@ -227,6 +227,17 @@ def _check_projection(projection: Optional[str]) -> None:
         fail(f"--projection: expected one of {', '.join(PROJECTIONS)}, got {projection!r}")
 
 
+_WINDOW_HELP = ("Area model: what the synthetic scene receives from beyond the lenslets' window: the captured "
+                "light field read at the window's edge, or nothing (default: the scene's).")
+
+
+def _check_window(window: Optional[str]) -> None:
+    from lftransfer.render.lights import WINDOWS
+
+    if window is not None and window not in WINDOWS:
+        fail(f"--window: expected one of {', '.join(WINDOWS)}, got {window!r}")
+
+
 def _check_reconstruction(reconstruction: Optional[str]) -> None:
     from lftransfer.render.lights import RECONSTRUCTIONS
 
@@ -308,10 +319,11 @@ def _summary(report: dict, out: Path) -> None:
     for name, m in by_reconstruction.items():
         if len(by_reconstruction) > 1 and m.get("cross_transfer_rel_error") is not None:
             _row(table, f"cross error, {name} reconstruction", f"{m['cross_transfer_rel_error']:.4g}")
-    by_projection = report.get("by_projection") or {}
-    for name, m in by_projection.items():
-        if len(by_projection) > 1 and m.get("cross_transfer_rel_error") is not None:
-            _row(table, f"cross error, {name} projection", f"{m['cross_transfer_rel_error']:.4g}")
+    for key, label in (("by_projection", "projection"), ("by_window", "window")):
+        by_choice = report.get(key) or {}
+        for name, m in by_choice.items():
+            if len(by_choice) > 1 and m.get("cross_transfer_rel_error") is not None:
+                _row(table, f"cross error, {name} {label}", f"{m['cross_transfer_rel_error']:.4g}")
     control = report.get("negative_control")
     if control is not None:
         _row(table, f"negative control: {control['rig_model']}", _control_line(control))
@@ -343,15 +355,16 @@ def demo(out: Path = typer.Option(Path("out/demo"), metavar="DIR", help="Output 
          rig: str = typer.Option("sim", metavar="SPEC", help=_RIG_HELP),
          max_memory: Optional[str] = _memory_option()) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-    transfer, check against ground truth (both lighting models, both reconstructions, both projections) and against
-    a negative control (the rig file's nominal values, uncalibrated)."""
+    transfer, check against ground truth (both lighting models, both reconstructions, both projections, both
+    windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
     from lftransfer.app.pipeline import RunOptions
 
     _check_renderer(renderer)
     scene = _load(None, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, compare_models=("area", "point"), compare_reconstructions=("box", "linear"),
-                         compare_projections=("box", "depth"), use_cache=not no_cache, renderer=renderer,
+                         compare_projections=("box", "depth"), compare_windows=("edge", "cut"),
+                         use_cache=not no_cache, renderer=renderer,
                          negative_control=True, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",
@@ -368,9 +381,10 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
         reconstruction: Optional[str] = typer.Option(None, metavar="linear|box", help=(
             "Area model: how the captured light field is read between lenslets (default: the scene's).")),
         projection: Optional[str] = typer.Option(None, metavar="box|depth", help=_PROJECTION_HELP),
+        window: Optional[str] = typer.Option(None, metavar="edge|cut", help=_WINDOW_HELP),
         compare: bool = _flag("--compare-models", "Also measure the other lighting model (area or point), the "
-                                                  "other reconstruction (linear or box) and the other projection "
-                                                  "(depth or box)."),
+                                                  "other reconstruction (linear or box), the other projection "
+                                                  "(depth or box) and the other window (edge or cut)."),
         gt_spp: Optional[int] = typer.Option(None, min=1, metavar="N", help=_GT_SPP_HELP),
         quick: bool = _flag("--quick", _QUICK_HELP),
         no_cache: bool = _flag("--no-cache", "Render the ground truth again (do not read or write the cache)."),
@@ -387,14 +401,16 @@ def run(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help=_SCENE
     _check_lighting_model(lighting_model)
     _check_reconstruction(reconstruction)
     _check_projection(projection)
+    _check_window(window)
     _check_renderer(renderer)
     scene = _load(scene_file, quick)
     rig_opts = _rig_options(scene, truth_seed, exact_rig, rig_model, calibration, rig)
     options = RunOptions(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                         projection=projection,
+                         projection=projection, window=window,
                          compare_models=("area", "point") if compare else (),
                          compare_reconstructions=("box", "linear") if compare else (),
-                         compare_projections=("box", "depth") if compare else (), gt_spp=gt_spp,
+                         compare_projections=("box", "depth") if compare else (),
+                         compare_windows=("edge", "cut") if compare else (), gt_spp=gt_spp,
                          use_cache=not no_cache, renderer=renderer, **rig_opts)
     _check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                        bounces=bounces, calibrate=calibration is None and rig_model == "calibrated",

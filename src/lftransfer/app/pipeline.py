@@ -19,7 +19,7 @@ from lftransfer.calibration.rig import calibrate_rig, count_calibration_steps, l
 from lftransfer.composite import composite
 from lftransfer.app.report import emitter_ceiling, write_json, write_outputs
 from lftransfer.app.run_folder import clear_run_folder, tracked_run, write_status
-from lftransfer.render.lights import RECONSTRUCTIONS
+from lftransfer.render.lights import RECONSTRUCTIONS, WINDOWS
 from lftransfer.transfer.projection import PROJECTIONS
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
@@ -82,6 +82,9 @@ class RunOptions:
         projection: what the projector is sent, "box" or "depth" (None: the scene's ``render.projection``; area
             model only; :mod:`lftransfer.transfer.projection`).
         compare_projections: further projections measured beside it (full reruns, area model only).
+        window: what the synthetic scene receives from beyond the lenslets' window, "edge" or "cut" (None: the
+            scene's ``render.window``; area model only; :mod:`lftransfer.render.lights`).
+        compare_windows: further windows measured beside it (full reruns, area model only).
         gt_spp: samples per pixel of each ground-truth render (None: the scene's ``render.gt_spp``).
         capture_spp: rays per LF camera pixel in the simulated rig.
         use_cache: cache ground-truth renders.
@@ -113,6 +116,8 @@ class RunOptions:
     compare_reconstructions: tuple[str, ...] = ()
     projection: str | None = None
     compare_projections: tuple[str, ...] = ()
+    window: str | None = None
+    compare_windows: tuple[str, ...] = ()
     gt_spp: int | None = None
     capture_spp: int = 4
     use_cache: bool = True
@@ -145,6 +150,9 @@ class RunOptions:
         for r in (self.reconstruction, *self.compare_reconstructions):
             if r is not None and r not in RECONSTRUCTIONS:
                 problems.append(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {r!r}")
+        for w in (self.window, *self.compare_windows):
+            if w is not None and w not in WINDOWS:
+                problems.append(f"window must be one of {', '.join(WINDOWS)}, got {w!r}")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -285,7 +293,8 @@ def count_run_steps(scene, options: RunOptions) -> int:
     calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
     reruns = len(_other_models(scene, options)) + len(_other_choices(scene, options, "reconstruction")) \
-        + len(_other_choices(scene, options, "projection")) + (1 if _runs_control(options) else 0)
+        + len(_other_choices(scene, options, "projection")) + len(_other_choices(scene, options, "window")) \
+        + (1 if _runs_control(options) else 0)
     return 1 + calibration + primary + (6 if _verifies(options) else 0) + reruns * other + 1
 
 
@@ -294,11 +303,15 @@ def _other_models(scene, options: RunOptions) -> list[str]:
     return [m for m in options.compare_models if m != primary]
 
 
+#: What a setting of the area model is under the other lighting models.
+_NOT_AREA = {"reconstruction": "box", "projection": "box", "window": "cut"}
+
+
 def _area_choice(scene, options: RunOptions, name: str) -> str:
-    """The run's ``name`` ("reconstruction" or "projection"): the option, else the scene's ``render`` value; "box"
-    unless the area model."""
+    """The run's ``name`` ("reconstruction", "projection" or "window"): the option, else the scene's ``render``
+    value; "box" ("cut" for the window) unless the area model."""
     if (options.lighting_model or scene.render.lighting_model) != "area":
-        return "box"
+        return _NOT_AREA[name]
     return getattr(options, name) or getattr(scene.render, name)
 
 
@@ -588,6 +601,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     settings = TransferSettings.for_scene(scene, bounces=options.bounces, lighting_model=primary,
                                           reconstruction=_area_choice(scene, options, "reconstruction"),
                                           projection=_area_choice(scene, options, "projection"),
+                                          window=_area_choice(scene, options, "window"),
                                           renderer=options.renderer)
     result = run_transfer(rig, model, pipeline_scene, settings, progress=step)
     for k, v in result.timings_s.items():
@@ -603,6 +617,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     by_model = {primary: {}}
     by_reconstruction = {settings.reconstruction: {}}
     by_projection = {settings.projection: {}}
+    by_window = {settings.window: {}}
     if verified:
         from lftransfer.sim.verify import evaluate, gt_noise_verdict, render_ground_truth
 
@@ -614,6 +629,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         by_model[primary] = {k: getattr(metrics, k) for k in BY_MODEL_KEYS}
         by_reconstruction[settings.reconstruction] = by_model[primary]
         by_projection[settings.projection] = by_model[primary]
+        by_window[settings.window] = by_model[primary]
         noisy = gt_noise_verdict(metrics, gt_spp)
         if noisy is not None:
             warning(noisy.message())
@@ -624,6 +640,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
                for other in _other_choices(scene, options, "reconstruction")]
     reruns += [("projection", other, by_projection, f"transfer_{other}_projection")
                for other in _other_choices(scene, options, "projection")]
+    reruns += [("window", other, by_window, f"transfer_{other}_window")
+               for other in _other_choices(scene, options, "window")]
     for field_name, other, table, timing in reruns:       # the same run with one setting changed, measured
         t = time.perf_counter()
         alt = run_transfer(rig, model, pipeline_scene, replace(settings, **{field_name: other}, bounce_views=False),
@@ -662,6 +680,8 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
         "projection": settings.projection,
         "by_reconstruction": by_reconstruction,
         "by_projection": by_projection,
+        "window": settings.window,
+        "by_window": by_window,
         "negative_control": control.result.to_json() if control is not None else None,
         "undefined_metrics": undefined,
         "warnings": warnings,

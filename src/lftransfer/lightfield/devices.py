@@ -421,7 +421,8 @@ class LightFieldDecoder:
 class LightFieldEncoder:
     """LightField of radiance -> projector image (codec, brightness, inverse response, quantisation)."""
 
-    def __init__(self, array: LensArray, projector: ProjectorModel, U: int, V: int) -> None:
+    def __init__(self, array: LensArray, projector: ProjectorModel, U: int, V: int, *,
+                 above_black: bool = False) -> None:
         """Precompute the codec.
 
         Args:
@@ -429,8 +430,15 @@ class LightFieldEncoder:
             projector: The projector model.
             U: Samples along u.
             V: Samples along v.
+            above_black: the light field is light to add to what the projector emits at code 0 (its black
+                level), not the whole radiance to emit: ``x = C^-1 L / max_radiance``. Light field transfer
+                measures every projection against a frame with the projector black, so this is the light it
+                means; encoding it as the whole radiance takes the black level off every entry (on Fig. 4's
+                rig, whose black level is up to 1 % of the projector's maximum, 4 to 8 % of the light projected
+                and every entry below the black level).
         """
         self.array, self.projector = array, projector
+        self.above_black = above_black
         self.codec = LensletCodec(array, projector.device, U, V)
         # With cross-talk or a black level, radiance becomes linear drive through one affine transform; the
         # drive is then quantised like radiance of a plain projector with max_radiance = 1.
@@ -438,6 +446,8 @@ class LightFieldEncoder:
         self._quantised = projector
         if projector.mixes_colours:
             self._affine = projector.drive_affine().astype(np.float32)
+            if above_black:
+                self._affine[:, 3] = 0.0
             self._quantised = replace(projector, max_radiance=1.0, cross_talk=None, black_level=(0.0, 0.0, 0.0))
         self._quantiser = _Quantiser.build(self._quantised)   # None: no table fine enough (e.g. 16-bit codes)
 
@@ -445,7 +455,8 @@ class LightFieldEncoder:
         """Encode a light field for the projector.
 
         The drive is ``x = C^-1 (L / max_radiance - black_level)`` (just ``L / max_radiance`` without cross-talk
-        and black level), clipped to [0, 1]: radiance outside what the projector can emit is clipped.
+        and black level; ``C^-1 L / max_radiance`` when :attr:`above_black`), clipped to [0, 1]: radiance outside
+        what the projector can emit is clipped.
 
         Args:
             lf: LightField ``(K, V, U, 3)`` radiance to emit.

@@ -21,6 +21,18 @@ How the light field is read between lenslet centres (the area model's ``reconstr
   position, the same flux per lenslet. A captured sample L_k(w) is the average of the true light field over
   aperture k, so this is the piecewise-linear reading of those averages.
 
+What arrives from beyond the lenslets' window (|u| or |v| > a, about 26.6 degrees off the normal: light no
+lenslet's pixels record), the light field light's ``window``:
+
+- ``"cut"``: nothing, the light field as the hardware records it.
+- ``"edge"``: the window's edge, out to |(u, v)| <= :data:`EDGE_REACH` a: lenslet k's radiance at the (u, v)
+  clamped into [-a, a]^2, its table's samples outside the window (the corners of a hexagonal lenslet's) filled
+  with the nearest inside. Steep light from a real surface is read at the nearest direction the lenslet saw it
+  from, which is right for diffuse real surfaces whose radiance changes slowly with direction (the point the
+  clamped direction sees lies beside the one the steep direction meets, a lateral shift of depth * (tan(steep)
+  - tan(edge))). Further out the guess overshoots: the real objects end, and at grazing angles the synthetic
+  ones see past them.
+
 All lenslets are summed at every shading point (not one picked at random), inside one Dr.Jit loop over the
 lenslets that carry light. Shapes of inputs are written as (N,) for N shading points.
 
@@ -47,6 +59,13 @@ LightingModel = Literal["point", "area", "prefiltered"]
 LIGHTING_MODELS: tuple[str, ...] = ("point", "area", "prefiltered")
 Reconstruction = Literal["box", "linear"]
 RECONSTRUCTIONS: tuple[str, ...] = ("box", "linear")
+Window = Literal["edge", "cut"]
+WINDOWS: tuple[str, ...] = ("edge", "cut")
+#: How far ``window="edge"`` reads beyond the window: |(u, v)| <= EDGE_REACH a (36.9 degrees off the normal for
+#: a = 0.5). Measured on Fig. 4 and five other scenes (docs/architecture.md, "Light from beyond the window"):
+#: 1.5 brings the synthetic side's energy to within 1 % of the ground truth's on the four whose real objects
+#: stand near the synthetic ones; unbounded it overshoots by 3 to 5 % and the error grows again.
+EDGE_REACH = 1.5
 #: What ``illuminate`` returns: False, the radiance reflected towards ``-si.wi`` (BSDF-weighted); True, the
 #: irradiance on the surface with normal ``si.n`` (each direction weighted by its cosine), W m^-2; a function
 #: ``weight(cosine) -> mi.Float`` (per shading point, (N,)), each direction weighted by ``weight(cosine)``
@@ -218,6 +237,8 @@ class LightFieldLight:
             long stratified sequence over the aperture (an unbiased Monte Carlo estimate whose error averages
             out over pixels and samples), instead of the same M points everywhere (a fixed quadrature).
         reconstruction: area model only: ``"box"`` or ``"linear"`` (module docstring).
+        window: what arrives from beyond the lenslets' window, ``"cut"`` (nothing) or ``"edge"`` (the window's
+            edge; module docstring).
 
     Example:
         >>> light = LightFieldLight(captured, side="synthetic", model="area")  # doctest: +SKIP
@@ -233,6 +254,7 @@ class LightFieldLight:
         seed: int = 0,
         jitter: bool = True,
         reconstruction: Reconstruction = "box",
+        window: Window = "cut",
     ) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
@@ -240,6 +262,8 @@ class LightFieldLight:
             raise ValueError(f"lighting model must be one of {LIGHTING_MODELS}, got {model!r}")
         if reconstruction not in RECONSTRUCTIONS:
             raise ValueError(f"reconstruction must be one of {RECONSTRUCTIONS}, got {reconstruction!r}")
+        if window not in WINDOWS:
+            raise ValueError(f"window must be one of {WINDOWS}, got {window!r}")
         if reconstruction != "box" and model != "area":
             raise ValueError(f"reconstruction {reconstruction!r} needs the area lighting model (the {model!r} "
                              "model reads each lenslet at its centre)")
@@ -255,9 +279,12 @@ class LightFieldLight:
         self.a = float(array.half_width)
         self.area = float(array.aperture_area)
         self.reconstruction = reconstruction
+        self.window = window
         # Only lenslets that carry light are visited (the background is dark).
         peak = np.abs(data).reshape(self.K, -1).max(axis=1)
         carries = peak > 0
+        if window == "edge":
+            data = data[:, *_nearest_sample(lightfield.mask())]
         if model == "prefiltered":
             # Summed-area table (V+1, U+1) per lenslet and channel: box-filtered lookups in O(1).
             sat = np.zeros((self.K, self.V + 1, self.U + 1, 3), np.float64)
@@ -339,9 +366,9 @@ class LightFieldLight:
             active: mi.Bool (N,).
 
         Returns:
-            :class:`Incident`: the radiance (zero where the ray misses the apertures or leaves the lenslets'
-            window |u|, |v| > a), the lenslet k(q) (K where none) and the density with which :meth:`reflect`
-            draws this direction, M r^2 / (A cos_p) where k(q) sends light, else 0.
+            :class:`Incident`: the radiance (zero where the ray misses the apertures, or with ``window="cut"``
+            leaves the lenslets' window |u|, |v| > a), the lenslet k(q) (K where none) and the density with which
+            :meth:`reflect` draws this direction, M r^2 / (A cos_p) where k(q) sends light, else 0.
 
         Raises:
             ValueError: a ``"point"`` or ``"prefiltered"`` light (its lenslets are points, seen along no
@@ -455,14 +482,18 @@ class LightFieldLight:
 
     # -- texture lookups ---------------------------------------------------------------------------------
     def _bilinear(self, k, u, v, active):
-        """Bilinear radiance lookup of lenslet k at (u, v); zero outside [-a, a]^2."""
+        """Bilinear radiance lookup of lenslet k at (u, v); outside [-a, a]^2 zero (``window="cut"``) or the
+        value at the nearest point of its edge out to :data:`EDGE_REACH` a (``"edge"``)."""
         mi = mitsuba()
         import drjit as dr
 
         U, V, a = self.U, self.V, self.a
         fx = (u + a) * (U / (2 * a)) - 0.5
         fy = (v + a) * (V / (2 * a)) - 0.5
-        inside = active & (dr.abs(u) <= a) & (dr.abs(v) <= a)
+        if self.window == "edge":
+            inside = active & (dr.square(u) + dr.square(v) <= (EDGE_REACH * a) ** 2)
+        else:
+            inside = active & (dr.abs(u) <= a) & (dr.abs(v) <= a)
         fx = dr.clip(fx, 0.0, U - 1.0)
         fy = dr.clip(fy, 0.0, V - 1.0)
         x0 = dr.minimum(mi.UInt32(dr.floor(fx)), U - 2) if U > 1 else mi.UInt32(0)
@@ -491,6 +522,9 @@ class LightFieldLight:
         import drjit as dr
 
         U, V, a = self.U, self.V, self.a
+        if self.window == "edge":    # the box centred at the nearest direction inside the window
+            active = active & (dr.square(u) + dr.square(v) <= (EDGE_REACH * a) ** 2)
+            u, v = dr.clip(u, -a, a), dr.clip(v, -a, a)
         scale_u, scale_v = U / (2 * a), V / (2 * a)
         # Continuous texel-edge coordinates of the box, clamped to the grid.
         x0 = dr.clip((u - half + a) * scale_u, 0.0, float(U))
@@ -565,6 +599,15 @@ class LightFieldLight:
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
+
+
+def _nearest_sample(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For every (v, u) of the grid, the nearest sample that is data (``mask``, (V, U) bool): the (V, U) row
+    and column indices that fill a lenslet's table out to the square [-a, a]^2 with its window's edge."""
+    from scipy.ndimage import distance_transform_edt
+
+    rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    return rows, cols
 
 
 @dataclass(frozen=True)

@@ -42,9 +42,10 @@ class RigModel:
         """Raw LF camera image -> light field on a (V, U) angular grid."""
         return LightFieldDecoder(self.array, self.camera, U, V)
 
-    def encoder(self, U: int, V: int) -> LightFieldEncoder:
-        """Light field on a (V, U) angular grid -> projector image."""
-        return LightFieldEncoder(self.array, self.projector, U, V)
+    def encoder(self, U: int, V: int, *, above_black: bool = False) -> LightFieldEncoder:
+        """Light field on a (V, U) angular grid -> projector image (``above_black``: the light field is light
+        added to what the projector shows at code 0, :class:`~lftransfer.lightfield.LightFieldEncoder`)."""
+        return LightFieldEncoder(self.array, self.projector, U, V, above_black=above_black)
 
 
 def nominal_rig(rig) -> RigModel:

@@ -213,6 +213,9 @@ class RenderConfig(_Model):
             from the real scene's depth, measured through the rig with one extra frame, so that each real point
             receives the synthetic light of the rays that land on it) or ``"box"`` (each entry the mean of the
             synthetic light over its lenslet's aperture).
+        window: area model: what the synthetic scene receives from beyond the lenslets' window (light steeper than
+            about 26.6 degrees, which no lenslet records), ``"edge"`` (the captured light field read at the
+            window's edge: diffuse real surfaces look much the same from there) or ``"cut"`` (nothing).
         spp: samples per pixel of view renders and per light field sample.
         max_depth: path depth (surface interactions) inside each half-space.
         gt_spp: samples per pixel of the path-traced ground truth.
@@ -222,6 +225,7 @@ class RenderConfig(_Model):
     aperture_samples: PosInt = 4
     reconstruction: Literal["box", "linear"] = "linear"
     projection: Literal["box", "depth"] = "depth"
+    window: Literal["edge", "cut"] = "edge"
     spp: PosInt = 4
     max_depth: PosInt = 3
     gt_spp: PosInt = 2048

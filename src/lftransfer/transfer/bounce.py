@@ -47,6 +47,8 @@ class TransferSettings:
         projection: what the projector is sent: "box" (each entry the mean of the synthetic light over its
             lenslet's aperture) or "depth" (prefiltered from the real scene's depth measured through the rig with
             one extra frame; area model; :mod:`lftransfer.transfer.projection`).
+        window: what the synthetic scene receives from beyond the lenslets' window: "edge" (the captured light
+            field read at the window's edge) or "cut" (nothing; area model; :mod:`lftransfer.render.lights`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -63,6 +65,7 @@ class TransferSettings:
     aperture_samples: int = 4
     reconstruction: str = "box"
     projection: str = "box"
+    window: str = "cut"
     lf_spp: int = 4
     view_spp: int = 4
     projector_fill: float = 0.95
@@ -79,16 +82,16 @@ class TransferSettings:
     @classmethod
     def for_scene(cls, scene, **changes) -> "TransferSettings":
         """The settings a scene's ``[rig]`` and ``[render]`` ask for (angular samples, lighting model, aperture
-        samples, reconstruction, projection, ``render.spp`` rays per light field entry and per view pixel), with
-        ``changes`` applied (None values ignored); the reconstruction and the projection are "box" unless the
-        lighting model is the area model."""
+        samples, reconstruction, projection, window, ``render.spp`` rays per light field entry and per view pixel),
+        with ``changes`` applied (None values ignored); the reconstruction and the projection are "box" and the
+        window "cut" unless the lighting model is the area model."""
         render = scene.render
         values = dict(angular_samples=scene.rig.angular_samples, lighting_model=render.lighting_model,
                       aperture_samples=render.aperture_samples, reconstruction=render.reconstruction,
-                      projection=render.projection, lf_spp=render.spp, view_spp=render.spp)
+                      projection=render.projection, window=render.window, lf_spp=render.spp, view_spp=render.spp)
         values.update({k: v for k, v in changes.items() if v is not None})
         if values["lighting_model"] != "area":
-            values.update(reconstruction="box", projection="box")
+            values.update(reconstruction="box", projection="box", window="cut")
         return cls(**values)
 
 

@@ -131,7 +131,8 @@ class SyntheticSide:
         self.scene = check_synthetic(scene)
         U = V = settings.angular_samples
         self.decoder = model.decoder(U, V)
-        self.encoder = model.encoder(U, V)
+        # every projection is measured against a frame with the projector black: light added to its black level
+        self.encoder = model.encoder(U, V, above_black=True)
         self.time_s = float(time_s)
         posed = self._posed(self.time_s)
         self.renderer = synthetic_renderer(posed, settings.renderer)
@@ -198,10 +199,12 @@ class SyntheticSide:
 
     def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
         """The captured real light field as a light of the synthetic half-space (the settings' lighting model
-        and reconstruction)."""
+        reconstruction and window)."""
         s = self.settings
+        area = s.lighting_model == "area"
         return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=s.aperture_samples,
-                               seed=seed, reconstruction=s.reconstruction if s.lighting_model == "area" else "box")
+                               seed=seed, reconstruction=s.reconstruction if area else "box",
+                               window=s.window if area else "cut")
 
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
         """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is

@@ -1,0 +1,54 @@
+"""A study of the window: does reading the captured light field at the lenslets' window edge for light steeper
+than the window (``[render] window = "edge"``, :mod:`lftransfer.render.lights`) bring the synthetic objects the
+light that the lens array cannot record, on scenes other than Fig. 4 too?
+
+Each scene runs twice, with ``window = "cut"`` (nothing arrives from beyond the window, the light field as the
+hardware records it) and ``"edge"``, and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes:
+Fig. 4 and the five scenes of this folder (true rig model, truth seed 2, the linear reconstruction, the depth
+prefilter, 2 bounces); at quarter resolution (ground truth 8192 samples per pixel) or, with ``--full``, at the
+paper's (ground truth 512).
+
+Run: python benchmarks/reconstruction/window.py [--full]   (about a minute at quarter resolution once the ground
+truths are cached, 4 minutes with --full). The table is in docs/architecture.md ("Light from beyond the window").
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from lftransfer.app.bench.step import transfer_settings
+from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
+from lftransfer.scenes import builtin_scene, load_scene
+from lftransfer.sim.verify import evaluate, render_ground_truth
+from lftransfer.transfer.bounce import run_transfer
+
+HERE = Path(__file__).parent
+WINDOWS = ("cut", "edge")
+
+
+def main(full: bool) -> None:
+    scenes = [("fig4", builtin_scene("fig4")),
+              *[(n, HERE / f"{n}.toml") for n in ("spheres", "cylinders", "far", "rect", "glossy")]]
+    print("| scene | window | cross error | real side: error, energy ratio, error after best scale "
+          "| synthetic side: the same | ground truth's noise (real / synthetic) |")
+    print("|---|---|---|---|---|---|")
+    for name, path in scenes:
+        scene = load_scene(path) if full else quick_scene(load_scene(path))
+        for window in WINDOWS:
+            opened = open_rig(scene, RunOptions(truth_seed=2))
+            known = knowledge(opened, scene, "oracle")
+            settings = replace(transfer_settings(scene), bounces=2, reconstruction="linear", window=window)
+            opened.start_frame(0)
+            result = run_transfer(opened.rig, known.model, known.scene, settings)
+            m = evaluate(result, render_ground_truth(opened.world, spp=512 if full else 8192))
+            real, syn = m.cross_by_side["real"], m.cross_by_side["synthetic"]
+            print(f"| {name} | {window} | {m.cross_transfer_rel_error:.3f} "
+                  f"| {real.rel_error:.3f}, {real.energy_ratio:.3f}, {real.rel_error_shape:.3f} "
+                  f"| {syn.rel_error:.3f}, {syn.energy_ratio:.3f}, {syn.rel_error_shape:.3f} "
+                  f"| {real.gt_noise_rel:.3f} / {syn.gt_noise_rel:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main("--full" in sys.argv[1:])
