@@ -366,9 +366,10 @@ class LightFieldLight:
             active: mi.Bool (N,).
 
         Returns:
-            :class:`Incident`: the radiance (zero where the ray misses the apertures, or with ``window="cut"``
-            leaves the lenslets' window |u|, |v| > a), the lenslet k(q) (K where none) and the density with which
-            :meth:`reflect` draws this direction, M r^2 / (A cos_p) where k(q) sends light, else 0.
+            :class:`Incident`: the radiance (zero where the ray misses the apertures or leaves the lenslets'
+            window |u|, |v| > a, with ``window="edge"`` their reach |(u, v)| > EDGE_REACH a), the lenslet k(q) (K
+            where none) and the density with which :meth:`reflect` draws this direction, M r^2 / (A cos_p) where
+            k(q) sends light, else 0.
 
         Raises:
             ValueError: a ``"point"`` or ``"prefiltered"`` light (its lenslets are points, seen along no
