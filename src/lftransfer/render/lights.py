@@ -25,13 +25,13 @@ What arrives from beyond the lenslets' window (|u| or |v| > a, about 26.6 degree
 lenslet's pixels record), the light field light's ``window``:
 
 - ``"cut"``: nothing, the light field as the hardware records it.
-- ``"edge"``: the window's edge, out to |(u, v)| <= :data:`EDGE_REACH` a: lenslet k's radiance at the (u, v)
-  clamped into [-a, a]^2, its table's samples outside the window (the corners of a hexagonal lenslet's) filled
-  with the nearest inside. Steep light from a real surface is read at the nearest direction the lenslet saw it
-  from, which is right for diffuse real surfaces whose radiance changes slowly with direction (the point the
-  clamped direction sees lies beside the one the steep direction meets, a lateral shift of depth * (tan(steep)
-  - tan(edge))). Further out the guess overshoots: the real objects end, and at grazing angles the synthetic
-  ones see past them.
+- ``"edge"``: the window's edge, out to |(u, v)| <= :data:`EDGE_REACH` a: lenslet k's table extended beyond its
+  window, each sample there the nearest one inside (:func:`lftransfer.lightfield.window.extend_beyond_window`).
+  Steep light from a real surface is read at the nearest direction the lenslet saw it from, which is right for
+  diffuse real surfaces whose radiance changes slowly with direction (the point the edge direction sees lies
+  beside the one the steep direction meets). Further out the guess overshoots: the real objects end, and at
+  grazing angles the synthetic ones see past them. Given the real scene's depth, each steep sample is kept only
+  where the steep ray, followed to the depth of the edge sample it reads, still meets a surface.
 
 All lenslets are summed at every shading point (not one picked at random), inside one Dr.Jit loop over the
 lenslets that carry light. Shapes of inputs are written as (N,) for N shading points.
@@ -53,6 +53,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.lightfield import LightField
+from lftransfer.lightfield.window import extend_beyond_window
 
 SAMPLING_POOL = 1024        # aperture points of a jittered area model (a stratified pool)
 LightingModel = Literal["point", "area", "prefiltered"]
@@ -239,6 +240,8 @@ class LightFieldLight:
         reconstruction: area model only: ``"box"`` or ``"linear"`` (module docstring).
         window: what arrives from beyond the lenslets' window, ``"cut"`` (nothing) or ``"edge"`` (the window's
             edge; module docstring).
+        depth: with ``window="edge"``, the real scene's depth along each sample's centre ray, (K, V, U) metres
+            (NaN: unknown), which keeps the steep samples whose rays meet a surface; None: all of them.
 
     Example:
         >>> light = LightFieldLight(captured, side="synthetic", model="area")  # doctest: +SKIP
@@ -255,6 +258,7 @@ class LightFieldLight:
         jitter: bool = True,
         reconstruction: Reconstruction = "box",
         window: Window = "cut",
+        depth: np.ndarray | None = None,
     ) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
@@ -283,8 +287,16 @@ class LightFieldLight:
         # Only lenslets that carry light are visited (the background is dark).
         peak = np.abs(data).reshape(self.K, -1).max(axis=1)
         carries = peak > 0
+        self._margin = 0       # samples of the table beyond [-a, a] on each side
+        self.steep_kept = None
         if window == "edge":
-            data = data[:, *_nearest_sample(lightfield.mask())]
+            ext = extend_beyond_window(lightfield, EDGE_REACH, depth)
+            self.steep_kept = ext.kept
+            if model == "prefiltered":          # the summed-area table of the square, read at clamped (u, v)
+                m = ext.margin
+                data = ext.data[:, m:m + self.V, m:m + self.U]
+            else:
+                data, self._margin = ext.data, ext.margin
         if model == "prefiltered":
             # Summed-area table (V+1, U+1) per lenslet and channel: box-filtered lookups in O(1).
             sat = np.zeros((self.K, self.V + 1, self.U + 1, 3), np.float64)
@@ -483,14 +495,15 @@ class LightFieldLight:
 
     # -- texture lookups ---------------------------------------------------------------------------------
     def _bilinear(self, k, u, v, active):
-        """Bilinear radiance lookup of lenslet k at (u, v); outside [-a, a]^2 zero (``window="cut"``) or the
-        value at the nearest point of its edge out to :data:`EDGE_REACH` a (``"edge"``)."""
+        """Bilinear radiance lookup of lenslet k at (u, v); outside [-a, a]^2 zero (``window="cut"``), or out to
+        :data:`EDGE_REACH` a the table extended beyond the window (``"edge"``)."""
         mi = mitsuba()
         import drjit as dr
 
-        U, V, a = self.U, self.V, self.a
-        fx = (u + a) * (U / (2 * a)) - 0.5
-        fy = (v + a) * (V / (2 * a)) - 0.5
+        a, m = self.a, self._margin
+        fx = (u + a) * (self.U / (2 * a)) - 0.5 + m
+        fy = (v + a) * (self.V / (2 * a)) - 0.5 + m
+        U, V = self.U + 2 * m, self.V + 2 * m            # the table, extended beyond the window with "edge"
         if self.window == "edge":
             inside = active & (dr.square(u) + dr.square(v) <= (EDGE_REACH * a) ** 2)
         else:
@@ -600,15 +613,6 @@ class LightFieldLight:
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
-
-
-def _nearest_sample(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For every (v, u) of the grid, the nearest sample that is data (``mask``, (V, U) bool): the (V, U) row
-    and column indices that fill a lenslet's table out to the square [-a, a]^2 with its window's edge."""
-    from scipy.ndimage import distance_transform_edt
-
-    rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
-    return rows, cols
 
 
 @dataclass(frozen=True)

@@ -174,8 +174,9 @@ class SyntheticSide:
 
     def set_depth(self, depth: np.ndarray | None) -> None:
         """Prefilter every outgoing light field from this depth of the real scene
-        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``settings.prefilters``); None: the
-        box light field.
+        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``settings.prefilters``; None: the
+        box light field), and check the steep light read beyond the lenslets' window against it
+        (:mod:`~lftransfer.lightfield.window`).
 
         Args:
             depth: (K, V, U) depth of each light field entry's centre ray, metres (NaN: unknown), from
@@ -199,12 +200,17 @@ class SyntheticSide:
 
     def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
         """The captured real light field as a light of the synthetic half-space (the settings' lighting model
-        reconstruction and window)."""
+        reconstruction and window; the steep light checked against the measured depth where there is one)."""
         s = self.settings
         area = s.lighting_model == "area"
         return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=s.aperture_samples,
                                seed=seed, reconstruction=s.reconstruction if area else "box",
-                               window=s.window if area else "cut")
+                               window=s.window if area else "cut", depth=self.depth)
+
+    @property
+    def depth(self) -> np.ndarray | None:
+        """The real scene's measured depth (K, V, U), metres, or None where none was measured."""
+        return None if self.prefilter is None else self.prefilter.depth
 
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
         """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is

@@ -1,0 +1,127 @@
+"""A captured light field read beyond its lenslets' window: the edge of the window, checked against the depth.
+
+No lenslet records light steeper than its window (|u|, |v| <= a; a hexagonal lenslet's window is its cell's
+hexagon). Where a diffuse real surface sends that light, it looks much as it does from the window's edge, so a
+steep direction can be read at the nearest direction the lenslet recorded (:func:`extend_beyond_window`). That
+guess holds only while the steep ray still meets the real surface the edge saw: a small real object seen at the
+window's edge is missed by the steeper rays beside it. With the real scene's depth (measured through the rig,
+:func:`lftransfer.transfer.projection.measure_depth`), each steep direction is checked: the steep ray is followed
+to the depth of the edge sample it reads, and kept only if the lenslet under that point sees a surface there.
+The renderer reads the extended table (:class:`lftransfer.render.lights.LightFieldLight`, ``window="edge"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from lftransfer.lightfield.lightfield import LightField
+
+#: A steep ray is taken to meet the surface that the window's edge saw if the lenslet under the point where it
+#: reaches that depth sees a surface within this fraction of it (the sweep's candidates are 1.3 to 9 % apart).
+DEPTH_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True)
+class WindowExtension:
+    """A light field's table extended beyond its window.
+
+    Attributes:
+        data: (K, V + 2 margin, U + 2 margin, 3) float32 radiance, W m^-2 sr^-1: the light field's samples in the
+            middle, each sample outside the window the nearest one inside it (zero where the depth says the steep
+            ray misses the real scene).
+        margin: samples added on each side, at the light field's spacing.
+        kept: fraction of the steep samples (outside the window, within the reach) that the depth check kept; 1
+            without a depth.
+    """
+
+    data: np.ndarray
+    margin: int
+    kept: float
+
+
+def extend_beyond_window(lf: LightField, reach: float, depth: np.ndarray | None = None,
+                         tolerance: float = DEPTH_TOLERANCE) -> WindowExtension:
+    """The light field's table out to |(u, v)| <= ``reach`` a, read at the window's edge.
+
+    Args:
+        lf: the captured light field (K, V, U, 3) radiance, W m^-2 sr^-1.
+        reach: how far beyond the window, in units of the window's half-width a (> 1).
+        depth: (K, V, U) depth of each sample's centre ray, metres (NaN: unknown), or None: every steep sample
+            takes its edge value.
+        tolerance: relative depth difference within which the lenslet under a steep ray's point sees the same
+            surface (:data:`DEPTH_TOLERANCE`).
+
+    Returns:
+        :class:`WindowExtension`.
+
+    Example:
+        >>> ext = extend_beyond_window(captured, 1.5, depth)     # doctest: +SKIP
+        >>> ext.data.shape                                         # doctest: +SKIP
+        (120, 72, 72, 3)
+    """
+    if not reach > 1.0:
+        raise ValueError(f"reach must be > 1 (in units of the window's half-width), got {reach}")
+    K, V, U = lf.data.shape[:3]
+    if depth is not None and np.shape(depth) != (K, V, U):
+        raise ValueError(f"depth has shape {np.shape(depth)}, the light field needs {(K, V, U)}")
+    array, a = lf.array, lf.array.half_width
+    du, dv = 2.0 * a / U, 2.0 * a / V
+    margin = int(np.ceil((reach - 1.0) * max(U, V) / 2.0)) + 1
+    Ve, Ue = V + 2 * margin, U + 2 * margin
+    mask = np.zeros((Ve, Ue), bool)
+    mask[margin:margin + V, margin:margin + U] = lf.mask()
+    rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    source = (rows - margin) * U + (cols - margin)                    # (Ve, Ue) nearest sample inside the window
+    ue = -a + (np.arange(Ue) - margin + 0.5) * du
+    ve = -a + (np.arange(Ve) - margin + 0.5) * dv
+    uu, vv = np.meshgrid(ue, ve)
+    steep = ~mask & (uu**2 + vv**2 <= (reach * a) ** 2)
+    flat = lf.data.reshape(K, V * U, 3)
+    data = flat[:, source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32)
+    kept = 1.0
+    if depth is not None and steep.any():
+        keep = _meets_surface(array, np.asarray(depth, np.float64).reshape(K, V * U), source[steep],
+                              np.stack([uu[steep], vv[steep]], -1), source[margin:margin + V, margin:margin + U],
+                              (U, V, du, dv, a), tolerance)                     # (K, n)
+        block = data[:, steep]
+        block[~keep] = 0.0
+        data[:, steep] = block
+        kept = float(keep.mean())
+    return WindowExtension(data=data, margin=margin, kept=kept)
+
+
+def _meets_surface(array, depth: np.ndarray, source: np.ndarray, uv: np.ndarray, inside: np.ndarray, grid,
+                   tolerance: float) -> np.ndarray:
+    """Whether each lenslet's steep ray (u, v) meets the surface that its edge sample ``source`` saw.
+
+    The ray from lenslet k's centre along (u, v) reaches the edge sample's depth z at y = c_k + z (u, v); the
+    lenslet k' whose cell holds y sees y at (y - c_k') / z, nearly straight on. The ray is kept when k' sees a
+    surface there within ``tolerance`` z, or when nothing can be checked (no depth at the edge, y off the array).
+
+    Args:
+        depth: (K, V * U) depths; source: (n,) the edge sample of each steep direction; uv: (n, 2) the steep
+            directions; inside: (V, U) each grid sample's nearest sample inside the window.
+
+    Returns:
+        (K, n) bool.
+    """
+    U, V, du, dv, a = grid
+    z = depth[:, source]                                                    # (K, n)
+    y = array.centres[:, None, :] + z[..., None] * uv[None]                 # (K, n, 2)
+    known = np.isfinite(z)
+    k2 = np.full(z.shape, -1, np.int64)
+    k2[known] = array.lenslet_at(y[known])
+    check = known & (k2 >= 0)
+    d = (y[check] - array.centres[k2[check]]) / z[check][:, None]
+    iu = np.clip(np.floor((d[:, 0] + a) / du).astype(np.int64), 0, U - 1)
+    iv = np.clip(np.floor((d[:, 1] + a) / dv).astype(np.int64), 0, V - 1)
+    z2 = depth[k2[check], inside[iv, iu]]
+    keep = np.ones(z.shape, bool)
+    keep[check] = np.isfinite(z2) & (np.abs(z2 - z[check]) <= tolerance * z[check])
+    return keep
+
+
+__all__ = ["DEPTH_TOLERANCE", "WindowExtension", "extend_beyond_window"]
