@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lftransfer.lightfield import LightField
-from lftransfer.lightfield.window import extend_beyond_window
+from lftransfer.lightfield.window import extend_beyond_window, steep_rays
 from lftransfer.optics import LensArray
 
 P = 0.02
@@ -46,7 +46,7 @@ def test_01_without_depth_every_steep_sample_is_its_nearest_edge_sample(lattice)
     distance on the sample grid), so a light field constant in direction stays constant out to the reach."""
     lf, _ = _patch(lattice, "none")
     lf.data[...] = np.random.default_rng(1).random(lf.data.shape).astype(np.float32) * lf.mask()[None, ..., None]
-    ext = extend_beyond_window(lf, REACH)
+    ext = extend_beyond_window(lf, steep_rays(lf, REACH))
     m = ext.margin
     assert ext.kept == 1.0
     np.testing.assert_array_equal(ext.data[:, m:m + lf.V, m:m + lf.U][:, lf.mask()], lf.data[:, lf.mask()])
@@ -59,7 +59,7 @@ def test_01_without_depth_every_steep_sample_is_its_nearest_edge_sample(lattice)
         assert any(np.array_equal(ext.data[:, r, c], lf.data[:, v, u]) for v, u in zip(iv[nearest], iu[nearest]))
     flat = LightField.zeros(lf.array, 16, 16)
     flat.data[...] = 2.0 * lf.mask()[None, ..., None]
-    out = extend_beyond_window(flat, REACH).data
+    out = extend_beyond_window(flat, steep_rays(flat, REACH)).data
     np.testing.assert_array_equal(out[:, steep], 2.0)
 
 
@@ -71,8 +71,8 @@ def test_02_the_depth_keeps_the_steep_rays_that_still_meet_the_surface(lattice, 
     plane at ten times the depth). Decided within half a sample's footprint of the patch's border. Without the
     depth (the control) the rays beside the patch keep the patch's light."""
     lf, depth = _patch(lattice, background)
-    ext = extend_beyond_window(lf, REACH, depth)
-    bare = extend_beyond_window(lf, REACH)
+    ext = extend_beyond_window(lf, steep_rays(lf, REACH, depth))
+    bare = extend_beyond_window(lf, steep_rays(lf, REACH))
     m = ext.margin
     uu, vv, steep = _steep(lf, m)
     c = lf.array.centres
@@ -93,9 +93,12 @@ def test_02_the_depth_keeps_the_steep_rays_that_still_meet_the_surface(lattice, 
     np.testing.assert_array_equal(ext.data[middle][:, lf.mask()], lf.data[:, lf.mask()])  # the window untouched
 
 
-def test_03_bad_reach_or_depth_is_refused():
+def test_03_bad_reach_depth_or_shape_is_refused():
     lf, depth = _patch("rect", "none")
     with pytest.raises(ValueError, match="reach"):
-        extend_beyond_window(lf, 1.0)
+        steep_rays(lf, 1.0)
     with pytest.raises(ValueError, match="depth has shape"):
-        extend_beyond_window(lf, REACH, depth[:, :4])
+        steep_rays(lf, REACH, depth[:, :4])
+    other = LightField.zeros(lf.array, 8, 8)
+    with pytest.raises(ValueError, match="shape"):
+        extend_beyond_window(other, steep_rays(lf, REACH))

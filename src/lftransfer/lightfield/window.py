@@ -6,8 +6,9 @@ steep direction can be read at the nearest direction the lenslet recorded (:func
 guess holds only while the steep ray still meets the real surface the edge saw: a small real object seen at the
 window's edge is missed by the steeper rays beside it. With the real scene's depth (measured through the rig,
 :func:`lftransfer.transfer.projection.measure_depth`), each steep direction is checked: the steep ray is followed
-to the depth of the edge sample it reads, and kept only if the lenslet under that point sees a surface there.
-The renderer reads the extended table (:class:`lftransfer.render.lights.LightFieldLight`, ``window="edge"``).
+to the depth of the edge sample it reads, and kept only if the lenslet under that point sees a surface there
+(:func:`steep_rays`, once per measured depth). The renderer reads the extended table
+(:class:`lftransfer.render.lights.LightFieldLight`, ``window="edge"``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,36 @@ from lftransfer.lightfield.lightfield import LightField
 #: A steep ray is taken to meet the surface that the window's edge saw if the lenslet under the point where it
 #: reaches that depth sees a surface within this fraction of it (the sweep's candidates are 1.3 to 9 % apart).
 DEPTH_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True)
+class SteepRays:
+    """Which samples beyond a light field's window are read from its edge: the grid and, with a depth, the check.
+
+    Depends only on the lens array, the angular grid and the real scene's depth, so it is computed once per
+    measured depth (:func:`steep_rays`) and applied to every light field captured with it
+    (:func:`extend_beyond_window`).
+
+    Attributes:
+        shape: (K, V, U) of the light fields it applies to.
+        reach: how far beyond the window, in units of the window's half-width a.
+        margin: samples added on each side of the (V, U) grid, at its spacing.
+        source: (V + 2 margin, U + 2 margin) int64: each sample's nearest sample inside the window, an index into
+            the V * U grid (inside the window: itself).
+        keep: (K, V + 2 margin, U + 2 margin) bool: False where the depth says the steep ray misses the real scene;
+            None without a depth (all kept).
+        index: with ``keep``, (K, V + 2 margin, U + 2 margin) int64: each sample's entry of the light field's
+            (K V U) entries, K V U (an entry of zero) where dropped; None without.
+        kept: fraction of the steep samples (outside the window, within the reach) kept; 1 without a depth.
+    """
+
+    shape: tuple[int, int, int]
+    reach: float
+    margin: int
+    source: np.ndarray
+    keep: np.ndarray | None
+    kept: float
+    index: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -42,12 +73,14 @@ class WindowExtension:
     kept: float
 
 
-def extend_beyond_window(lf: LightField, reach: float, depth: np.ndarray | None = None,
-                         tolerance: float = DEPTH_TOLERANCE) -> WindowExtension:
-    """The light field's table out to |(u, v)| <= ``reach`` a, read at the window's edge.
+def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
+               tolerance: float = DEPTH_TOLERANCE) -> SteepRays:
+    """The samples beyond ``lf``'s window out to |(u, v)| <= ``reach`` a, each read at the window's edge, and with
+    ``depth`` checked: a steep sample is kept where its ray, followed to the depth of the edge sample it reads,
+    lands where the lenslet below sees a surface within ``tolerance`` of that depth.
 
     Args:
-        lf: the captured light field (K, V, U, 3) radiance, W m^-2 sr^-1.
+        lf: a light field of the lens array and angular grid (only its shape and array are used).
         reach: how far beyond the window, in units of the window's half-width a (> 1).
         depth: (K, V, U) depth of each sample's centre ray, metres (NaN: unknown), or None: every steep sample
             takes its edge value.
@@ -55,12 +88,7 @@ def extend_beyond_window(lf: LightField, reach: float, depth: np.ndarray | None 
             surface (:data:`DEPTH_TOLERANCE`).
 
     Returns:
-        :class:`WindowExtension`.
-
-    Example:
-        >>> ext = extend_beyond_window(captured, 1.5, depth)     # doctest: +SKIP
-        >>> ext.data.shape                                         # doctest: +SKIP
-        (120, 72, 72, 3)
+        :class:`SteepRays`, for :func:`extend_beyond_window`.
     """
     if not reach > 1.0:
         raise ValueError(f"reach must be > 1 (in units of the window's half-width), got {reach}")
@@ -75,22 +103,51 @@ def extend_beyond_window(lf: LightField, reach: float, depth: np.ndarray | None 
     mask[margin:margin + V, margin:margin + U] = lf.mask()
     rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
     source = (rows - margin) * U + (cols - margin)                    # (Ve, Ue) nearest sample inside the window
+    if depth is None:
+        return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, keep=None, kept=1.0)
     ue = -a + (np.arange(Ue) - margin + 0.5) * du
     ve = -a + (np.arange(Ve) - margin + 0.5) * dv
     uu, vv = np.meshgrid(ue, ve)
     steep = ~mask & (uu**2 + vv**2 <= (reach * a) ** 2)
+    keep = np.ones((K, Ve, Ue), bool)
+    if steep.any():
+        keep[:, steep] = _meets_surface(array, np.asarray(depth, np.float64).reshape(K, V * U), source[steep],
+                                        np.stack([uu[steep], vv[steep]], -1),
+                                        source[margin:margin + V, margin:margin + U], (U, V, du, dv, a), tolerance)
+    kept = float(keep[:, steep].mean()) if steep.any() else 1.0
+    index = np.where(keep, np.arange(K)[:, None, None] * (V * U) + source[None], K * V * U)
+    return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, keep=keep, kept=kept,
+                     index=index)
+
+
+def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
+    """The light field's table out to |(u, v)| <= ``steep.reach`` a, read at the window's edge (and zero where
+    ``steep``'s depth check dropped the steep ray).
+
+    Args:
+        lf: the captured light field (K, V, U, 3) radiance, W m^-2 sr^-1.
+        steep: :func:`steep_rays` of a light field of the same shape.
+
+    Returns:
+        :class:`WindowExtension`.
+
+    Example:
+        >>> steep = steep_rays(captured, 1.5, depth)              # once per measured depth  # doctest: +SKIP
+        >>> extend_beyond_window(captured, steep).data.shape      # doctest: +SKIP
+        (120, 74, 74, 3)
+    """
+    K, V, U = lf.data.shape[:3]
+    if steep.shape != (K, V, U):
+        raise ValueError(f"the steep rays were found for light fields of shape {steep.shape}, this one is "
+                         f"{(K, V, U)}")
+    Ve, Ue = steep.source.shape
     flat = lf.data.reshape(K, V * U, 3)
-    data = flat[:, source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32)
-    kept = 1.0
-    if depth is not None and steep.any():
-        keep = _meets_surface(array, np.asarray(depth, np.float64).reshape(K, V * U), source[steep],
-                              np.stack([uu[steep], vv[steep]], -1), source[margin:margin + V, margin:margin + U],
-                              (U, V, du, dv, a), tolerance)                     # (K, n)
-        block = data[:, steep]
-        block[~keep] = 0.0
-        data[:, steep] = block
-        kept = float(keep.mean())
-    return WindowExtension(data=data, margin=margin, kept=kept)
+    if steep.keep is None:
+        data = flat[:, steep.source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32)
+    else:                                       # one gather; a dropped sample reads the zero entry at the end
+        entries = np.concatenate([lf.data.reshape(K * V * U, 3), np.zeros((1, 3), lf.data.dtype)])
+        data = entries[steep.index].astype(np.float32)
+    return WindowExtension(data=data, margin=steep.margin, kept=steep.kept)
 
 
 def _meets_surface(array, depth: np.ndarray, source: np.ndarray, uv: np.ndarray, inside: np.ndarray, grid,
@@ -124,4 +181,4 @@ def _meets_surface(array, depth: np.ndarray, source: np.ndarray, uv: np.ndarray,
     return keep
 
 
-__all__ = ["DEPTH_TOLERANCE", "WindowExtension", "extend_beyond_window"]
+__all__ = ["DEPTH_TOLERANCE", "SteepRays", "WindowExtension", "extend_beyond_window", "steep_rays"]

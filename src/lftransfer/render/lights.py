@@ -53,7 +53,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.lightfield import LightField
-from lftransfer.lightfield.window import extend_beyond_window
+from lftransfer.lightfield.window import SteepRays, extend_beyond_window, steep_rays
 
 SAMPLING_POOL = 1024        # aperture points of a jittered area model (a stratified pool)
 LightingModel = Literal["point", "area", "prefiltered"]
@@ -240,8 +240,9 @@ class LightFieldLight:
         reconstruction: area model only: ``"box"`` or ``"linear"`` (module docstring).
         window: what arrives from beyond the lenslets' window, ``"cut"`` (nothing) or ``"edge"`` (the window's
             edge; module docstring).
-        depth: with ``window="edge"``, the real scene's depth along each sample's centre ray, (K, V, U) metres
-            (NaN: unknown), which keeps the steep samples whose rays meet a surface; None: all of them.
+        steep: with ``window="edge"``, which steep samples to read from the window's edge
+            (:func:`lftransfer.lightfield.window.steep_rays` at :data:`EDGE_REACH`, with the real scene's depth:
+            those whose rays meet a surface); None: all of them.
 
     Example:
         >>> light = LightFieldLight(captured, side="synthetic", model="area")  # doctest: +SKIP
@@ -258,7 +259,7 @@ class LightFieldLight:
         jitter: bool = True,
         reconstruction: Reconstruction = "box",
         window: Window = "cut",
-        depth: np.ndarray | None = None,
+        steep: SteepRays | None = None,
     ) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
@@ -290,7 +291,11 @@ class LightFieldLight:
         self._margin = 0       # samples of the table beyond [-a, a] on each side
         self.steep_kept = None
         if window == "edge":
-            ext = extend_beyond_window(lightfield, EDGE_REACH, depth)
+            if steep is None:
+                steep = steep_rays(lightfield, EDGE_REACH)
+            elif steep.reach != EDGE_REACH:
+                raise ValueError(f"steep rays found out to {steep.reach} a, the edge window reads {EDGE_REACH} a")
+            ext = extend_beyond_window(lightfield, steep)
             self.steep_kept = ext.kept
             if model == "prefiltered":          # the summed-area table of the square, read at clamped (u, v)
                 m = ext.margin

@@ -10,9 +10,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from lftransfer.lightfield import LightField
+from lftransfer.lightfield.window import SteepRays, steep_rays
 from lftransfer.render import fast
 from lftransfer.render.camera import sensor_dict
-from lftransfer.render.lights import EmitterLight, LightFieldLight, PointLight
+from lftransfer.render.lights import EDGE_REACH, EmitterLight, LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
@@ -142,6 +143,7 @@ class SyntheticSide:
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
                                                self.height))
         self.prefilter: DepthPrefilter | None = None
+        self._steep: tuple[np.ndarray, SteepRays] | None = None        # (the depth, its steep rays)
 
     def _posed(self, t: float) -> SyntheticScene:
         return scene_in_frame(self.scene.at(t), self.model.world_to_array())
@@ -205,12 +207,19 @@ class SyntheticSide:
         area = s.lighting_model == "area"
         return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=s.aperture_samples,
                                seed=seed, reconstruction=s.reconstruction if area else "box",
-                               window=s.window if area else "cut", depth=self.depth)
+                               window=s.window if area else "cut", steep=self.steep_rays(real_lf))
 
-    @property
-    def depth(self) -> np.ndarray | None:
-        """The real scene's measured depth (K, V, U), metres, or None where none was measured."""
-        return None if self.prefilter is None else self.prefilter.depth
+    def steep_rays(self, real_lf: LightField) -> SteepRays | None:
+        """Which samples beyond the lenslets' window the synthetic side reads from their edge
+        (:func:`~lftransfer.lightfield.window.steep_rays`): checked against the measured depth, found once per
+        depth; None without a depth or an edge window (the light field light then reads them all, or none)."""
+        s = self.settings
+        if self.prefilter is None or s.lighting_model != "area" or s.window != "edge":
+            return None
+        depth = self.prefilter.depth
+        if self._steep is None or self._steep[0] is not depth or self._steep[1].shape != real_lf.data.shape[:3]:
+            self._steep = (depth, steep_rays(real_lf, EDGE_REACH, depth))
+        return self._steep[1]
 
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
         """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is

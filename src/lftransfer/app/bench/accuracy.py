@@ -70,7 +70,7 @@ def fast_vs_exact(frame, side, settings, *, max_depth: int, aperture_samples: in
     incident = LightFieldLight(frame.captured_lf, side="synthetic", model=settings.lighting_model,
                                aperture_samples=samples, seed=settings.seed,
                                reconstruction=settings.reconstruction if area else "box",
-                               window=settings.window if area else "cut", depth=side.depth)
+                               window=settings.window if area else "cut", steep=side.steep_rays(frame.captured_lf))
     exact = HalfSpaceRenderer(side.renderer.objects, max_depth=max_depth)
     view = exact.render_view(side.sensor, side.width, side.height, [*side.direct_lights, incident], spp=spp,
                              seed=settings.seed)
