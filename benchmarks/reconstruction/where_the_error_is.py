@@ -25,8 +25,7 @@ from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 from lftransfer.sim.verify import evaluate, render_ground_truth
 from lftransfer.transfer.bounce import run_transfer
-
-GT_SPP = 8192
+from study_scenes import GT_SPP, by_side_cells
 
 
 def variants(scene):
@@ -52,11 +51,7 @@ def main() -> None:
         opened.start_frame(0)
         result = run_transfer(opened.rig, known.model, known.scene, settings)
         m = evaluate(result, render_ground_truth(opened.world, spp=GT_SPP))
-        real, syn = m.cross_by_side["real"], m.cross_by_side["synthetic"]
-        print(f"| {name} | {m.cross_transfer_rel_error:.3f} "
-              f"| {real.rel_error:.3f}, {real.energy_ratio:.3f}, {real.rel_error_shape:.3f} "
-              f"| {syn.rel_error:.3f}, {syn.energy_ratio:.3f}, {syn.rel_error_shape:.3f} "
-              f"| {real.gt_noise_rel:.3f} / {syn.gt_noise_rel:.3f} |", flush=True)
+        print(f"| {name} | {m.cross_transfer_rel_error:.3f} {by_side_cells(m)}", flush=True)
 
 
 if __name__ == "__main__":

@@ -16,38 +16,29 @@ from __future__ import annotations
 
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 from lftransfer.app.bench.step import transfer_settings
-from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
-from lftransfer.scenes import builtin_scene, load_scene
+from lftransfer.app.pipeline import RunOptions, knowledge, open_rig
 from lftransfer.sim.verify import evaluate, render_ground_truth
 from lftransfer.transfer.bounce import run_transfer
+from study_scenes import GT_SPP, by_side_cells, study_scenes
 
-HERE = Path(__file__).parent
 WINDOWS = ("cut", "edge")
 
 
 def main(full: bool) -> None:
-    scenes = [("fig4", builtin_scene("fig4")),
-              *[(n, HERE / f"{n}.toml") for n in ("spheres", "cylinders", "far", "rect", "glossy")]]
     print("| scene | window | cross error | real side: error, energy ratio, error after best scale "
           "| synthetic side: the same | ground truth's noise (real / synthetic) |")
     print("|---|---|---|---|---|---|")
-    for name, path in scenes:
-        scene = load_scene(path) if full else quick_scene(load_scene(path))
+    for name, scene in study_scenes(full):
         for window in WINDOWS:
             opened = open_rig(scene, RunOptions(truth_seed=2))
             known = knowledge(opened, scene, "oracle")
             settings = replace(transfer_settings(scene), bounces=2, reconstruction="linear", window=window)
             opened.start_frame(0)
             result = run_transfer(opened.rig, known.model, known.scene, settings)
-            m = evaluate(result, render_ground_truth(opened.world, spp=512 if full else 8192))
-            real, syn = m.cross_by_side["real"], m.cross_by_side["synthetic"]
-            print(f"| {name} | {window} | {m.cross_transfer_rel_error:.3f} "
-                  f"| {real.rel_error:.3f}, {real.energy_ratio:.3f}, {real.rel_error_shape:.3f} "
-                  f"| {syn.rel_error:.3f}, {syn.energy_ratio:.3f}, {syn.rel_error_shape:.3f} "
-                  f"| {real.gt_noise_rel:.3f} / {syn.gt_noise_rel:.3f} |", flush=True)
+            m = evaluate(result, render_ground_truth(opened.world, spp=512 if full else GT_SPP))
+            print(f"| {name} | {window} | {m.cross_transfer_rel_error:.3f} {by_side_cells(m)}", flush=True)
 
 
 if __name__ == "__main__":
