@@ -56,3 +56,28 @@ def test_02_points_on_the_wrong_side_get_no_light(variant):
     rad, hit, _ = real.render_rays(np.array([[0.0, 0.0, 0.04]]), np.array([[0.0, 0.0, 1.0]]),
                                    [LightFieldLight(lf, "synthetic", model="area")])
     assert hit[0] and np.all(rad == 0)
+
+
+def test_03_linear_blend_is_found_once_and_lights_the_neighbours_of_a_lit_lenslet(variant):
+    """The linear reconstruction's blend depends on the rig and the seed only: a second light reuses it (a live
+    loop builds a light per frame). With one lenslet lit, the lenslets whose apertures read it carry light too:
+    exactly those whose blend indices name it with a positive weight (the negative control: the box
+    reconstruction visits the lit lenslet alone)."""
+    array = LensArray(lattice="hex", rows=4, cols=5, pitch=0.0254, focal_length=0.0254)
+    lf = LightField.zeros(array, 8, 8)
+    lit = 7
+    lf.data[lit] = lf.mask()[..., None]
+    first = LightFieldLight(lf, "synthetic", model="area", reconstruction="linear", seed=3)
+    second = LightFieldLight(lf, "synthetic", model="area", reconstruction="linear", seed=3)
+    assert second._blend_idx is not first._blend_idx                   # its own Dr.Jit arrays ...
+    from lftransfer.render.lights import _linear_blend
+
+    blend = _linear_blend(array, first.pool, 3)
+    assert _linear_blend.cache_info().hits >= 1                          # ... from the same blend
+    idx = blend.index.reshape(array.K, -1)
+    w = blend.weight.reshape(array.K, -1)
+    expected = np.flatnonzero(((idx == lit) & (w > 0)).any(axis=1))
+    np.testing.assert_array_equal(first.active_lenslets, expected)
+    assert lit in expected and len(expected) >= 4                        # the lit one and its neighbours
+    box = LightFieldLight(lf, "synthetic", model="area", reconstruction="box", seed=3)
+    np.testing.assert_array_equal(box.active_lenslets, [lit])

@@ -796,7 +796,7 @@ def _bench_table(result) -> None:
     p = result.pipeline_iteration
     _row(table, "pipeline_iteration_ms (median)",
          f"{result.pipeline_iteration_ms:.1f} ms (min {p.min:.1f}, max {p.max:.1f}; {s['iterations']} frames)")
-    labels = {"render_lightfield": "relight + render light field"}
+    labels = {"incident_light": "captured light field as a light", "render_lightfield": "relight + render light field"}
     for stage, t in result.stages_ms.items():
         _row(table, f"  {labels.get(stage, stage.replace('_', ' '))}", f"{t.median:.1f} ms")
     rig = result.rig_stages_ms

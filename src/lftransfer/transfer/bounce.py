@@ -280,7 +280,8 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
                 real_view_n = (rig.capture_view().radiance - real_view_direct) / gain
         # Synthetic side: lit by R_{n-1} only.
         step(f"bounce {n}: render synthetic lit by R_{n - 1}")
-        incident = side.incident_light(prev.real_lf, settings.seed + n)
+        with timer("incident_light"):
+            incident = side.incident_light(prev.real_lf, settings.seed + n)
         lsn, sn = render_synthetic([incident], settings.seed + 1000 * n)
         bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
         step(f"bounce {n} done")

@@ -38,8 +38,8 @@ from lftransfer.transfer.timer import StageTimer
 
 __all__ = ["LiveFrame", "LiveTransfer", "LIVE_STAGES"]
 
-LIVE_STAGES = ("pose", "measure_depth", "encode", "capture", "decode", "capture_view", "render_lightfield", "prefilter",
-               "render_view", "composite")
+LIVE_STAGES = ("pose", "measure_depth", "encode", "capture", "decode", "capture_view", "incident_light",
+               "render_lightfield", "prefilter", "render_view", "composite")
 
 
 @dataclass
@@ -157,7 +157,8 @@ class LiveTransfer:
         with timer("capture_view"):
             real_view = rig.capture_view().radiance
         # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
-        lights = [*side.direct_lights, side.incident_light(captured, s.seed)]
+        with timer("incident_light"):
+            lights = [*side.direct_lights, side.incident_light(captured, s.seed)]
         synthetic_lf, view = side.render(lights, s.seed, timer)
         with timer("composite"):
             comp = composite(view.rgb, view.alpha, real_view)

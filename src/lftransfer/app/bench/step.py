@@ -6,7 +6,9 @@ calls per frame, with the rig model a run uses (calibrated by default) and the s
 samples, reconstruction, projection, ``render.spp`` rays per light field sample and per view pixel, renderer).
 Each frame's stages are split into:
 
-- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, relight + render light field, the
+- the pipeline's own stages (:data:`PIPELINE_STAGES`: pose, encode, decode, the captured light field made a light
+  of the synthetic scene (``incident_light``: the window's table, the reconstruction's blend), relight + render
+  light field, the
   projection prefilter where the scene asks for it, render view, composite): the work a physical rig's computer
   does; ``pipeline_iteration_ms`` is their sum per frame, median over the timed frames after ``warmup`` frames
   (the first compiles the kernels and measures the real scene's depth for the prefilter, the second builds the
@@ -44,7 +46,8 @@ __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
-PIPELINE_STAGES = ("pose", "encode", "decode", "render_lightfield", "prefilter", "render_view", "composite")
+PIPELINE_STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "render_view",
+                   "composite")
 RIG_MODELS = ("calibrated", "nominal", "oracle")
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
