@@ -143,10 +143,10 @@ def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
     Ve, Ue = steep.source.shape
     flat = lf.data.reshape(K, V * U, 3)
     if steep.keep is None:
-        data = flat[:, steep.source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32)
+        data = flat[:, steep.source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32, copy=False)
     else:                                       # one gather; a dropped sample reads the zero entry at the end
         entries = np.concatenate([lf.data.reshape(K * V * U, 3), np.zeros((1, 3), lf.data.dtype)])
-        data = entries[steep.index].astype(np.float32)
+        data = entries[steep.index].astype(np.float32, copy=False)
     return WindowExtension(data=data, margin=steep.margin, kept=steep.kept)
 
 
