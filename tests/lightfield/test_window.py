@@ -46,9 +46,10 @@ def test_01_without_depth_every_steep_sample_is_its_nearest_edge_sample(lattice)
     distance on the sample grid), so a light field constant in direction stays constant out to the reach."""
     lf, _ = _patch(lattice, "none")
     lf.data[...] = np.random.default_rng(1).random(lf.data.shape).astype(np.float32) * lf.mask()[None, ..., None]
-    ext = extend_beyond_window(lf, steep_rays(lf, REACH))
+    steep = steep_rays(lf, REACH)
+    ext = extend_beyond_window(lf, steep)
     m = ext.margin
-    assert ext.kept == 1.0
+    assert steep.kept == 1.0
     np.testing.assert_array_equal(ext.data[:, m:m + lf.V, m:m + lf.U][:, lf.mask()], lf.data[:, lf.mask()])
     uu, vv, steep = _steep(lf, m)
     assert np.hypot(uu, vv)[steep].max() > 1.4 * lf.array.half_width          # the margin covers the reach
@@ -71,7 +72,8 @@ def test_02_the_depth_keeps_the_steep_rays_that_still_meet_the_surface(lattice, 
     plane at ten times the depth). Decided within half a sample's footprint of the patch's border. Without the
     depth (the control) the rays beside the patch keep the patch's light."""
     lf, depth = _patch(lattice, background)
-    ext = extend_beyond_window(lf, steep_rays(lf, REACH, depth))
+    checked = steep_rays(lf, REACH, depth)
+    ext = extend_beyond_window(lf, checked)
     bare = extend_beyond_window(lf, steep_rays(lf, REACH))
     m = ext.margin
     uu, vv, steep = _steep(lf, m)
@@ -88,7 +90,7 @@ def test_02_the_depth_keeps_the_steep_rays_that_still_meet_the_surface(lattice, 
     assert np.all(value[on] == 1.0)
     assert np.all(value[beside] == 0.0)
     assert np.all(bare.data[:, steep, 0][beside] == 1.0)                       # the control reads the patch there
-    assert 0.0 < ext.kept < 1.0
+    assert 0.0 < checked.kept < 1.0
     middle = np.s_[:, m:m + lf.V, m:m + lf.U]
     np.testing.assert_array_equal(ext.data[middle][:, lf.mask()], lf.data[:, lf.mask()])  # the window untouched
 

@@ -39,10 +39,9 @@ class SteepRays:
         margin: samples added on each side of the (V, U) grid, at its spacing.
         source: (V + 2 margin, U + 2 margin) int64: each sample's nearest sample inside the window, an index into
             the V * U grid (inside the window: itself).
-        keep: (K, V + 2 margin, U + 2 margin) bool: False where the depth says the steep ray misses the real scene;
-            None without a depth (all kept).
-        index: with ``keep``, (K, V + 2 margin, U + 2 margin) int64: each sample's entry of the light field's
-            (K V U) entries, K V U (an entry of zero) where dropped; None without.
+        index: with a depth, (K, V + 2 margin, U + 2 margin) int64: each sample's entry of the light field's
+            (K V U) entries, ``source`` in its own lenslet, or K V U (an entry of zero) where the depth says the
+            steep ray misses the real scene; None without a depth (every lenslet reads ``source``).
         kept: fraction of the steep samples (outside the window, within the reach) kept; 1 without a depth.
     """
 
@@ -50,9 +49,8 @@ class SteepRays:
     reach: float
     margin: int
     source: np.ndarray
-    keep: np.ndarray | None
+    index: np.ndarray | None
     kept: float
-    index: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -64,13 +62,10 @@ class WindowExtension:
             middle, each sample outside the window the nearest one inside it (zero where the depth says the steep
             ray misses the real scene).
         margin: samples added on each side, at the light field's spacing.
-        kept: fraction of the steep samples (outside the window, within the reach) that the depth check kept; 1
-            without a depth.
     """
 
     data: np.ndarray
     margin: int
-    kept: float
 
 
 def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
@@ -104,7 +99,7 @@ def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
     rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
     source = (rows - margin) * U + (cols - margin)                    # (Ve, Ue) nearest sample inside the window
     if depth is None:
-        return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, keep=None, kept=1.0)
+        return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, index=None, kept=1.0)
     ue = -a + (np.arange(Ue) - margin + 0.5) * du
     ve = -a + (np.arange(Ve) - margin + 0.5) * dv
     uu, vv = np.meshgrid(ue, ve)
@@ -116,8 +111,7 @@ def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
                                         source[margin:margin + V, margin:margin + U], (U, V, du, dv, a), tolerance)
     kept = float(keep[:, steep].mean()) if steep.any() else 1.0
     index = np.where(keep, np.arange(K)[:, None, None] * (V * U) + source[None], K * V * U)
-    return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, keep=keep, kept=kept,
-                     index=index)
+    return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, index=index, kept=kept)
 
 
 def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
@@ -142,12 +136,12 @@ def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
                          f"{(K, V, U)}")
     Ve, Ue = steep.source.shape
     flat = lf.data.reshape(K, V * U, 3)
-    if steep.keep is None:
+    if steep.index is None:
         data = flat[:, steep.source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32, copy=False)
     else:                                       # one gather; a dropped sample reads the zero entry at the end
         entries = np.concatenate([lf.data.reshape(K * V * U, 3), np.zeros((1, 3), lf.data.dtype)])
         data = entries[steep.index].astype(np.float32, copy=False)
-    return WindowExtension(data=data, margin=steep.margin, kept=steep.kept)
+    return WindowExtension(data=data, margin=steep.margin)
 
 
 def _meets_surface(array, depth: np.ndarray, source: np.ndarray, uv: np.ndarray, inside: np.ndarray, grid,

@@ -289,14 +289,12 @@ class LightFieldLight:
         peak = np.abs(data).reshape(self.K, -1).max(axis=1)
         carries = peak > 0
         self._margin = 0       # samples of the table beyond [-a, a] on each side
-        self.steep_kept = None
         if window == "edge":
             if steep is None:
                 steep = steep_rays(lightfield, EDGE_REACH)
             elif steep.reach != EDGE_REACH:
                 raise ValueError(f"steep rays found out to {steep.reach} a, the edge window reads {EDGE_REACH} a")
             ext = extend_beyond_window(lightfield, steep)
-            self.steep_kept = ext.kept
             if model == "prefiltered":          # the summed-area table of the square, read at clamped (u, v)
                 m = ext.margin
                 data = ext.data[:, m:m + self.V, m:m + self.U]

@@ -143,7 +143,7 @@ class SyntheticSide:
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
                                                self.height))
         self.prefilter: DepthPrefilter | None = None
-        self._steep: tuple[np.ndarray, SteepRays] | None = None        # (the depth, its steep rays)
+        self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
 
     def _posed(self, t: float) -> SyntheticScene:
         return scene_in_frame(self.scene.at(t), self.model.world_to_array())
@@ -211,12 +211,12 @@ class SyntheticSide:
 
     def steep_rays(self, real_lf: LightField) -> SteepRays | None:
         """Which samples beyond the lenslets' window the synthetic side reads from their edge
-        (:func:`~lftransfer.lightfield.window.steep_rays`): checked against the measured depth, found once per
-        depth; None without a depth or an edge window (the light field light then reads them all, or none)."""
+        (:func:`~lftransfer.lightfield.window.steep_rays`), checked against the measured depth where there is one;
+        found once per depth (a live loop builds a light per frame). None without an edge window."""
         s = self.settings
-        if self.prefilter is None or s.lighting_model != "area" or s.window != "edge":
+        if s.lighting_model != "area" or s.window != "edge":
             return None
-        depth = self.prefilter.depth
+        depth = None if self.prefilter is None else self.prefilter.depth
         if self._steep is None or self._steep[0] is not depth or self._steep[1].shape != real_lf.data.shape[:3]:
             self._steep = (depth, steep_rays(real_lf, EDGE_REACH, depth))
         return self._steep[1]
