@@ -81,3 +81,29 @@ def test_03_linear_blend_is_found_once_and_lights_the_neighbours_of_a_lit_lensle
     assert lit in expected and len(expected) >= 4                        # the lit one and its neighbours
     box = LightFieldLight(lf, "synthetic", model="area", reconstruction="box", seed=3)
     np.testing.assert_array_equal(box.active_lenslets, [lit])
+
+
+def test_04_edge_table_gathered_by_drjit_equals_the_numpy_extension(variant):
+    """The light's extended table (:func:`extended_table`, one Dr.Jit gather per frame from an index found once per
+    steep-ray set) is :func:`extend_beyond_window`'s table bit for bit: without a depth, and with a depth whose
+    check drops some steep rays (those read zero). A second light of the same steep rays reuses the index."""
+    from lftransfer.lightfield.window import extend_beyond_window, steep_rays
+    from lftransfer.render import lights as lights_module
+    from lftransfer.render.lights import EDGE_REACH, extended_table
+
+    array = LensArray(lattice="hex", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
+    rng = np.random.default_rng(4)
+    lf = LightField(rng.random((array.K, 12, 12, 3)).astype(np.float32) + 0.1, array)
+    depth = rng.uniform(0.03, 0.2, (array.K, 12, 12))
+    depth[rng.random(depth.shape) < 0.3] = np.nan
+    for d in (None, depth):
+        steep = steep_rays(lf, EDGE_REACH, d)
+        expected = extend_beyond_window(lf, steep).data
+        got = np.array(extended_table(lf.data, steep))
+        np.testing.assert_array_equal(got, expected.ravel())
+        if d is not None:
+            assert steep.kept < 1.0 and (expected == 0).any()          # the check dropped some: zeros read
+        index = lights_module._edge_index(steep, lights_module.mitsuba().variant())
+        light = LightFieldLight(lf, "synthetic", model="area", window="edge", steep=steep)
+        assert lights_module._edge_index(steep, lights_module.mitsuba().variant()) is index
+        np.testing.assert_array_equal(np.array(light._table), expected.ravel())

@@ -289,24 +289,25 @@ class LightFieldLight:
         peak = np.abs(data).reshape(self.K, -1).max(axis=1)
         carries = peak > 0
         self._margin = 0       # samples of the table beyond [-a, a] on each side
+        edge_table = None
         if window == "edge":
             if steep is None:
                 steep = steep_rays(lightfield, EDGE_REACH)
             elif steep.reach != EDGE_REACH:
                 raise ValueError(f"steep rays found out to {steep.reach} a, the edge window reads {EDGE_REACH} a")
-            ext = extend_beyond_window(lightfield, steep)
             if model == "prefiltered":          # the summed-area table of the square, read at clamped (u, v)
+                ext = extend_beyond_window(lightfield, steep)
                 m = ext.margin
                 data = ext.data[:, m:m + self.V, m:m + self.U]
             else:
-                data, self._margin = ext.data, ext.margin
+                edge_table, self._margin = extended_table(data, steep), steep.margin
         if model == "prefiltered":
             # Summed-area table (V+1, U+1) per lenslet and channel: box-filtered lookups in O(1).
             sat = np.zeros((self.K, self.V + 1, self.U + 1, 3), np.float64)
             sat[:, 1:, 1:] = data.astype(np.float64).cumsum(1).cumsum(2)
             self._table = jit_array(mi.Float, sat.astype(np.float32).ravel())
         else:
-            self._table = jit_array(mi.Float, data.ravel())
+            self._table = jit_array(mi.Float, data.ravel()) if edge_table is None else edge_table
         centres = array.centres.astype(np.float32)
         self._cx = jit_array(mi.Float, centres[:, 0])
         self._cy = jit_array(mi.Float, centres[:, 1])
@@ -613,6 +614,51 @@ class LightFieldLight:
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
+
+
+def extended_table(data: np.ndarray, steep: SteepRays):
+    """:func:`~lftransfer.lightfield.window.extend_beyond_window`'s table, gathered by Dr.Jit: mi.Float
+    (K * Ve * Ue * 3,), equal to ``extend_beyond_window(lf, steep).data.ravel()`` bit for bit.
+
+    The gather's index depends only on ``steep`` and is uploaded once per :class:`SteepRays` (a live loop builds a
+    light per frame from the same one); per frame only the light field itself is uploaded (a third of the
+    extended table) and the gather runs on the renderer's threads.
+
+    Args:
+        data: (K, V, U, 3) float32 radiance, C-contiguous.
+        steep: :func:`~lftransfer.lightfield.window.steep_rays` of light fields of this shape.
+    """
+    import drjit as dr
+
+    mi = mitsuba()
+    K, V, U = data.shape[:3]
+    if steep.shape != (K, V, U):
+        raise ValueError(f"the steep rays were found for light fields of shape {steep.shape}, this one is "
+                         f"{(K, V, U)}")
+    index = _edge_index(steep, mi.variant())
+    table = dr.gather(mi.Float, jit_array(mi.Float, data), index, index < 3 * K * V * U)   # 0 past the end
+    dr.eval(table)
+    dr.sync_thread()        # finished here, so that a stage timer charges the gather to the light's construction
+    return table
+
+
+_EDGE_INDEX: list = []      # (SteepRays, variant, mi.UInt32) of the last few steep-ray sets, newest last
+
+
+def _edge_index(steep: SteepRays, variant: str):
+    """mi.UInt32 (K * Ve * Ue * 3,) the float each entry of the extended table reads (3 K V U: zero), per steep-ray
+    set (recognised by identity; a few are kept)."""
+    mi = mitsuba()
+    for kept, var, index in _EDGE_INDEX:
+        if kept is steep and var == variant:
+            return index
+    K, V, U = steep.shape
+    entry = (np.arange(K)[:, None, None] * (V * U) + steep.source[None]) if steep.index is None else steep.index
+    floats = entry.astype(np.uint32)[..., None] * np.uint32(3) + np.arange(3, dtype=np.uint32)
+    index = jit_array(mi.UInt32, floats)
+    del _EDGE_INDEX[:-3]
+    _EDGE_INDEX.append((steep, variant, index))
+    return index
 
 
 @functools.lru_cache(maxsize=16)
