@@ -501,3 +501,30 @@ def test_19_objects_that_move_as_one_keep_their_gather(variant):
     assert fast_module.TOGETHER == pytest.approx(1e-4)
     gather = r._interreflection()
     assert r.update(moved(0.001, 0.0)) and r._interreflection() is not gather
+
+
+@pytest.mark.parametrize("hits", [0, 1, 57, 4000])
+def test_20_group_means_from_the_hits_equal_the_full_size_means(hits):
+    """The fast path's per-pixel means, summed over the groups with a hit only, equal the means over every ray
+    (rays that miss count as black; depth is the mean over the hits, inf where none hit)."""
+    from lftransfer.render.fast import group_means
+
+    rng = np.random.default_rng(hits)
+    spp, groups = 4, 2500
+    idx = np.sort(rng.choice(groups * spp, hits, replace=False))
+    colour = rng.random((hits, 3)).astype(np.float32)
+    t = rng.uniform(0.05, 0.5, hits).astype(np.float32)
+    full = np.zeros((groups * spp, 3))
+    full[idx] = colour
+    hit = np.zeros(groups * spp)
+    hit[idx] = 1.0
+    dist = np.zeros(groups * spp)
+    dist[idx] = t
+    means = group_means(idx, colour, t, groups, spp)
+    np.testing.assert_allclose(means.radiance, full.reshape(groups, spp, 3).mean(1), rtol=1e-6, atol=0)
+    count = hit.reshape(groups, spp).sum(1)
+    np.testing.assert_array_equal(means.coverage, count / spp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        expected = np.where(count > 0, dist.reshape(groups, spp).sum(1) / count, np.inf)
+    np.testing.assert_allclose(means.depth, expected, rtol=1e-6)
+    assert means.radiance.dtype == means.coverage.dtype == means.depth.dtype == np.float32

@@ -465,6 +465,40 @@ class _RaySet:
         return self._centre[0]
 
 
+def group_means(idx: np.ndarray, colour: np.ndarray, t_hit: np.ndarray, groups: int, spp: int) -> SampleMeans:
+    """:class:`SampleMeans` of ``groups`` groups of ``spp`` consecutive rays from the rays that hit only.
+
+    The sums run over the groups with a hit (a view's objects cover a few per cent of its pixels), in float64 as
+    a full-size ``np.bincount`` would sum them; the other groups are written once (black, coverage 0, depth inf).
+
+    Args:
+        idx: (H,) int64 ray indices of the hits, ascending.
+        colour: (H, 3) float32 their radiance.
+        t_hit: (H,) float32 their hit distances, metres.
+        groups: G, the number of groups.
+        spp: rays per group.
+    """
+    scale = 1.0 / spp
+    radiance = np.zeros((groups, 3), np.float32)
+    coverage = np.zeros(groups, np.float32)
+    depth = np.full(groups, np.inf, np.float32)
+    if len(idx):
+        group = idx // spp
+        first = np.empty(len(group), bool)          # the first hit of each group with a hit
+        first[0] = True
+        np.not_equal(group[1:], group[:-1], out=first[1:])
+        dense = np.cumsum(first) - 1                # each hit's group among those with a hit
+        hit = group[first]
+        n = len(hit)
+        flat = radiance.reshape(-1)
+        for c in range(3):
+            flat[hit * 3 + c] = np.bincount(dense, weights=colour[:, c], minlength=n) * scale
+        hits = np.bincount(dense, minlength=n).astype(np.float32)
+        coverage[hit] = hits * np.float32(scale)
+        depth[hit] = mean_depth(np.bincount(dense, weights=t_hit, minlength=n), hits)
+    return SampleMeans(radiance=radiance, coverage=coverage, depth=depth)
+
+
 class CachedRenderer(HalfSpaceRenderer):
     """Renders objects from a diffuse irradiance cache at the vertices of a fine tessellation, with glossy lobes
     evaluated per ray (module docs).
@@ -952,14 +986,7 @@ class CachedRenderer(HalfSpaceRenderer):
             radiance, hit, t = self.render_rays(origins, directions, lights, seed=seed)
             return SampleMeans(radiance=radiance, coverage=hit.astype(np.float32), depth=t)
         idx, colour, t_hit = self._hits(origins, directions, lights, seed)
-        groups = len(origins) // spp
-        group = idx // spp
-        scale = 1.0 / spp
-        radiance = np.stack([np.bincount(group, weights=colour[:, c], minlength=groups) for c in range(3)], axis=1)
-        hits = np.bincount(group, minlength=groups).astype(np.float32)
-        near = np.bincount(group, weights=t_hit, minlength=groups)
-        return SampleMeans(radiance=(radiance * scale).astype(np.float32), coverage=hits * np.float32(scale),
-                           depth=mean_depth(near, hits))
+        return group_means(idx, colour, t_hit, len(origins) // spp, spp)
 
     def _shade(self, rays, pi, lights: Sequence[Light], seed: int, pinhole: np.ndarray | None = None):
         """Radiance (mi.Color3f, (N,)) leaving the hits ``pi`` of ``rays`` (all valid) back along the rays.
