@@ -229,3 +229,25 @@ def test_09_sixteen_bit_projector_uses_the_float_path():
     _, dev = _rig()
     assert _Quantiser.build(ProjectorModel(dev, bits=16, response=ResponseCurve((2.2,) * 3))) is None
     assert _Quantiser.build(ProjectorModel(dev, bits=12)) is not None            # linear 12-bit: finer bins
+
+
+def test_10_row_blocks_on_threads_change_nothing(monkeypatch):
+    """The per-pixel table work runs in row blocks on threads at the paper's resolution; forced onto small images
+    (every block a few rows, more blocks than rows for the smallest), the codecs still equal the float reference,
+    and a projector with cross-talk and a black level encodes as it does in one block."""
+    from lftransfer.lightfield import devices
+
+    arr, dev = _rig("hex", seed=11)
+    rng = np.random.default_rng(12)
+    prj = ProjectorModel(dev, bits=8, response=ResponseCurve((2.2, 2.0, 1.8)), max_radiance=2.0,
+                         cross_talk=[[1.0, 0.05, 0.0], [0.04, 1.0, 0.03], [0.0, 0.06, 1.0]],
+                         black_level=(0.01, 0.005, 0.008))
+    lf = _lf(arr, rng, 2.0)
+    one_block = LightFieldEncoder(arr, prj, U, V, above_black=True)(lf)
+    monkeypatch.setattr(devices, "_MIN_BLOCK_VALUES", 1)
+    for threads in (2, 3, 200):
+        monkeypatch.setattr(devices, "CODEC_THREADS", threads)
+        monkeypatch.setattr(devices, "_pool", None)
+        np.testing.assert_array_equal(LightFieldEncoder(arr, prj, U, V, above_black=True)(lf), one_block)
+        test_03_decoder_equals_the_float_reference("hex", 17.5)
+        test_06_encoder_equals_the_float_reference("rect", 0.0)

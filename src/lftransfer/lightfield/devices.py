@@ -13,12 +13,18 @@ results equal bit for bit to the plain float formulas in their docstrings (tests
   colour cross-talk or a black level first maps radiance to per-channel linear drive with one affine 3 x 4
   ``cv2.transform`` (``x = C^-1 (L / max_radiance - black_level)``) and then quantises that with the table of
   the same projector at ``max_radiance = 1``.
+
+The table work per pixel runs in row blocks on a few threads (:data:`CODEC_THREADS`; numpy's gathers release the
+GIL, and OpenCV's remaps use their own threads), each block writing its own rows: the result does not depend on
+the split.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -61,20 +67,50 @@ def _as_cv_codes(codes: np.ndarray, levels: int) -> np.ndarray:
     return np.ascontiguousarray(codes)
 
 
-def _lookup(tables: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    """``tables[c][codes[..., c]]`` per channel; ``tables`` is ``(1, n)`` (shared by the channels) or ``(3, n)``.
+def _lookup(tables: np.ndarray, codes: np.ndarray, rows: slice = slice(None), out: np.ndarray | None = None
+            ) -> np.ndarray:
+    """``tables[c][codes[..., c]]`` per channel over ``codes[rows]``; ``tables`` is ``(1, n)`` (shared by the
+    channels) or ``(3, n)``.
 
     ``codes`` must be below n (uint16 codes with n = 65536); mode="wrap" then changes nothing and spares
-    numpy's bounds-checking buffer.
+    numpy's bounds-checking buffer. Each channel gathers through a contiguous index (through the strided
+    channel of one index array numpy gathers about twice as slowly).
+
+    Args:
+        tables: (1 or 3, n) values per code.
+        codes: (H, W, 3) integer codes.
+        rows: the rows of ``codes`` to look up.
+        out: where to write them (shape of ``codes[rows]``, the tables' dtype), or None: a new array.
     """
-    if codes.dtype != np.intp:
-        codes = codes.astype(np.intp)
-    out = np.empty(codes.shape, tables.dtype)
+    codes = codes[rows]
     if len(tables) == 1:
-        return np.take(tables[0], codes, out=out, mode="wrap")
+        return np.take(tables[0], codes.astype(np.intp), out=out, mode="wrap")
+    out = np.empty(codes.shape, tables.dtype) if out is None else out
     for c in range(3):
-        out[..., c] = np.take(tables[c], codes[..., c], mode="wrap")
+        out[..., c] = np.take(tables[c], codes[..., c].astype(np.intp), mode="wrap")
     return out
+
+
+#: Threads that share the per-pixel table work of the codecs (numpy's gathers release the GIL) in row blocks.
+CODEC_THREADS = max(1, min(os.cpu_count() or 1, 4))
+_MIN_BLOCK_VALUES = 1 << 17                         # below this many values a block is not worth a thread
+_pool: ThreadPoolExecutor | None = None
+
+
+def _in_row_blocks(work: Callable[[slice], None], rows: int, values_per_row: int) -> None:
+    """Run ``work(rows_slice)`` over consecutive row blocks covering ``range(rows)``, on up to
+    :data:`CODEC_THREADS` threads (each block writes its own rows of the output: the result does not depend on the
+    split)."""
+    global _pool
+    blocks = int(min(CODEC_THREADS, max(1, rows * values_per_row // _MIN_BLOCK_VALUES), rows))
+    if blocks <= 1:
+        work(slice(0, rows))
+        return
+    if _pool is None:
+        _pool = ThreadPoolExecutor(CODEC_THREADS, thread_name_prefix="lft-codec")
+    edges = np.linspace(0, rows, blocks + 1).astype(int)
+    for done in [_pool.submit(work, slice(a, b)) for a, b in zip(edges[:-1], edges[1:])]:
+        done.result()
 
 
 class _LinearCodes:
@@ -173,22 +209,24 @@ class _Quantiser:
         full_step = np.ascontiguousarray(full_step[:, :channels].T)
         return low, full_step
 
-    def __call__(self, y: np.ndarray) -> np.ndarray:
-        """Codes of a C-contiguous ``(H, W, 3) float32`` image."""
+    def __call__(self, y: np.ndarray, rows: slice = slice(None), out: np.ndarray | None = None) -> np.ndarray:
+        """Codes of the rows ``rows`` of a C-contiguous ``(H, W, 3) float32`` image (into ``out`` if given)."""
+        y = y[rows]
         if self.shift == 16 and _LITTLE_ENDIAN:
-            idx = y.view(np.uint16)[..., 1::2]              # the high 16 bits of every float, no arithmetic
+            high = y.view(np.uint16)[..., 1::2]             # the high 16 bits of every float, no arithmetic
         else:
-            idx = y.view(np.uint32) >> np.uint32(self.shift)
-        idx = idx.astype(np.intp)                           # once, not inside each np.take
+            high = y.view(np.uint32) >> np.uint32(self.shift)
         # every index is below the table size 2^(32 - shift): mode="wrap" changes nothing, skips the buffer
         if len(self.low) == 1:
-            code = np.take(self.low[0], idx, mode="wrap")
+            idx = high.astype(np.intp)                      # once, not inside each np.take
+            code = np.take(self.low[0], idx, out=out, mode="wrap")
             code += y >= np.take(self.step[0], idx, mode="wrap")
             return code
-        code = np.empty(y.shape, self.low.dtype)
-        for c in range(3):
-            code[..., c] = np.take(self.low[c], idx[..., c], mode="wrap")
-            code[..., c] += y[..., c] >= np.take(self.step[c], idx[..., c], mode="wrap")
+        code = np.empty(y.shape, self.low.dtype) if out is None else out
+        for c in range(3):                                  # a contiguous index per channel (see _lookup)
+            idx = high[..., c].astype(np.intp)
+            code[..., c] = np.take(self.low[c], idx, mode="wrap") + (y[..., c] >= np.take(self.step[c], idx,
+                                                                                          mode="wrap"))
         return code
 
 
@@ -375,7 +413,8 @@ class LightFieldDecoder:
         self._patches = self.codec.patch_sampler          # None where the images are too large for cv2.remap
         self._patch_gain = None
         if self._patches is not None and not self._uniform_gain:
-            self._patch_gain = self._patches.gather(self._inv_gain)[..., None]
+            # per channel: a multiply broadcast over a last axis of 1 runs several times slower
+            self._patch_gain = np.ascontiguousarray(np.repeat(self._patches.gather(self._inv_gain)[..., None], 3, -1))
 
     def radiance_image(self, raw: np.ndarray) -> np.ndarray:
         """Raw codes -> per-pixel radiance, ``decode(raw / (2^bits - 1)) / (exposure * vignetting)``.
@@ -408,9 +447,17 @@ class LightFieldDecoder:
         # interpolation: equal to image_to_lightfield(radiance_image(raw)), without touching the other pixels
         raw = _check_codes(raw, self.camera.device, "raw camera image")
         codes = self._patches.gather(_as_cv_codes(raw, self.camera.levels))
-        patch = _lookup(self._table, codes) if self._linear is None else self._linear(codes)
-        if self._patch_gain is not None:
-            patch *= self._patch_gain
+        patch = np.empty(codes.shape, np.float32)
+
+        def decode_rows(rows: slice) -> None:
+            if self._linear is None:
+                _lookup(self._table, codes, rows, out=patch[rows])
+            else:
+                patch[rows] = self._linear(codes[rows])
+            if self._patch_gain is not None:
+                patch[rows] *= self._patch_gain[rows]
+
+        _in_row_blocks(decode_rows, codes.shape[0], codes[0].size)
         return self.codec.patches_to_lightfield(patch)
 
     def expose(self, radiance_image: np.ndarray) -> np.ndarray:
@@ -467,12 +514,23 @@ class LightFieldEncoder:
         if self._quantiser is None and self._affine is None:
             return _encode_float(self.projector, self.codec.lightfield_to_image(lf)).astype(self.projector.dtype)
         img = self.codec.lightfield_to_unnormalised(lf)
-        img *= self.codec.inv_norm3                          # = lightfield_to_image(lf), bit for bit
-        if self._affine is not None:
-            img = cv2.transform(img, self._affine)           # radiance -> linear drive (max_radiance 1)
+        norm = self.codec.inv_norm3
         if self._quantiser is None:
+            img *= norm                                      # = lightfield_to_image(lf), bit for bit
+            if self._affine is not None:
+                img = cv2.transform(img, self._affine)
             return _encode_float(self._quantised, img).astype(self.projector.dtype)
-        return self._quantiser(img)
+        codes = np.empty(img.shape, self._quantiser.low.dtype)
+
+        def encode_rows(rows: slice) -> None:
+            block = img[rows]
+            block *= norm[rows]                              # = lightfield_to_image(lf), bit for bit
+            if self._affine is not None:
+                block = cv2.transform(block, self._affine)   # radiance -> linear drive (max_radiance 1)
+            self._quantiser(block, out=codes[rows])
+
+        _in_row_blocks(encode_rows, img.shape[0], img[0].size)
+        return codes
 
     def quantise(self, radiance_image: np.ndarray) -> np.ndarray:
         """Per-pixel radiance -> projector codes (the encoder without the light field resampling).
