@@ -954,6 +954,7 @@ class CachedRenderer(HalfSpaceRenderer):
             if chosen.mean() < CULL_BELOW:
                 cast = tiles.rays(chosen)
                 rays = dr.gather(mi.Ray3f, rays, jit_array(mi.UInt32, cast.astype(np.uint32)))
+                dr.eval(rays)                # one kernel (the intersection would gather each field in its own)
         pi = self.scene.ray_intersect_preliminary(rays)
         dr.eval(pi)          # every field in one kernel (read apart, each would intersect again)
         t = np.array(pi.t, dtype=np.float32)
