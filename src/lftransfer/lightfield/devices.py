@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -95,6 +96,15 @@ def _lookup(tables: np.ndarray, codes: np.ndarray, rows: slice = slice(None), ou
 CODEC_THREADS = max(1, min(os.cpu_count() or 1, 4))
 _MIN_BLOCK_VALUES = 1 << 17                         # below this many values a block is not worth a thread
 _pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+
+def _forget_pool() -> None:
+    global _pool
+    _pool = None                                    # a forked child has none of the parent's threads
+
+
+os.register_at_fork(after_in_child=_forget_pool)
 
 
 def _in_row_blocks(work: Callable[[slice], None], rows: int, values_per_row: int) -> None:
@@ -106,8 +116,9 @@ def _in_row_blocks(work: Callable[[slice], None], rows: int, values_per_row: int
     if blocks <= 1:
         work(slice(0, rows))
         return
-    if _pool is None:
-        _pool = ThreadPoolExecutor(CODEC_THREADS, thread_name_prefix="lft-codec")
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(CODEC_THREADS, thread_name_prefix="lft-codec")
     edges = np.linspace(0, rows, blocks + 1).astype(int)
     for done in [_pool.submit(work, slice(a, b)) for a, b in zip(edges[:-1], edges[1:])]:
         done.result()
