@@ -231,7 +231,8 @@ class HalfSpaceRenderer:
             return origins[rays], directions[rays], np.repeat(entries, 3)
 
         origins, directions, channels = self._rays(("lf", array, U, V, side, model == "area", spp, seed), entry_rays)
-        lf.data.reshape(-1)[channels] = self.render_samples(origins, directions, lights, spp, seed=seed).radiance.ravel()
+        means = self.render_samples(origins, directions, lights, spp, seed=seed)
+        lf.data.reshape(-1)[channels] = means.radiance.ravel()
         return lf
 
     def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = 4,
