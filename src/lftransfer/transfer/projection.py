@@ -93,8 +93,9 @@ class DepthPrefilter:
         bin_m, damp: landing bins' side (m) and the pull towards the box light field.
 
     Attributes:
-        origins, directions: (K * V * U * spp, 3) float32 read-only rays of the light field render (directions look
-            into the synthetic half-space, as :func:`~lftransfer.render.renderer.lightfield_rays` makes them).
+        origins, directions: (E * spp, 3) float32 read-only rays of the light field render, of the E entries with
+            data (:meth:`LightField.mask`; lenslet, direction, sample order; directions look into the synthetic
+            half-space, as :func:`~lftransfer.render.renderer.lightfield_rays` makes them).
         landed: (K, V, U) bool, entries with at least one ray that lands on the measured surface.
         bins: number of landing bins.
 
@@ -123,23 +124,28 @@ class DepthPrefilter:
             raise ValueError(f"depth has shape {self.depth.shape}, the light field needs {(K, V, U)}")
         self._zero = LightField.zeros(self.array, U, V)
         mask = self._zero.mask()
-        self._mask = mask[None, :, :, None]
-        self.origins, self.directions = lightfield_rays(self.array, U, V, area=True, spp=S, seed=self.seed)
+        # only the entries with data have rays (a hexagonal lenslet's window leaves out 15 % of the (V, U) grid)
+        entries = np.tile(mask.ravel(), K)
+        self._channels = np.repeat(entries, 3)                              # their values in the flat table
+        origins, directions = lightfield_rays(self.array, U, V, area=True, spp=S, seed=self.seed)
+        kept = np.repeat(entries, S)
+        self.origins, self.directions = origins[kept], directions[kept]
         for a in (self.origins, self.directions):
             a.flags.writeable = False
-        data = np.broadcast_to(mask, (K, V, U)).reshape(-1) & np.isfinite(self.depth.reshape(-1))
+        data = entries & np.isfinite(self.depth.reshape(-1))
         # every ray of an entry with a depth meets the plane at that depth, parallel to the array
-        rays = np.flatnonzero(np.repeat(data, S))
+        rays = np.flatnonzero(np.repeat(data, S))                           # over all entries' rays
         entry = rays // S
-        towards = -self.directions[rays].astype(np.float64)                 # into the real half-space, z > 0
-        points = self.origins[rays] + self.depth.reshape(-1)[entry][:, None] * towards / towards[:, 2:3]
+        towards = -directions[rays].astype(np.float64)                      # into the real half-space, z > 0
+        points = origins[rays] + self.depth.reshape(-1)[entry][:, None] * towards / towards[:, 2:3]
         weights = self._zero.solid_angle_weights()                          # (V, U)
         w = weights.reshape(-1)[entry % (V * U)] / S
         cells = np.floor(points / self.bin_m).astype(np.int64)
         bins = np.unique(cells, axis=0, return_inverse=True)[1].ravel() if len(rays) else np.zeros(0, np.int64)
         self.bins = int(bins.max() + 1) if len(bins) else 0
-        self._gather = sp.csr_matrix((w.astype(np.float32), (bins, rays)),          # target = G @ Ls(r): float32,
-                                     shape=(self.bins, K * V * U * S))              # as the rays' radiance is
+        column = (np.cumsum(kept) - 1)[rays]                                # each ray among those cast
+        self._gather = sp.csr_matrix((w.astype(np.float32), (bins, column)),        # target = G @ Ls(r): float32,
+                                     shape=(self.bins, len(self.origins)))          # as the rays' radiance is
         self._cols = np.unique(entry)                                       # the landing entries, sorted
         self.landed = np.zeros(K * V * U, bool)
         self.landed[self._cols] = True
@@ -164,15 +170,14 @@ class DepthPrefilter:
     def box(self, radiance: np.ndarray) -> LightField:
         """The box light field of the rays' radiance: each entry the mean of its ``spp`` rays (K, V, U, 3)."""
         lf = self._zero.copy()
-        K, V, U = lf.data.shape[:3]
-        lf.data[...] = sample_mean(radiance, self.spp).reshape(K, V, U, 3) * self._mask
+        lf.data.reshape(-1)[self._channels] = sample_mean(radiance, self.spp).ravel()
         return lf
 
     def apply(self, radiance: np.ndarray) -> LightField:
         """The prefiltered light field to project.
 
         Args:
-            radiance: (K * V * U * spp, 3) radiance the synthetic scene sends along each of :attr:`origins` /
+            radiance: (E * spp, 3) radiance the synthetic scene sends along each of :attr:`origins` /
                 :attr:`directions`, W m^-2 sr^-1.
 
         Returns:
