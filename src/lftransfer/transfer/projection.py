@@ -150,7 +150,8 @@ class DepthPrefilter:
         self.landed = np.zeros(K * V * U, bool)
         self.landed[self._cols] = True
         self.landed = self.landed.reshape(K, V, U)
-        self._power_weights = (weights[None] * self.landed).reshape(K, -1)  # each lenslet's landing entries
+        self._col_lenslet = self._cols // (V * U)                           # each landing entry's lenslet
+        self._col_weight = weights.reshape(-1)[self._cols % (V * U)]        # and its solid angle weight
         self._lu, self._last = None, None
         if self.bins:
             # bins <- landing entries (the other entries' columns would be empty)
@@ -189,27 +190,22 @@ class DepthPrefilter:
         box = self.box(radiance)
         if self._lu is None:
             return box
-        K, V, U = box.data.shape[:3]
-        p0 = box.data.reshape(-1, 3).astype(np.float64)
         target = (self._gather @ radiance).astype(np.float64)
-        fitted = p0[self._cols]
+        fitted = box.data.reshape(-1, 3)[self._cols].astype(np.float64)       # the box entries being fitted
         last = self._last
         if last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target):
             start, steps = last[1], WARM_ITERATIONS
         else:
             start, steps = fitted + self._mlt @ self._lu.solve(target - self._ml @ fitted), ITERATIONS
-        p = p0.copy()
-        p[self._cols] = self._nonnegative(target, fitted, start, steps)
-        self._last = (target, p[self._cols])
-        # each lenslet's landing entries keep the box power over them
-        w = self._power_weights
-        p, p0 = p.reshape(K, V * U, 3), p0.reshape(K, V * U, 3)
-        kept, now = np.einsum("kpc,kp->kc", p0, w), np.einsum("kpc,kp->kc", p, w)
+        fit = self._nonnegative(target, fitted, start, steps)
+        self._last = (target, fit)
+        # each lenslet's landing entries keep the box power over them (only they change: the rest is the box)
+        lenslet, w, K = self._col_lenslet, self._col_weight, self.array.K
+        kept, now = (np.stack([np.bincount(lenslet, weights=p[:, c] * w, minlength=K) for c in range(3)], -1)
+                     for p in (fitted, fit))
         scale = np.where(now > 0, kept / np.maximum(now, 1e-300), 1.0)
-        p = np.where(w[..., None] > 0, p * scale[:, None, :], p)
-        out = box.copy()
-        out.data[...] = p.reshape(K, V, U, 3).astype(np.float32)
-        return out
+        box.data.reshape(-1, 3)[self._cols] = (fit * scale[lenslet]).astype(np.float32)
+        return box
 
     def _nonnegative(self, target: np.ndarray, p0: np.ndarray, start: np.ndarray, steps: int) -> np.ndarray:
         """The damped fit restricted to P >= 0 over the landing entries: accelerated projected gradient (FISTA)
@@ -227,12 +223,23 @@ class DepthPrefilter:
         """
         x = np.maximum(start, 0.0)
         y, step, momentum = x.copy(), 1.0 / self._lipschitz, 1.0
+        lam2_p0 = self._lam2 * p0
+        new, diff = np.empty_like(x), np.empty_like(x)
         for _ in range(steps):
-            gradient = self._mlt @ (self._ml @ y - target) + self._lam2 * (y - p0)
-            new = np.maximum(y - step * gradient, 0.0)
+            residual = self._ml @ y
+            residual -= target
+            gradient = self._mlt @ residual                 # + lam2 (y - p0), in place below
+            gradient += self._lam2 * y
+            gradient -= lam2_p0
+            np.multiply(gradient, -step, out=new)
+            new += y
+            np.maximum(new, 0.0, out=new)
             following = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * momentum**2))
-            y = new + (momentum - 1.0) / following * (new - x)
-            x, momentum = new, following
+            np.subtract(new, x, out=diff)
+            diff *= (momentum - 1.0) / following
+            np.add(new, diff, out=y)
+            x, new = new, x
+            momentum = following
         return x
 
 
