@@ -36,14 +36,20 @@ def test_01_view_alpha_and_depth(variant):
 
 def test_02_lightfield_is_masked_and_symmetric(variant):
     """A sphere on the axis of the central lenslet, lit from that lenslet, sends it a light field symmetric
-    under (u, v) -> (-u, -v); samples outside each lenslet's cell are zero."""
+    under (u, v) -> (-u, -v) (each entry's rays land in its place); samples outside each lenslet's cell are zero,
+    and have no rays cast."""
     r = HalfSpaceRenderer([_sphere(-0.1, 0.03)], max_depth=1)
     light = PointLight(np.array([0.0, 0.0, 0.0]), np.ones(3))
     for lattice in ("hex", "rect"):
         array = LensArray(lattice=lattice, rows=3, cols=3, pitch=0.0254, focal_length=0.0254)
         for model in ("point", "area"):
+            cast = []
+            inner = r.render_samples
+            r.render_samples = lambda o, d, *a, **k: cast.append(len(o)) or inner(o, d, *a, **k)
             lf = r.render_lightfield(array, [light], 16, 16, model=model, spp=16)
+            del r.render_samples
             assert np.all(lf.data[:, ~lf.mask()] == 0)
+            assert cast == [array.K * int(lf.mask().sum()) * 16]     # rays for the entries with data only
             if lattice != "rect":
                 continue
             centre = lf.data[4].sum(-1)                   # lenslet 4 sits at the origin

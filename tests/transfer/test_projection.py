@@ -107,3 +107,24 @@ def test_04_bad_shapes_are_refused():
     pf = DepthPrefilter(np.full((array.K, U, U), Z0), array, U, U, spp=2)
     with pytest.raises(ValueError, match="radiance has shape"):
         pf.apply(np.zeros((10, 3), np.float32))
+
+
+def test_05_rays_for_the_entries_with_data_only():
+    """The prefilter casts the rays of the entries with data only (a hexagonal window leaves some of the grid out),
+    and its box light field puts each entry's mean back in its place: an entry's rays carry its own index, and the
+    box light field reads it back there (zero elsewhere)."""
+    array = _array()
+    pf = DepthPrefilter(np.full((array.K, U, U), Z0), array, U, U, spp=3)
+    mask = LightField.zeros(array, U, U).mask()
+    assert 0 < mask.mean() < 1
+    assert len(pf.origins) == len(pf.directions) == array.K * int(mask.sum()) * 3
+    entries = np.flatnonzero(np.tile(mask.ravel(), array.K))
+    radiance = np.repeat(entries.astype(np.float32), 3)[:, None] * np.float32([1, 2, 3])
+    box = pf.box(radiance).data.reshape(-1, 3)
+    expected = np.zeros_like(box)
+    expected[entries] = entries[:, None] * np.float32([1, 2, 3])
+    np.testing.assert_array_equal(box, expected)
+    full_o, full_d = lightfield_rays(array, U, U, area=True, spp=3, seed=0)
+    kept = np.repeat(np.tile(mask.ravel(), array.K), 3)
+    np.testing.assert_array_equal(pf.origins, full_o[kept])                 # the same rays as before, fewer
+    np.testing.assert_array_equal(pf.directions, full_d[kept])
