@@ -13,7 +13,7 @@ to the depth of the edge sample it reads, and kept only if the lenslet under tha
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
@@ -51,6 +51,21 @@ class SteepRays:
     source: np.ndarray
     index: np.ndarray | None
     kept: float
+
+    @property
+    def entries(self) -> np.ndarray:
+        """(K, V + 2 margin, U + 2 margin) int64: the entry of the light field's (K V U) entries each sample of the
+        extended table reads, K V U (an entry of zero) where the depth check dropped it."""
+        if self.index is not None:
+            return self.index
+        K, V, U = self.shape
+        return np.arange(K)[:, None, None] * (V * U) + self.source[None]
+
+    def check(self, shape: tuple[int, ...]) -> None:
+        """Raise ValueError unless light fields of ``shape`` ((K, V, U, ...)) are those these rays were found for."""
+        if tuple(shape[:3]) != self.shape:
+            raise ValueError(f"the steep rays were found for light fields of shape {self.shape}, this one is "
+                             f"{tuple(shape[:3])}")
 
 
 @dataclass(frozen=True)
@@ -98,8 +113,9 @@ def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
     mask[margin:margin + V, margin:margin + U] = lf.mask()
     rows, cols = distance_transform_edt(~mask, return_distances=False, return_indices=True)
     source = (rows - margin) * U + (cols - margin)                    # (Ve, Ue) nearest sample inside the window
+    unchecked = SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, index=None, kept=1.0)
     if depth is None:
-        return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, index=None, kept=1.0)
+        return unchecked
     ue = -a + (np.arange(Ue) - margin + 0.5) * du
     ve = -a + (np.arange(Ve) - margin + 0.5) * dv
     uu, vv = np.meshgrid(ue, ve)
@@ -110,8 +126,7 @@ def steep_rays(lf: LightField, reach: float, depth: np.ndarray | None = None,
                                         np.stack([uu[steep], vv[steep]], -1),
                                         source[margin:margin + V, margin:margin + U], (U, V, du, dv, a), tolerance)
     kept = float(keep[:, steep].mean()) if steep.any() else 1.0
-    index = np.where(keep, np.arange(K)[:, None, None] * (V * U) + source[None], K * V * U)
-    return SteepRays(shape=(K, V, U), reach=float(reach), margin=margin, source=source, index=index, kept=kept)
+    return replace(unchecked, index=np.where(keep, unchecked.entries, K * V * U), kept=kept)
 
 
 def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
@@ -130,18 +145,10 @@ def extend_beyond_window(lf: LightField, steep: SteepRays) -> WindowExtension:
         >>> extend_beyond_window(captured, steep).data.shape      # doctest: +SKIP
         (120, 74, 74, 3)
     """
-    K, V, U = lf.data.shape[:3]
-    if steep.shape != (K, V, U):
-        raise ValueError(f"the steep rays were found for light fields of shape {steep.shape}, this one is "
-                         f"{(K, V, U)}")
-    Ve, Ue = steep.source.shape
-    flat = lf.data.reshape(K, V * U, 3)
-    if steep.index is None:
-        data = flat[:, steep.source.ravel()].reshape(K, Ve, Ue, 3).astype(np.float32, copy=False)
-    else:                                       # one gather; a dropped sample reads the zero entry at the end
-        entries = np.concatenate([lf.data.reshape(K * V * U, 3), np.zeros((1, 3), lf.data.dtype)])
-        data = entries[steep.index].astype(np.float32, copy=False)
-    return WindowExtension(data=data, margin=steep.margin)
+    steep.check(lf.data.shape)
+    # one gather; a dropped sample reads the zero entry at the end
+    entries = np.concatenate([lf.data.reshape(-1, 3), np.zeros((1, 3), lf.data.dtype)])
+    return WindowExtension(data=entries[steep.entries].astype(np.float32, copy=False), margin=steep.margin)
 
 
 def _meets_surface(array, depth: np.ndarray, source: np.ndarray, uv: np.ndarray, inside: np.ndarray, grid,

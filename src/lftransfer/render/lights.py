@@ -631,12 +631,9 @@ def extended_table(data: np.ndarray, steep: SteepRays):
     import drjit as dr
 
     mi = mitsuba()
-    K, V, U = data.shape[:3]
-    if steep.shape != (K, V, U):
-        raise ValueError(f"the steep rays were found for light fields of shape {steep.shape}, this one is "
-                         f"{(K, V, U)}")
+    steep.check(data.shape)
     index = _edge_index(steep, mi.variant())
-    table = dr.gather(mi.Float, jit_array(mi.Float, data), index, index < 3 * K * V * U)   # 0 past the end
+    table = dr.gather(mi.Float, jit_array(mi.Float, data), index, index < data.size)   # 0 past the end
     dr.eval(table)
     dr.sync_thread()        # finished here, so that a stage timer charges the gather to the light's construction
     return table
@@ -652,9 +649,7 @@ def _edge_index(steep: SteepRays, variant: str):
     for kept, var, index in _EDGE_INDEX:
         if kept is steep and var == variant:
             return index
-    K, V, U = steep.shape
-    entry = (np.arange(K)[:, None, None] * (V * U) + steep.source[None]) if steep.index is None else steep.index
-    floats = entry.astype(np.uint32)[..., None] * np.uint32(3) + np.arange(3, dtype=np.uint32)
+    floats = steep.entries.astype(np.uint32)[..., None] * np.uint32(3) + np.arange(3, dtype=np.uint32)
     index = jit_array(mi.UInt32, floats)
     del _EDGE_INDEX[:-3]
     _EDGE_INDEX.append((steep, variant, index))
