@@ -90,6 +90,20 @@ def lightfield_rays(array: LensArray, U: int, V: int, *, side: Literal["syntheti
     return origins.reshape(-1, 3), np.ascontiguousarray(directions.reshape(-1, 3))
 
 
+def data_entry_rays(array: LensArray, U: int, V: int, **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`lightfield_rays` (same keyword arguments) of the entries with data only (:meth:`LightField.mask`: a
+    hexagonal lenslet's window leaves out 15 % of the (V, U) grid, whose rays a render need not cast).
+
+    Returns:
+        origins, directions (E * spp, 3) float32 of the E entries with data, in :func:`lightfield_rays`' order, and
+        entries (K * V * U,) bool: which entries those are.
+    """
+    entries = np.tile(LightField.zeros(array, U, V).mask().ravel(), array.K)
+    origins, directions = lightfield_rays(array, U, V, **kwargs)
+    rays = np.repeat(entries, kwargs.get("spp", 4))
+    return origins[rays], directions[rays], entries
+
+
 @dataclass
 class SampleMeans:
     """Means over groups of ``spp`` consecutive rays (the samples of one pixel or one light field entry).
@@ -223,12 +237,10 @@ class HalfSpaceRenderer:
         """
         lf = LightField.zeros(array, U, V)
 
-        def entry_rays():
-            # only the entries with data (a hexagonal lenslet's window leaves out 15 % of the (V, U) grid)
-            entries = np.tile(lf.mask().ravel(), array.K)
-            origins, directions = lightfield_rays(array, U, V, side=side, area=model == "area", spp=spp, seed=seed)
-            rays = np.repeat(entries, spp)
-            return origins[rays], directions[rays], np.repeat(entries, 3)
+        def entry_rays():               # the entries with data, and their values' places in the flat table
+            origins, directions, entries = data_entry_rays(array, U, V, side=side, area=model == "area", spp=spp,
+                                                           seed=seed)
+            return origins, directions, np.repeat(entries, 3)
 
         origins, directions, channels = self._rays(("lf", array, U, V, side, model == "area", spp, seed), entry_rays)
         means = self.render_samples(origins, directions, lights, spp, seed=seed)

@@ -39,7 +39,7 @@ from scipy.sparse.linalg import splu
 
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.depth import SWEEP_DEPTHS, plane_sweep
-from lftransfer.render.renderer import lightfield_rays, sample_mean
+from lftransfer.render.renderer import data_entry_rays, sample_mean
 
 #: Side of the landing bins, metres.
 BIN_M = 0.004
@@ -123,28 +123,22 @@ class DepthPrefilter:
         if self.depth.shape != (K, V, U):
             raise ValueError(f"depth has shape {self.depth.shape}, the light field needs {(K, V, U)}")
         self._zero = LightField.zeros(self.array, U, V)
-        mask = self._zero.mask()
-        # only the entries with data have rays (a hexagonal lenslet's window leaves out 15 % of the (V, U) grid)
-        entries = np.tile(mask.ravel(), K)
-        self._channels = np.repeat(entries, 3)                              # their values in the flat table
-        origins, directions = lightfield_rays(self.array, U, V, area=True, spp=S, seed=self.seed)
-        kept = np.repeat(entries, S)
-        self.origins, self.directions = origins[kept], directions[kept]
+        self.origins, self.directions, entries = data_entry_rays(self.array, U, V, area=True, spp=S, seed=self.seed)
         for a in (self.origins, self.directions):
             a.flags.writeable = False
-        data = entries & np.isfinite(self.depth.reshape(-1))
+        self._channels = np.repeat(entries, 3)                              # their values in the flat table
+        cast = np.flatnonzero(entries)                                      # cast[r // S]: the entry of ray r
         # every ray of an entry with a depth meets the plane at that depth, parallel to the array
-        rays = np.flatnonzero(np.repeat(data, S))                           # over all entries' rays
-        entry = rays // S
-        towards = -directions[rays].astype(np.float64)                      # into the real half-space, z > 0
-        points = origins[rays] + self.depth.reshape(-1)[entry][:, None] * towards / towards[:, 2:3]
+        rays = np.flatnonzero(np.repeat(np.isfinite(self.depth.reshape(-1))[cast], S))   # among the rays cast
+        entry = cast[rays // S]
+        towards = -self.directions[rays].astype(np.float64)                 # into the real half-space, z > 0
+        points = self.origins[rays] + self.depth.reshape(-1)[entry][:, None] * towards / towards[:, 2:3]
         weights = self._zero.solid_angle_weights()                          # (V, U)
         w = weights.reshape(-1)[entry % (V * U)] / S
         cells = np.floor(points / self.bin_m).astype(np.int64)
         bins = np.unique(cells, axis=0, return_inverse=True)[1].ravel() if len(rays) else np.zeros(0, np.int64)
         self.bins = int(bins.max() + 1) if len(bins) else 0
-        column = (np.cumsum(kept) - 1)[rays]                                # each ray among those cast
-        self._gather = sp.csr_matrix((w.astype(np.float32), (bins, column)),        # target = G @ Ls(r): float32,
+        self._gather = sp.csr_matrix((w.astype(np.float32), (bins, rays)),          # target = G @ Ls(r): float32,
                                      shape=(self.bins, len(self.origins)))          # as the rays' radiance is
         self._cols = np.unique(entry)                                       # the landing entries, sorted
         self.landed = np.zeros(K * V * U, bool)
