@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 
@@ -23,8 +24,6 @@ def composite(synthetic_rgb: np.ndarray, alpha: np.ndarray, real_rgb: np.ndarray
     if synthetic_rgb.shape != real_rgb.shape or alpha.shape != synthetic_rgb.shape[:2]:
         raise ValueError(f"composite: shapes differ: synthetic {synthetic_rgb.shape}, alpha {alpha.shape}, "
                          f"real {real_rgb.shape}")
-    import cv2
-
     keep = 1.0 - np.clip(np.asarray(alpha, np.float32), 0.0, 1.0)
     # per channel through OpenCV: numpy broadcasts over a last axis of 1 several times slower (the live loop
     # composites every frame); the same float32 operations in the same order
