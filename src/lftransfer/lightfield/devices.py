@@ -68,10 +68,8 @@ def _as_cv_codes(codes: np.ndarray, levels: int) -> np.ndarray:
     return np.ascontiguousarray(codes)
 
 
-def _lookup(tables: np.ndarray, codes: np.ndarray, rows: slice = slice(None), out: np.ndarray | None = None
-            ) -> np.ndarray:
-    """``tables[c][codes[..., c]]`` per channel over ``codes[rows]``; ``tables`` is ``(1, n)`` (shared by the
-    channels) or ``(3, n)``.
+def _lookup(tables: np.ndarray, codes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``tables[c][codes[..., c]]`` per channel; ``tables`` is ``(1, n)`` (shared by the channels) or ``(3, n)``.
 
     ``codes`` must be below n (uint16 codes with n = 65536); mode="wrap" then changes nothing and spares
     numpy's bounds-checking buffer. Each channel gathers through a contiguous index (through the strided
@@ -80,10 +78,8 @@ def _lookup(tables: np.ndarray, codes: np.ndarray, rows: slice = slice(None), ou
     Args:
         tables: (1 or 3, n) values per code.
         codes: (H, W, 3) integer codes.
-        rows: the rows of ``codes`` to look up.
-        out: where to write them (shape of ``codes[rows]``, the tables' dtype), or None: a new array.
+        out: where to write them (the shape of ``codes``, the tables' dtype), or None: a new array.
     """
-    codes = codes[rows]
     if len(tables) == 1:
         return np.take(tables[0], codes.astype(np.intp), out=out, mode="wrap")
     out = np.empty(codes.shape, tables.dtype) if out is None else out
@@ -220,9 +216,8 @@ class _Quantiser:
         full_step = np.ascontiguousarray(full_step[:, :channels].T)
         return low, full_step
 
-    def __call__(self, y: np.ndarray, rows: slice = slice(None), out: np.ndarray | None = None) -> np.ndarray:
-        """Codes of the rows ``rows`` of a C-contiguous ``(H, W, 3) float32`` image (into ``out`` if given)."""
-        y = y[rows]
+    def __call__(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Codes of a C-contiguous ``(H, W, 3) float32`` image (into ``out`` if given)."""
         if self.shift == 16 and _LITTLE_ENDIAN:
             high = y.view(np.uint16)[..., 1::2]             # the high 16 bits of every float, no arithmetic
         else:
@@ -462,7 +457,7 @@ class LightFieldDecoder:
 
         def decode_rows(rows: slice) -> None:
             if self._linear is None:
-                _lookup(self._table, codes, rows, out=patch[rows])
+                _lookup(self._table, codes[rows], out=patch[rows])
             else:
                 patch[rows] = self._linear(codes[rows])
             if self._patch_gain is not None:
@@ -522,23 +517,14 @@ class LightFieldEncoder:
         Returns:
             ``(H, W, 3)`` uint8 (bits <= 8) or uint16 codes.
         """
-        if self._quantiser is None and self._affine is None:
-            return _encode_float(self.projector, self.codec.lightfield_to_image(lf)).astype(self.projector.dtype)
         img = self.codec.lightfield_to_unnormalised(lf)
         norm = self.codec.inv_norm3
-        if self._quantiser is None:
-            img *= norm                                      # = lightfield_to_image(lf), bit for bit
-            if self._affine is not None:
-                img = cv2.transform(img, self._affine)
-            return _encode_float(self._quantised, img).astype(self.projector.dtype)
-        codes = np.empty(img.shape, self._quantiser.low.dtype)
+        codes = np.empty(img.shape, self.projector.dtype)
 
         def encode_rows(rows: slice) -> None:
             block = img[rows]
             block *= norm[rows]                              # = lightfield_to_image(lf), bit for bit
-            if self._affine is not None:
-                block = cv2.transform(block, self._affine)   # radiance -> linear drive (max_radiance 1)
-            self._quantiser(block, out=codes[rows])
+            self._codes(block, out=codes[rows])
 
         _in_row_blocks(encode_rows, img.shape[0], img[0].size)
         return codes
@@ -555,11 +541,20 @@ class LightFieldEncoder:
         img = np.ascontiguousarray(radiance_image, dtype=np.float32)
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"radiance image must have shape (H, W, 3), got {img.shape}")
+        return self._codes(img)
+
+    def _codes(self, radiance: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Codes of a C-contiguous ``(H, W, 3) float32`` radiance image (into ``out`` if given): the affine map to
+        linear drive where the projector mixes colours, then the exact table (or the float quantiser without one)."""
         if self._affine is not None:
-            img = cv2.transform(img, self._affine)
-        if self._quantiser is None:
-            return _encode_float(self._quantised, img).astype(self.projector.dtype)
-        return self._quantiser(img)
+            radiance = cv2.transform(radiance, self._affine)     # radiance -> linear drive (max_radiance 1)
+        if self._quantiser is not None:
+            return self._quantiser(radiance, out=out)
+        codes = _encode_float(self._quantised, radiance).astype(self.projector.dtype)
+        if out is None:
+            return codes
+        out[...] = codes
+        return out
 
     def emitted(self, image: np.ndarray) -> np.ndarray:
         """Radiance each projector pixel makes its lenslet emit (inverse of :meth:`__call__` up to quantisation).
