@@ -9,13 +9,14 @@ and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes: Fig. 4 a
 samples per pixel) or, with ``--full``, at the paper's (48 x 48 directions per lenslet, ground truth 512).
 
 ``--fig5`` measures instead the planet's shadow on the head in Fig. 5 (converged 2-bounce transfers, true rig
-model, truth seed 0; quarter resolution at frames 24, 32 and 40, or with ``--full`` the paper's resolution at
-frames 24 and 36 with a ground truth of 128 samples per pixel) beside the ground truth's
+model, truth seed 0; quarter resolution at frames 18, 30 and 42, or with ``--full`` the paper's resolution at
+frames 24 and 42 with a ground truth of 128 samples per pixel) beside the ground truth's
 (:mod:`lftransfer.sim.effects`): the projector carries the sun's light to the head, so the shadow's edge is
-where the aperture's blur shows.
+where the aperture's blur shows. It projects the box light field, the prefilter with 4 rays per entry and the
+prefilter with the scene's ``lf_spp`` (16).
 
 Run: python benchmarks/reconstruction/projector_prefilter.py [--fig5] [--full]   (20 s at quarter resolution
-once the ground truths are cached, 3 minutes with --full; --fig5 --full about 10). The tables are in
+once the ground truths are cached, 3 minutes with --full; --fig5 2 minutes, --fig5 --full about 15). The tables are in
 docs/architecture.md ("The projector's side").
 """
 
@@ -33,10 +34,12 @@ from study_scenes import GT_SPP, by_side_cells, study_scenes
 VARIANTS = ("box", "depth")
 
 
-def transfer(opened, known, settings, variant: str, time_s: float = 0.0, synthetic=None):
-    """One converged transfer projecting the variant's light field ("box" or "depth")."""
+def transfer(opened, known, settings, variant: str, time_s: float = 0.0, synthetic=None, lf_spp=None):
+    """One converged transfer projecting the variant's light field ("box" or "depth"), with ``lf_spp`` rays per
+    light field entry (None: the settings')."""
     synthetic = known.scene if synthetic is None else synthetic
-    return run_transfer(opened.rig, known.model, synthetic, replace(settings, projection=variant), time_s=time_s)
+    settings = replace(settings, projection=variant, lf_spp=lf_spp or settings.lf_spp)
+    return run_transfer(opened.rig, known.model, synthetic, settings, time_s=time_s)
 
 
 def fig5_shadow(full: bool) -> None:
@@ -50,7 +53,8 @@ def fig5_shadow(full: bool) -> None:
     print("| frame | planet to head (m) | projected light field | contrast | penumbra (mm) | area taking half the "
           "light (cm^2) |")
     print("|---|---|---|---|---|---|")
-    for frame in (24, 36) if full else (24, 32, 40):
+    lf_spp = scene.render.lf_spp or scene.render.spp
+    for frame in (24, 42) if full else (18, 30, 42):
         opened = open_rig(scene, RunOptions(truth_seed=0))
         known = knowledge(opened, scene, "oracle")
         t = frame / scene.animation.fps
@@ -61,13 +65,13 @@ def fig5_shadow(full: bool) -> None:
         gt_without = render_ground_truth(_without(world, effect.by), spp=scene.render.gt_spp).image
         rows = [("ground truth", measure_effect("shadow", gt, gt_without, pixels))]
         settings = replace(transfer_settings(scene), bounces=2, bounce_views=False)
-        for variant in VARIANTS:
+        for variant, spp in (("box", 4), ("depth", 4), ("depth", lf_spp)):
             images = []
             for synthetic in (known.scene, _without(known.scene, effect.by)):
                 opened.start_frame(frame)
-                r = transfer(opened, known, settings, variant, t, synthetic)
+                r = transfer(opened, known, settings, variant, t, synthetic, lf_spp=spp)
                 images.append(composite(r.synthetic_view.rgb, r.synthetic_view.alpha, r.real_view))
-            rows.append((variant, measure_effect("shadow", images[0], images[1], pixels)))
+            rows.append((f"{variant}, {spp} rays per entry", measure_effect("shadow", images[0], images[1], pixels)))
         for name, m in rows:
             pen = f"{1e3 * m.penumbra_m:.1f}" if m.penumbra_m is not None else "-"
             print(f"| {frame} | {distance:.3f} | {name} | {m.contrast:.3f} | {pen} | {1e4 * m.area_m2:.1f} |",

@@ -158,6 +158,19 @@ def test_mesh_path_relative_to_scene_file_and_bounds(tmp_path):
     np.testing.assert_allclose(obj.bounds(), [[-0.01, -0.02, -0.13], [0.01, 0.02, -0.07]], atol=1e-9)
 
 
+def test_light_field_rays_per_entry_default_to_spp():
+    """``render.lf_spp`` sets the outgoing light field's rays per entry (fig5 takes 16); unset, it is ``spp``;
+    the view keeps ``spp`` either way."""
+    from lftransfer.transfer.bounce import TransferSettings
+
+    fig4, fig5 = (load_scene(builtin_scene(name)) for name in ("fig4", "fig5"))
+    assert fig4.render.lf_spp is None
+    assert (TransferSettings.for_scene(fig4).lf_spp, TransferSettings.for_scene(fig4).view_spp) == (4, 4)
+    assert (TransferSettings.for_scene(fig5).lf_spp, TransferSettings.for_scene(fig5).view_spp) == (16, 4)
+    more = with_overrides(fig4, render={"spp": 8})
+    assert TransferSettings.for_scene(more).lf_spp == 8
+
+
 def test_with_overrides_revalidates():
     scene = load_scene(builtin_scene())
     small = with_overrides(scene, view={"resolution": [64, 48]}, render={"gt_spp": 8})
@@ -208,6 +221,7 @@ def test_with_overrides_revalidates():
      "at least 3"),
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n" * 9 + BOX, "light", "at most 8"),
     (LIGHT + "[render]\nprojection = 'prefilter'\n" + BOX, "render.projection", "'box' or 'depth'"),
+    (LIGHT + "[render]\nlf_spp = 0\n" + BOX, "render.lf_spp", "greater than 0"),
 ])
 def test_bad_input_names_file_and_field(tmp_path, text, path, what):
     message = _error(tmp_path, text)

@@ -217,6 +217,9 @@ class RenderConfig(_Model):
             about 26.6 degrees, which no lenslet records), ``"edge"`` (the captured light field read at the
             window's edge: diffuse real surfaces look much the same from there) or ``"cut"`` (nothing).
         spp: samples per pixel of view renders and per light field sample.
+        lf_spp: rays per entry of the outgoing light field render (points over the entry's lenslet aperture), which
+            the depth prefilter also uses to model where each entry's light lands; None: ``spp``. More rays let the
+            prefilter sharpen edges finer than a lenslet (Fig. 5's penumbra, docs/architecture.md).
         max_depth: path depth (surface interactions) inside each half-space.
         gt_spp: samples per pixel of the path-traced ground truth.
     """
@@ -227,6 +230,7 @@ class RenderConfig(_Model):
     projection: Literal["box", "depth"] = "depth"
     window: Literal["edge", "cut"] = "edge"
     spp: PosInt = 4
+    lf_spp: PosInt | None = None
     max_depth: PosInt = 3
     gt_spp: PosInt = 2048
 

@@ -82,13 +82,15 @@ class TransferSettings:
     @classmethod
     def for_scene(cls, scene, **changes) -> "TransferSettings":
         """The settings a scene's ``[rig]`` and ``[render]`` ask for (angular samples, lighting model, aperture
-        samples, reconstruction, projection, window, ``render.spp`` rays per light field entry and per view pixel),
+        samples, reconstruction, projection, window, ``render.lf_spp`` (default ``render.spp``) rays per light field
+        entry, ``render.spp`` per view pixel),
         with ``changes`` applied (None values ignored); the reconstruction and the projection are "box" and the
         window "cut" unless the lighting model is the area model."""
         render = scene.render
         values = dict(angular_samples=scene.rig.angular_samples, lighting_model=render.lighting_model,
                       aperture_samples=render.aperture_samples, reconstruction=render.reconstruction,
-                      projection=render.projection, window=render.window, lf_spp=render.spp, view_spp=render.spp)
+                      projection=render.projection, window=render.window, lf_spp=render.lf_spp or render.spp,
+                      view_spp=render.spp)
         values.update({k: v for k, v in changes.items() if v is not None})
         if values["lighting_model"] != "area":
             values.update(reconstruction="box", projection="box", window="cut")
