@@ -16,7 +16,7 @@ where the aperture's blur shows. It projects the box light field, the prefilter 
 prefilter with the scene's ``lf_spp`` (16).
 
 Run: python benchmarks/reconstruction/projector_prefilter.py [--fig5] [--full]   (20 s at quarter resolution
-once the ground truths are cached, 3 minutes with --full; --fig5 2 minutes, --fig5 --full about 15). The tables are in
+once the ground truths are cached, 3 minutes with --full; --fig5 2 minutes, --fig5 --full about 18). The tables are in
 docs/architecture.md ("The projector's side").
 """
 

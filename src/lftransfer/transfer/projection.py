@@ -10,8 +10,10 @@ light where it belongs. Knowing where each projected ray lands:
 1. the depth of the real scene is measured through the rig (:func:`measure_depth`: the projector shows white, the
    LF camera captures, the direct frame is subtracted, and :func:`~lftransfer.lightfield.depth.plane_sweep` finds
    the depth where neighbouring lenslets agree);
-2. every ray of the light field render (``spp`` stratified aperture points per entry) lands on the plane of its
-   entry's depth; the landing points are binned (:data:`BIN_M`);
+2. every ray of the light field render (``spp`` stratified aperture points per entry: the scene's
+   ``[render] lf_spp``) lands on the plane of its entry's depth; the landing points are binned (:data:`BIN_M`).
+   The rays are the fit's model of where each entry's light lands: four sample an entry's footprint (a lenslet
+   wide) too coarsely for an edge sharper than a lenslet, 16 do better (Fig. 5's penumbra, docs/architecture.md);
 3. the projected entries P are chosen so that every bin receives the light the synthetic scene sends along the
    rays that land in it (:class:`DepthPrefilter`)::
 
