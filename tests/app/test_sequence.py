@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lftransfer.app.pipeline import RunOptions, quick_scene
-from lftransfer.app.sequence import SequenceError, SequenceOptions, render_sequence, sequence_times
+from lftransfer.app.sequence import SequenceError, SequenceOptions, read_depth, render_sequence, sequence_times
 from lftransfer.imageio_utils import read_exr
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
@@ -63,6 +63,11 @@ def test_02_live_sequence_files_metrics_and_resume(variant, tmp_path):
                  "frames/panel_0002.png"):
         assert (out / name).is_file(), name
     assert json.loads((out / "status.json").read_text())["state"] == "complete"
+    # the depth the prefilter measured before frame 0 is kept; the resumed loop prefilters with it, unmeasured
+    depth = read_depth(out)
+    assert depth is not None and depth.shape[1:] == (8, 8) and np.isfinite(depth).mean() > 0.05
+    timings = [f["timings_s"] for f in report["frames"]]
+    assert "measure_depth" in timings[0] and not any("measure_depth" in t for t in timings[1:])
     verified = [f for f in report["frames"] if f["metrics"]]
     assert [f["index"] for f in verified] == [0, 2]
     assert all(f["metrics"]["psnr_objects_db"] > 20 for f in verified)

@@ -85,6 +85,15 @@ def test_02b_depth_projection_is_measured_once_and_converges_to_the_bounce_loop(
     both = found & again
     assert np.median(np.abs(live.side.prefilter.depth[both] - reference.depth[both])) < 1e-3
     assert _rel(frames[3].real_view, reference.real_view) < 0.005
+    # a depth measured earlier is used as given, not measured again (a resumed sequence, the exchange check)
+    given = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), settings, depth=live.depth)
+    assert "measure_depth" not in given.timings_s and given.depth is live.depth
+    assert _rel(given.real_view, reference.real_view) < 0.005
+    again = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings, depth=live.depth)
+    assert again.depth is live.depth and "measure_depth" not in again.step(0.0).timings_s
+    box = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), replace(settings, projection="box"),
+                       depth=live.depth)
+    assert box.depth is None and "prefilter" not in box.timings_s         # nothing prefilters: the depth is unused
 
 
 def test_03_fig5_the_sun_lights_the_head_through_the_projector(variant):

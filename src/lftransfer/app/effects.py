@@ -140,7 +140,9 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     ``cross_gt_noise_rel`` (and the error's range into the summary), and split by side (``cross_synthetic_rel_error``
     and ``cross_real_rel_error``, each with its ``..._gt_noise_rel``: the synthetic objects' pixels, lit by the
     captured light field, and the real ones', lit through the projector); and, for
-    a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png.
+    a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png. The transfer
+    without ``by`` prefilters with the depth the live frames used (``state/depth.npz``) where there is one: a depth
+    measured anew differs by the capture's noise, which showed as a faint "shadow" where there was none.
 
     Args:
         scene: the ``SceneConfig`` the sequence was rendered from.
@@ -155,7 +157,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     Returns:
         The :class:`ExchangeCheck`, or None when no frame was verified (or the rig has no ground truth).
     """
-    from lftransfer.app.sequence import acquire_model
+    from lftransfer.app.sequence import acquire_model, read_depth
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
     from lftransfer.sim.verify import cross_transfer_error, render_ground_truth
 
@@ -176,6 +178,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
             return None
         known = acquire_model(opened, scene, options, out, True, step)
         model, ps = known.model, known.scene
+        depth = read_depth(out)         # the live frames' own depth: both sides prefilter alike
         for f in verified:
             i, t = int(f["index"]), float(f["time_s"])
             step(f"check the exchange: frame {i}")
@@ -194,7 +197,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
             if effect is None:
                 continue
             truth_without = render_ground_truth(_without(world, effect.by), spp=spp, use_cache=options.use_cache).image
-            result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t)
+            result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
             transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
             pixels = object_pixels(world, effect.on)
             check.effect.points.append(EffectPoint(

@@ -10,7 +10,9 @@ Two modes (DESIGN.md sections 4 and 8):
 The output folder holds ``frames/NNNN.exr`` (the composite, linear radiance), ``frames/NNNN.png`` and
 ``frames/panel_NNNN.png`` (the Fig. 4 panel of the frame), ``composite.mp4`` and ``bounces.mp4`` (the panels),
 ``report.json`` (settings and per-frame timings and metrics, rewritten after every frame), ``status.json``
-(:mod:`lftransfer.app.run_folder`) and, in live mode, ``state/projected_lf.npz`` (what the projector shows next).
+(:mod:`lftransfer.app.run_folder`) and, in live mode, ``state/projected_lf.npz`` (what the projector shows next)
+and, where the projection prefilter measured it, ``state/depth.npz`` (the real scene's depth: a resumed loop and
+the exchange check of :mod:`lftransfer.app.effects` prefilter with it, as the frames did).
 ``--resume`` continues after the last finished frame of an interrupted sequence with the same settings.
 """
 
@@ -38,11 +40,12 @@ from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
 __all__ = ["ConvergedFrame", "FrameRecord", "FrameWorker", "SequenceError", "SequenceOptions", "acquire_model",
-           "converged_frame", "frame_ground_truth", "frame_metrics", "render_sequence", "sequence_times"]
+           "converged_frame", "frame_ground_truth", "frame_metrics", "read_depth", "render_sequence", "sequence_times"]
 
 MODES = ("live", "converged")
 STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
 STATE_FILE = "state/projected_lf.npz"
+DEPTH_FILE = "state/depth.npz"
 
 FrameProgress = Callable[["FrameRecord", int, int], None]
 
@@ -441,7 +444,7 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
                  done: list[dict], out: Path, scene, verified: Callable[[int], bool], gt_spp: int,
                  use_cache: bool) -> None:
     """The live loop over the frames after ``done``, each written as it is finished."""
-    state = out / STATE_FILE
+    state, depth_file = out / STATE_FILE, out / DEPTH_FILE
     n = len(times)
     projected = None
     if done and state.is_file():
@@ -449,8 +452,9 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
             projected = LightField(z["data"], model.array)
     elif done:
         raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
+    depth = read_depth(out) if done else None
     live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
-                        time_s=float(times[len(done)]) if len(done) < n else 0.0)
+                        time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth)
     live.index = len(done)
     for i in range(len(done), n):
         t0 = time.perf_counter()
@@ -461,7 +465,9 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
             writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)
         panel = live_panel(frame, gt.image if gt is not None else None, writer.scale,
                            camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
-        _write_state(state, live.projected)
+        _write_state(state, data=live.projected.data)
+        if live.depth is not None and not depth_file.is_file():
+            _write_state(depth_file, depth=live.depth)
         writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
                      time.perf_counter() - t0)
 
@@ -490,16 +496,27 @@ def _summary(frames: list[dict]) -> dict:
     return out
 
 
-def _write_state(path: Path, lf: LightField) -> None:
-    """The projector's next light field, atomically (a resumed live loop starts from it)."""
+def read_depth(out: str | Path) -> np.ndarray | None:
+    """The real scene's depth a live sequence in ``out`` prefiltered with ((K, V, U) metres, NaN: unknown), or None
+    where it has none (box projection, converged mode, or a folder from before it was kept)."""
+    path = Path(out) / DEPTH_FILE
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        return z["depth"]
+
+
+def _write_state(path: Path, **arrays: np.ndarray) -> None:
+    """Arrays of the live loop's state (the projector's next light field, the depth), atomically: a resumed live
+    loop starts from them."""
     import os
     import tempfile
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".projected_lf.", suffix=".npz", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
     os.close(fd)
     try:
-        np.savez(tmp, data=lf.data)
+        np.savez(tmp, **arrays)
         os.replace(tmp, path)
     finally:
         Path(tmp).unlink(missing_ok=True)

@@ -145,8 +145,8 @@ class TransferResult:
         saturated_fraction: fraction of the direct frame's LF camera codes at full scale (light clipped there
             is lost to the synthetic side).
         timings_s: seconds per stage.
-        depth: (K, V, U) the real scene's depth measured for the projection prefilter, metres (NaN where none
-            was found), or None (``projection == "box"``).
+        depth: (K, V, U) the real scene's depth the projection prefilter used (measured, or given to
+            :func:`run_transfer`), metres (NaN where none was found), or None (``projection == "box"``).
     """
 
     bounces: list[Bounce]
@@ -220,7 +220,8 @@ def count_steps(settings: TransferSettings) -> int:
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
-                 progress: Progress | None = None, time_s: float = 0.0) -> TransferResult:
+                 progress: Progress | None = None, time_s: float = 0.0,
+                 depth: np.ndarray | None = None) -> TransferResult:
     """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
 
     Args:
@@ -233,6 +234,9 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         progress: called with a short description at the start of each step.
         time_s: the moment of an animated scene: the synthetic objects and (through
             :class:`~lftransfer.rig.requests.RealScene`) the simulated rig's real objects are posed there.
+        depth: (K, V, U) the real scene's depth for the projection prefilter, metres (NaN: unknown), measured
+            earlier (a live sequence's, so that a check of its frames prefilters as the frames did); None: measured
+            here with one extra frame.
 
     Returns:
         TransferResult with every bounce kept.
@@ -257,13 +261,15 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
-    depth = None
-    if settings.prefilters:
-        step("measure the real scene's depth (projector white)")
-        with timer("measure_depth"):
-            depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
-                                  settings.angular_samples, r0)
-        side.set_depth(depth)
+    if not settings.prefilters:
+        depth = None                        # nothing prefilters: the result carries no depth
+    else:
+        if depth is None:
+            step("measure the real scene's depth (projector white)")
+            with timer("measure_depth"):
+                depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
+                                      settings.angular_samples, r0)
+        side.set_depth(np.asarray(depth))
     step("render synthetic direct")
     ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]

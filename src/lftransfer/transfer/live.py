@@ -87,6 +87,9 @@ class LiveTransfer:
         settings: :class:`~lftransfer.transfer.bounce.TransferSettings` (``bounces``, ``bounce_views`` and
             ``projector_fill`` do not apply: each frame is one exchange).
         projected: the synthetic light field to start from (the state of a resumed sequence), or None: black.
+        time_s: the scene time the synthetic side is first posed at.
+        depth: (K, V, U) the real scene's depth measured earlier (a resumed sequence's, :attr:`depth`), metres, used
+            by the projection prefilter instead of measuring it at the first step; None: measured there.
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP
@@ -94,7 +97,8 @@ class LiveTransfer:
     """
 
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
-                 *, projected: LightField | None = None, time_s: float = 0.0) -> None:
+                 *, projected: LightField | None = None, time_s: float = 0.0,
+                 depth: np.ndarray | None = None) -> None:
         self.rig = rig
         self.model = model
         self.settings = settings
@@ -106,6 +110,14 @@ class LiveTransfer:
                              f"{self._black_lf.data.shape}")
         self.projected = projected if projected is not None else self._black_lf
         self.index = 0
+        if depth is not None and settings.prefilters:
+            self.side.set_depth(np.asarray(depth))
+
+    @property
+    def depth(self) -> np.ndarray | None:
+        """(K, V, U) the real scene's depth the projection prefilter uses, metres (NaN: unknown); None before it is
+        measured or when the settings do not prefilter."""
+        return None if self.side.prefilter is None else self.side.prefilter.depth
 
     def set_scene(self, scene: SyntheticScene, settings: TransferSettings | None = None) -> None:
         """Change the synthetic scene (an interactive edit) and optionally the settings (lighting model,
