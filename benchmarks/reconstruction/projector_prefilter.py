@@ -53,7 +53,6 @@ def fig5_shadow(full: bool) -> None:
     print("| frame | planet to head (m) | projected light field | contrast | penumbra (mm) | area taking half the "
           "light (cm^2) |")
     print("|---|---|---|---|---|---|")
-    lf_spp = scene.render.lf_spp or scene.render.spp
     for frame in (24, 42) if full else (18, 30, 42):
         opened = open_rig(scene, RunOptions(truth_seed=0))
         known = knowledge(opened, scene, "oracle")
@@ -65,7 +64,7 @@ def fig5_shadow(full: bool) -> None:
         gt_without = render_ground_truth(_without(world, effect.by), spp=scene.render.gt_spp).image
         rows = [("ground truth", measure_effect("shadow", gt, gt_without, pixels))]
         settings = replace(transfer_settings(scene), bounces=2, bounce_views=False)
-        for variant, spp in (("box", 4), ("depth", 4), ("depth", lf_spp)):
+        for variant, spp in (("box", 4), ("depth", 4), ("depth", settings.lf_spp)):
             images = []
             for synthetic in (known.scene, _without(known.scene, effect.by)):
                 opened.start_frame(frame)

@@ -100,7 +100,7 @@ def data_entry_rays(array: LensArray, U: int, V: int, **kwargs) -> tuple[np.ndar
     """
     entries = np.tile(LightField.zeros(array, U, V).mask().ravel(), array.K)
     origins, directions = lightfield_rays(array, U, V, **kwargs)
-    rays = np.repeat(entries, kwargs.get("spp", 4))
+    rays = np.repeat(entries, len(origins) // len(entries))            # spp rays per entry, sample-fastest
     return origins[rays], directions[rays], entries
 
 

@@ -269,7 +269,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
             with timer("measure_depth"):
                 depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
                                       settings.angular_samples, r0)
-        side.set_depth(np.asarray(depth))
+        side.set_depth(depth)
     step("render synthetic direct")
     ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]

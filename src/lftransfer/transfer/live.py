@@ -111,7 +111,7 @@ class LiveTransfer:
         self.projected = projected if projected is not None else self._black_lf
         self.index = 0
         if depth is not None and settings.prefilters:
-            self.side.set_depth(np.asarray(depth))
+            self.side.set_depth(depth)
 
     @property
     def depth(self) -> np.ndarray | None:
