@@ -56,6 +56,15 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
     return path
 
 
+def write_npz(path: str | Path, **arrays: np.ndarray) -> Path:
+    """Write named arrays as an uncompressed ``.npz`` file, atomically (:func:`write_bytes`)."""
+    import io
+
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return write_bytes(path, buffer.getvalue())
+
+
 def strict_json(value):
     """``value`` as plain, strict JSON data: numpy scalars and arrays as Python numbers and lists, tuples as
     lists, paths as strings, and every non-finite float (NaN, infinity) as None, which JSON can hold (``NaN`` is

@@ -1054,6 +1054,11 @@ def calibrate_intrinsics_cmd(images: list[Path] = typer.Argument(..., metavar="I
     Console().print(escape(f"wrote {out}"))
 
 
+from lftransfer.app.twin_cli import twin_app  # noqa: E402  (it uses the option helpers above)
+
+app.add_typer(twin_app, name="twin")
+
+
 def main() -> None:  # pragma: no cover
     logging.basicConfig(level=logging.WARNING)
     app()
@@ -1061,3 +1066,4 @@ def main() -> None:  # pragma: no cover
 
 if __name__ == "__main__":  # pragma: no cover
     main()
+

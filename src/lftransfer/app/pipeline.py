@@ -554,6 +554,20 @@ def _negative_control(rig: Rig, scene, pipeline_scene, settings: TransferSetting
     return ControlRun(result=compared, seconds=time.perf_counter() - t)
 
 
+VIEWS_FILE = "views.npz"
+
+
+def write_views(path: Path, result) -> Path:
+    """The view images a run's metrics are computed from, for scoring it later against a truth the run did not
+    know (``lft twin score``): ``real_view``, ``real_view_direct``, ``synthetic_rgb``, ``synthetic_alpha`` and
+    ``synthetic_direct_rgb`` ((H, W, 3) / (H, W) float32 radiance and coverage)."""
+    from lftransfer.imageio_utils import write_npz
+
+    return write_npz(path, real_view=result.real_view, real_view_direct=result.real_view_direct,
+                     synthetic_rgb=result.synthetic_view.rgb, synthetic_alpha=result.synthetic_view.alpha,
+                     synthetic_direct_rgb=result.bounces[0].synthetic_view.rgb)
+
+
 def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Progress | None,
          warn: Warn | None) -> dict:
     done = [0]
@@ -665,6 +679,12 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
             undefined["negative_control"] = why
 
     comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+    if not verified:                      # what a later scoring against a truth needs (lft twin score)
+        write_views(out / VIEWS_FILE, result)
+    stale = getattr(rig, "stale_captures", 0)
+    if stale:
+        warning(f"{stale} capture(s) saw frames that still changed after the rig file's settle_s: they were "
+                "dropped, not averaged, and the captures waited; settle_s is too short (lft calibrate latency)")
     timings["total"] = time.perf_counter() - t0
     from lftransfer.backend import variant
 

@@ -509,17 +509,9 @@ def read_depth(out: str | Path) -> np.ndarray | None:
 def _write_state(path: Path, **arrays: np.ndarray) -> None:
     """Arrays of the live loop's state (the projector's next light field, the depth), atomically: a resumed live
     loop starts from them."""
-    import os
-    import tempfile
+    from lftransfer.imageio_utils import write_npz
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    write_npz(path, **arrays)
 
 
 def _write_videos(out: Path, n: int, fps: float) -> None:

@@ -198,6 +198,13 @@ class SimRig:
 
     def capture_lf(self, request: LFCapture = LFCapture()) -> LFFrame:
         """LF camera image of the current set-up (a mean of ``request.frames`` noisy frames)."""
+        radiance = self.lf_signal() * np.float32(request.exposure_scale)
+        codes = self.expose_lf(radiance, request.frames)
+        return LFFrame(codes=codes, bits=self._truth.camera.bits, exposure_scale=request.exposure_scale)
+
+    def lf_signal(self) -> np.ndarray:
+        """(H, W, 3) float32 radiance reaching the LF camera's pixels in the current set-up and projection, before
+        exposure and sensor noise (the device twin, :mod:`lftransfer.sim.twin`, exposes it once per frame)."""
         if isinstance(self._setup, Collimator):
             make = lambda: self._collimated_radiance(self._setup.direction)     # noqa: E731
         elif isinstance(self._setup, WhiteField):
@@ -207,9 +214,12 @@ class SimRig:
         else:
             lights = self._setup_lights()
             make = lambda: self._lf_radiance(self._world, lights)               # noqa: E731
-        radiance = make() * np.float32(request.exposure_scale)
-        codes = self._expose_frames(radiance, request.frames)
-        return LFFrame(codes=codes, bits=self._truth.camera.bits, exposure_scale=request.exposure_scale)
+        return make()
+
+    def expose_lf(self, radiance: np.ndarray, frames: int = 1) -> np.ndarray:
+        """LF camera codes of ``radiance`` ((H, W, 3) float32, exposure scale applied): the mean of ``frames``
+        noisy exposures, (H, W, 3) uint16 codes of the camera's bit depth."""
+        return self._expose_frames(radiance, frames)
 
     def capture_view(self, request: ViewCapture = ViewCapture()) -> ViewFrame:
         """View camera image ((H, W, 3) float32 linear radiance) of the current set-up.

@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -34,7 +35,7 @@ from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware._worker import Worker, WorkerStuck, WorkerTimeout
 from lftransfer.rig.hardware.config import CameraConfig
 
-__all__ = ["Camera", "GenICamCamera", "OpenCVCamera", "open_camera"]
+__all__ = ["Camera", "GenICamCamera", "OpenCVCamera", "StreamCamera", "open_camera"]
 
 _log = logging.getLogger(__name__)
 
@@ -117,7 +118,12 @@ class Camera:
         a = np.asarray(frame)
         if a.ndim == 3 and a.shape[2] == 1:
             a = a[..., 0]
-        if a.ndim == 2:
+        if c.planar:
+            if a.ndim != 2 or a.shape[0] % 3:
+                raise RigError(f"{self.label}: frame of shape {a.shape}; a planar camera (planar = true) delivers "
+                               "(3 H, W) monochrome frames")
+            a = np.moveaxis(a.reshape(3, a.shape[0] // 3, a.shape[1]), 0, -1)
+        elif a.ndim == 2:
             a = np.repeat(a[..., None], 3, axis=2)
         elif a.ndim == 3 and a.shape[2] == 4:
             a = a[..., :3]
@@ -224,19 +230,30 @@ class Camera:
         """The exposure relative to the rig file's (or the camera's own at opening)."""
         return self._exposure_scale
 
-    def set_exposure_scale(self, scale: float, step: str = "exposure bracketing") -> None:
+    continuous = False
+    """Whether a reader thread takes every frame as it arrives (:class:`StreamCamera`): then a capture selects frames
+    by their arrival time (:meth:`mark_change`) instead of sleeping and dropping."""
+
+    def mark_change(self, not_before: float) -> None:
+        """Frames that arrive before ``not_before`` (monotonic seconds) are stale: never returned again (a camera
+        read continuously; for the others the caller sleeps and drops frames)."""
+
+    def set_exposure_scale(self, scale: float, step: str = "exposure bracketing") -> bool:
         """Set the exposure to ``scale`` times the base one (the rig file's ``exposure``, else the camera's own).
 
         Args:
             scale: relative exposure, > 0.
             step: what the caller is doing, for messages.
 
+        Returns:
+            Whether the exposure changed (frames taken before are stale then).
+
         Raises:
             RigError: the camera does not let its exposure be set (exposure bracketing is not supported by it).
         """
         self._check_open(step)
         if abs(scale - self._exposure_scale) <= 1e-9 * scale:
-            return
+            return False
         base = self._base_exposure
         if base is None or not base > 0:
             raise RigError(f"{self.label}: exposure bracketing (exposure_scale {scale:g}) is not supported by "
@@ -248,6 +265,7 @@ class Camera:
                            f"this camera: the driver refused exposure {target:g}"
                            + ("" if got is None else f" (reads back {got:g})") + f" ({step})")
         self._exposure_scale = scale
+        return True
 
     def close(self) -> None:
         """Release the device (idempotent; a camera stuck in a call is left to its daemon thread)."""
@@ -374,6 +392,166 @@ class OpenCVCamera(Camera):
         if self._cap is not None:
             self._cap.release()
             self._cap = None
+
+
+# -- network streams --------------------------------------------------------------------------------------------
+
+class StreamCamera(Camera):
+    """A network camera: a stream at a URL (``http://``, ``tcp://``, ``rtsp://``, ...) read by OpenCV's FFmpeg back-end.
+
+    A reader thread takes every frame as it arrives and notes its arrival time (a stream, unlike a V4L2 driver,
+    buffers whatever is not read, so frames must be drained as they come). :meth:`read_frame` hands out the next
+    frame that arrived after the last one handed out and after :meth:`mark_change`'s time: stale frames are skipped,
+    never averaged. A stream that ends or stalls is reconnected in the background; a capture waiting for a frame
+    gives up after ``timeout_s`` with a :class:`~lftransfer.rig.base.RigError` naming the camera, the step and why
+    the stream is down.
+
+    Frames of more than 8 bits are read without OpenCV's BGR conversion (``CAP_PROP_CONVERT_RGB`` off: FFmpeg's
+    GRAY16LE arrives as 16-bit); ``planar`` cameras send colour as three stacked monochrome planes. The exposure is
+    set through the camera's control URL (``control``), where it has one.
+
+    Args:
+        config: the camera's table of the rig file (a stream URL source).
+        role: how messages name it.
+        capture_factory: ``(url, api_preference, params) -> capture`` (tests), or None for ``cv2.VideoCapture``.
+    """
+
+    continuous = True
+    KEEP = 64                      # frames kept for a slow reader
+
+    def __init__(self, config: CameraConfig, role: str = "camera",
+                 capture_factory: Callable[[int | str, int, list[int]], Any] | None = None) -> None:
+        if config.kind != "stream":
+            raise ValueError(f"{role} ({config.source}): StreamCamera needs a stream URL source")
+        super().__init__(config, role)
+        import collections
+
+        self._factory = capture_factory
+        self._cond = threading.Condition()
+        self._frames: collections.deque = collections.deque(maxlen=self.KEEP)
+        self._last_t = -math.inf
+        self._not_before = -math.inf
+        self._down: str | None = None          # why the stream is down, while it is
+        self._stop = threading.Event()
+        self._reader: threading.Thread | None = None
+        self.arrived = 0
+
+    def _connect(self) -> Any:
+        import cv2
+
+        c = self.config
+        ms = int(round(c.timeout_s * 1000))
+        # one decoding thread: FFmpeg's frame threads hold a frame back per extra thread (a frame of latency each)
+        params = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms, cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms, cv2.CAP_PROP_N_THREADS, 1]
+        raw = c.bits > 8 or c.planar
+        if raw:
+            params += [cv2.CAP_PROP_CONVERT_RGB, 0]
+        cap = (self._factory or cv2.VideoCapture)(c.source, cv2.CAP_FFMPEG, params)
+        if cap is None or not cap.isOpened():
+            if cap is not None:
+                cap.release()
+            raise RigError(f"{self.label}: cannot open the camera: no stream at this URL (is the camera, or the "
+                           "twin, running?)")
+        return cap
+
+    def _open(self) -> None:
+        cap = self._connect()
+        self._base_exposure = self._get_exposure()
+        if self.config.exposure is not None and self.config.control is not None:
+            got = self._set_exposure(self.config.exposure)
+            if got is not None:
+                self._base_exposure = got
+        self._reader = threading.Thread(target=self._read_loop, args=(cap,), name=f"lft-{self.role}-reader",
+                                        daemon=True)
+        self._reader.start()
+
+    def _read_loop(self, cap: Any) -> None:
+        import cv2
+
+        while not self._stop.is_set():
+            if cap is None:
+                try:
+                    cap = self._connect()
+                except Exception as exc:  # noqa: BLE001  (down: try again)
+                    with self._cond:
+                        self._down = str(exc).split(": ", 1)[-1]
+                    self._stop.wait(0.5)
+                    continue
+            ok, frame = cap.read()
+            t = time.monotonic()
+            if not ok or frame is None:
+                cap.release()
+                cap = None
+                with self._cond:
+                    self._down = f"the stream stopped after {self.arrived} frames"
+                    self._cond.notify_all()
+                continue
+            if frame.ndim == 3 and frame.shape[2] == 3 and not (self.config.bits > 8 or self.config.planar):
+                frame = cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+            with self._cond:
+                self._frames.append((frame, t))
+                self._down = None
+                self.arrived += 1
+                self._cond.notify_all()
+        if cap is not None:
+            cap.release()
+
+    def mark_change(self, not_before: float) -> None:
+        with self._cond:
+            self._not_before = max(self._not_before, not_before)
+
+    def read_frame(self, step: str = "reading a frame") -> tuple[np.ndarray, float]:
+        """The next frame that arrived after the last one handed out and after the last :meth:`mark_change`.
+
+        Raises:
+            RigError: none within ``timeout_s`` (the message says whether the stream is down), or a wrong size.
+        """
+        self._check_open(step)
+        c = self.config
+        deadline = time.monotonic() + c.timeout_s
+        with self._cond:
+            while True:
+                after = max(self._last_t, self._not_before)
+                for frame, t in self._frames:
+                    if t > after:
+                        self._last_t = t
+                        self._frames_read += 1
+                        break
+                else:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        why = f"the stream is down ({self._down})" if self._down else "the stream sends no frames"
+                        raise RigError(f"{self.label}: no frame within {c.timeout_s:g} s during {step}: {why}; "
+                                       "outputs written so far are kept (lft render --resume goes on once the "
+                                       "camera is back)")
+                    self._cond.wait(left)
+                    continue
+                break
+        return self.to_codes(frame), t
+
+    def _request(self, body: dict | None) -> float | None:
+        import json
+        import urllib.request
+
+        if self.config.control is None:
+            return None
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.config.control, data=data, method="GET" if body is None else "POST",
+                                     headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(req, timeout=self.config.timeout_s) as answer:
+            value = json.loads(answer.read().decode()).get("exposure")
+        return None if value is None else float(value)
+
+    def _get_exposure(self) -> float | None:
+        return self._request(None)
+
+    def _set_exposure(self, value: float) -> float | None:
+        return self._request({"exposure": float(value)})
+
+    def _release(self) -> None:
+        self._stop.set()
+        if self._reader is not None:
+            self._reader.join(timeout=self.config.timeout_s + 1.0)
 
 
 # -- GenICam ---------------------------------------------------------------------------------------------------
@@ -513,7 +691,8 @@ def open_camera(config: CameraConfig, role: str = "camera") -> Camera:
     Raises:
         RigError: the camera cannot be opened (names the source), or its extra is not installed.
     """
-    cam: Camera = GenICamCamera(config, role) if config.kind == "genicam" else OpenCVCamera(config, role)
+    cam: Camera = GenICamCamera(config, role) if config.kind == "genicam" else \
+        StreamCamera(config, role) if config.kind == "stream" else OpenCVCamera(config, role)
     try:
         return cam.open()
     except BaseException:

@@ -5,7 +5,8 @@ field)::
 
     [lf_camera]     source, width, height, bits, exposure, gain, frames, timeout_s, ...
     [view_camera]   the same, plus response_gamma and radiance_scale (its radiometric linearisation)
-    [projector]     display, width, height, bits, settle_s, drop_frames, timeout_s
+    [projector]     display, x_display, width, height, bits, settle_s, drop_frames, stale_check, timeout_s
+    [operator]      kind (terminal | http | command), url, command, timeout_s  (optional: who arranges set-ups)
 
 An invalid file raises :class:`RigFileError` with one line naming the file, the field path and what was
 expected, e.g. ``rig.toml: lf_camera.bits: Input should be less than or equal to 16, found 20``.
@@ -44,7 +45,7 @@ from lftransfer.imageio_utils import write_text
 from lftransfer.rig.requests import RigInfo
 from lftransfer.validation import STRICT_NUMBER, read_toml, validation_message
 
-__all__ = ["CameraConfig", "HardwareRigConfig", "ProjectorConfig", "RigFileError", "ViewCameraConfig",
+__all__ = ["CameraConfig", "HardwareRigConfig", "OperatorConfig", "ProjectorConfig", "RigFileError", "ViewCameraConfig",
            "load_rig_file", "parse_rig_file", "write_rig_value"]
 
 _log = logging.getLogger(__name__)
@@ -77,7 +78,10 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-SourceKind = Literal["index", "v4l2", "video", "images", "genicam"]
+SourceKind = Literal["index", "v4l2", "video", "images", "genicam", "stream"]
+
+STREAM_SCHEMES = ("http://", "https://", "tcp://", "udp://", "rtsp://", "rtp://", "srt://")
+"""URL schemes of network cameras, opened by OpenCV's FFmpeg back-end."""
 
 
 class CameraConfig(_Model):
@@ -85,9 +89,11 @@ class CameraConfig(_Model):
 
     Attributes:
         source: what to open: an integer device index (``0``), a V4L2 device path (``"/dev/video2"``), a video
-            file (``"run.avi"``), an image-sequence pattern (``"frames/%04d.png"``), or ``"genicam:SERIAL"``
-            (a GenICam camera through ``harvesters``, with ``cti``). Relative file paths are relative to the
-            rig file's folder (the loader makes them absolute).
+            file (``"run.avi"``), an image-sequence pattern (``"frames/%04d.png"``), ``"genicam:SERIAL"``
+            (a GenICam camera through ``harvesters``, with ``cti``), or the URL of a network camera's stream
+            (``"http://10.0.0.5:8600/lf"``, ``tcp://``, ``rtsp://``: IP and streaming cameras, and the device
+            twin's cameras). Relative file paths are relative to the rig file's folder (the loader makes them
+            absolute).
         cti: GenTL producer (``.cti`` file) for a ``genicam:`` source; required there, unused otherwise.
         width, height: image size the camera must deliver, pixels.
         bits: bit depth of the codes the camera returns; captures are uint16 codes of this many bits.
@@ -101,6 +107,11 @@ class CameraConfig(_Model):
         gain: gain set at opening (``CAP_PROP_GAIN`` / GenICam ``Gain``), or None.
         frames: frames averaged per capture at least (a request asking for more gets more).
         timeout_s: longest wait for one frame (and for opening the device), seconds.
+        planar: the camera delivers its colour frames as one monochrome image of three planes, R above G above
+            B ((3 H, W)); a stream camera whose bits do not fit a colour format that OpenCV's FFmpeg reader
+            returns at full depth (it returns 16 bits only as GRAY16LE) sends them so.
+        control: URL of the camera's control API (HTTP, JSON ``{"exposure": value}`` read by GET and set by
+            POST, as IP cameras offer), for a stream camera whose exposure is set over the network; None: none.
     """
 
     source: Annotated[Union[int, str], BeforeValidator(_source_type)]
@@ -113,6 +124,15 @@ class CameraConfig(_Model):
     gain: NonNegFloat | None = None
     frames: PosInt = 1
     timeout_s: PosFloat = 5.0
+    planar: bool = False
+    control: str | None = None
+
+    @field_validator("control")
+    @classmethod
+    def _control(cls, value: str | None) -> str | None:
+        if value is not None and not value.startswith(("http://", "https://")):
+            raise ValueError(f"expected the camera's control URL (http://...), found {value!r}")
+        return value
 
     @field_validator("source")
     @classmethod
@@ -129,7 +149,7 @@ class CameraConfig(_Model):
             if not value.split(":", 1)[1].strip():
                 raise ValueError(f"genicam: needs the camera's serial number (genicam:SERIAL), found {value!r}")
             return value
-        if value.startswith("/dev/"):
+        if value.startswith("/dev/") or value.lower().startswith(STREAM_SCHEMES):
             return value
         base = (info.context or {}).get("base_dir")
         if base is not None and not Path(value).is_absolute():
@@ -161,6 +181,8 @@ class CameraConfig(_Model):
             return "genicam"
         if s.startswith("/dev/"):
             return "v4l2"
+        if s.lower().startswith(STREAM_SCHEMES):
+            return "stream"
         if re.search(r"%0?\d*d", s):
             return "images"
         return "video"
@@ -168,7 +190,7 @@ class CameraConfig(_Model):
     @property
     def live(self) -> bool:
         """A camera (True) rather than a recording (a video file or an image sequence, False)."""
-        return self.kind in ("index", "v4l2", "genicam")
+        return self.kind in ("index", "v4l2", "genicam", "stream")
 
     @property
     def levels(self) -> int:
@@ -206,22 +228,56 @@ class ProjectorConfig(_Model):
 
     Attributes:
         display: which monitor (0 = the primary one, in the window system's order).
+        x_display: the X display the window opens on (``":1"``; the process's ``DISPLAY`` is set to it), or None
+            for the session's own ``$DISPLAY``.
         width, height: the projector's resolution, pixels; the monitor must run at it or offer it as a mode.
         bits: bit depth of the projector's codes (8: uint8 images; 9..16: uint16 images).
         settle_s: seconds waited after showing an image before a capture counts (display and camera latency;
             written by :func:`~lftransfer.rig.hardware.calibrate_latency`).
         drop_frames: camera frames dropped after each projection or set-up (frames the driver buffered
             before the new image was on).
+        stale_check: after each projection or set-up, cameras read continuously (streams) compare their first
+            frames; a frame that still changed after ``settle_s`` (``settle_s`` too short) is dropped, the capture
+            waits for the image to hold still, and the rig counts and logs it (:class:`HardwareRig`).
         timeout_s: longest wait for the window to open or for one frame to be shown, seconds.
     """
 
     display: NonNegInt = 0
+    x_display: str | None = None
     width: PosInt
     height: PosInt
     bits: Annotated[int, _Num, Field(ge=8, le=16)] = 8
     settle_s: NonNegFloat = 0.1
     drop_frames: NonNegInt = 1
+    stale_check: bool = True
     timeout_s: PosFloat = 10.0
+
+
+class OperatorConfig(_Model):
+    """Who arranges the set-ups a run asks for (a board in front of the array, the point light on, ...).
+
+    Attributes:
+        kind: ``"terminal"``: a person, asked at the terminal (the default); ``"http"``: an endpoint (a motorised
+            stage's controller, the device twin) that gets each set-up as JSON by POST to ``url`` and answers
+            once it is done; ``"command"``: a program run with the set-up as JSON on its standard input, done
+            when it exits with status 0.
+        url: the endpoint of ``kind = "http"``.
+        command: the program of ``kind = "command"`` (split like a shell line, no shell).
+        timeout_s: longest wait for an endpoint or a command to say it is done, seconds.
+    """
+
+    kind: Literal["terminal", "http", "command"] = "terminal"
+    url: str | None = None
+    command: str | None = None
+    timeout_s: PosFloat = 600.0
+
+    @model_validator(mode="after")
+    def _needs(self) -> "OperatorConfig":
+        if self.kind == "http" and not (self.url or "").startswith(("http://", "https://")):
+            raise ValueError("kind = \"http\" needs url = the endpoint (http://...)")
+        if self.kind == "command" and not (self.command or "").strip():
+            raise ValueError("kind = \"command\" needs command = the program to run")
+        return self
 
 
 class HardwareRigConfig(_Model):
@@ -231,12 +287,14 @@ class HardwareRigConfig(_Model):
         lf_camera: the LF camera behind the lens array.
         view_camera: the view camera (the rig's radiometric reference).
         projector: the projector behind the lens array.
+        operator: who arranges the set-ups (:class:`OperatorConfig`; a person at the terminal by default).
         source: the file it was read from (set by :func:`load_rig_file`), or None.
     """
 
     lf_camera: CameraConfig
     view_camera: ViewCameraConfig
     projector: ProjectorConfig
+    operator: OperatorConfig = OperatorConfig()
     source: Path | None = None
 
     @property

@@ -3,7 +3,10 @@
 :func:`measure_latency` projects black, then a bright marker (full white by default) and reads the camera
 continuously (so no frames pile up in its driver) until a frame's mean brightness crosses the midpoint between
 the black and the marker levels; the delay is the time from ``show`` returning (the buffer swap carried out)
-to that frame's arrival. It does this ``tries`` times, each bounded by ``timeout_s``.
+to that frame's arrival. It does this ``tries`` times, each bounded by ``timeout_s``, each marker shown at a random
+phase of the camera's frame period (measured while priming), so the delays spread over a frame rather than lock
+to the camera's frame clock: the median is the latency plus about half a frame, the largest about a whole frame
+more, which is what ``settle_s`` has to cover.
 
 :func:`calibrate_latency` opens the projector and the LF camera from a rig file, measures, and writes
 ``projector.settle_s`` back into the file: the largest delay plus a margin (25 % of it, at least 20 ms),
@@ -23,7 +26,8 @@ from typing import Callable, Protocol
 import numpy as np
 
 from lftransfer.rig.base import RigError
-from lftransfer.rig.requests import FocalPlaneDiffuser
+from lftransfer.rig.hardware.operator import arranger
+from lftransfer.rig.requests import FocalPlaneDiffuser, RealScene
 
 __all__ = ["LatencyResult", "calibrate_latency", "measure_latency", "settle_time"]
 
@@ -123,11 +127,15 @@ def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, 
         frame, t = camera.read_frame(step)
         return float(np.mean(frame)), t
 
+    arrivals: list[float] = []
+
     def watch(seconds: float, at_least: int = 3) -> float:
         values: list[float] = []
         end = time.monotonic() + seconds
         while time.monotonic() < end or len(values) < at_least:
-            values.append(level()[0])
+            v, t = level()
+            values.append(v)
+            arrivals.append(t)
         return float(np.mean(values[-at_least:]))
 
     # the two levels
@@ -150,6 +158,13 @@ def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, 
                                  "marker")
     mid = 0.5 * (b + w)
     _log.info("latency: black level %.1f, marker level %.1f", b, w)
+    # the camera's frame period: each marker is shown at a random phase of it, so that the delays sample the whole
+    # frame interval instead of locking to the frame clock (reading a frame, then showing, would always land at
+    # the same phase and round every delay up to the same frame)
+    gaps = np.diff(np.asarray(arrivals))
+    gaps = gaps[gaps > 0.25 * gaps.max()] if gaps.size else gaps      # not the frames a driver had buffered
+    period = float(np.median(gaps)) if gaps.size else 0.0
+    rng = np.random.default_rng(tries)
 
     delays: list[float] = []
     for i in range(tries):
@@ -164,6 +179,8 @@ def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, 
                                f"{timeout_s:g} s (latency measurement, {projector.label}; mean code {v:.1f}, "
                                f"black is {b:.1f})")
         level()                                    # one more dark frame: the next one starts from black
+        if period > 0:
+            time.sleep(rng.uniform(0.0, min(period, timeout_s / 4)))
         t0 = projector.show(marker, step=step)
         if t0 is None:
             t0 = time.monotonic()
@@ -198,7 +215,8 @@ def calibrate_latency(rig_file: str | Path, tries: int = 20, *, timeout_s: float
         margin, min_margin_s: settle_s = max + max(min_margin_s, margin * max), rounded up to 1 ms
             (:func:`settle_time`).
         operator: where given, first asked for the focal-plane diffuser set-up (so the LF camera sees the
-            projector) and waited for; None: the caller has arranged it.
+            projector) and waited for; None: the caller has arranged it. A rig file whose ``[operator]`` names an
+            endpoint gets the set-up there instead, and the real scene again afterwards.
         progress: ``progress(try_index, tries, delay_s)`` after each try, or None.
         projector, camera: open devices to use instead of the rig file's (they are not closed here).
 
@@ -222,9 +240,12 @@ def calibrate_latency(rig_file: str | Path, tries: int = 20, *, timeout_s: float
         if camera is None:
             camera = open_camera(config.lf_camera, "LF camera")
             own.append(camera)
-        if operator is not None:
-            operator(FocalPlaneDiffuser().prompt())
+        arrange, endpoint = arranger(config.operator, operator or (lambda prompt: None))
+        if operator is not None or endpoint:
+            arrange(FocalPlaneDiffuser())
         result = measure_latency(projector, camera, tries, timeout_s=timeout_s, progress=progress)
+        if endpoint:
+            arrange(RealScene())          # as a run expects to find the rig
     finally:
         for device in reversed(own):
             device.close()

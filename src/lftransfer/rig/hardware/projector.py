@@ -27,13 +27,12 @@ OpenGL rounds to what it has and a warning says so once, at opening.
 Threads and time limits: all GLFW and OpenGL calls run on one daemon thread (:mod:`._worker`) that also
 processes the window's events while idle (so the window manager never marks it "not responding" while an
 operator prompt waits); every call is waited for at most the rig file's ``projector.timeout_s``. A missing display
-(no ``$DISPLAY`` / ``$WAYLAND_DISPLAY``), a display index beyond the monitors, or a window that fails to open is a
+(no ``$DISPLAY`` / ``$WAYLAND_DISPLAY``, or the rig file's ``x_display`` has no X server), a display index beyond the monitors, or a window that fails to open is a
 RigError naming the display and the step.
 """
 
 from __future__ import annotations
 
-import ctypes
 import logging
 import os
 import sys
@@ -46,6 +45,7 @@ import numpy as np
 from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware._worker import Worker, WorkerStuck, WorkerTimeout
 from lftransfer.rig.hardware.config import ProjectorConfig
+from lftransfer.rig.hardware.x11 import window_image
 
 __all__ = ["ProjectorWindow"]
 
@@ -105,78 +105,6 @@ def _import_gl() -> Any:
     return GL
 
 
-# -- reading the window back through X11 -------------------------------------------------------------------------
-
-class _XImage(ctypes.Structure):
-    _fields_ = [("width", ctypes.c_int), ("height", ctypes.c_int), ("xoffset", ctypes.c_int),
-                ("format", ctypes.c_int), ("data", ctypes.c_void_p), ("byte_order", ctypes.c_int),
-                ("bitmap_unit", ctypes.c_int), ("bitmap_bit_order", ctypes.c_int), ("bitmap_pad", ctypes.c_int),
-                ("depth", ctypes.c_int), ("bytes_per_line", ctypes.c_int), ("bits_per_pixel", ctypes.c_int),
-                ("red_mask", ctypes.c_ulong), ("green_mask", ctypes.c_ulong), ("blue_mask", ctypes.c_ulong)]
-
-
-_XErrorHandler = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
-_x11: Any = None
-_x_errors: list[int] = []
-
-
-@_XErrorHandler
-def _on_x_error(display, event):  # noqa: ANN001  (Xlib's callback)
-    _x_errors.append(1)
-    return 0
-
-
-def _libx11() -> Any:
-    global _x11
-    if _x11 is None:
-        lib = ctypes.CDLL("libX11.so.6")
-        lib.XGetImage.restype = ctypes.POINTER(_XImage)
-        lib.XGetImage.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_int, ctypes.c_int, ctypes.c_uint,
-                                  ctypes.c_uint, ctypes.c_ulong, ctypes.c_int]
-        lib.XDestroyImage.argtypes = [ctypes.POINTER(_XImage)]
-        lib.XSync.argtypes = [ctypes.c_void_p, ctypes.c_int]
-        lib.XSetErrorHandler.restype = ctypes.c_void_p
-        lib.XSetErrorHandler.argtypes = [ctypes.c_void_p]
-        _x11 = lib
-    return _x11
-
-
-def _x11_window_image(display: int, window: int, width: int, height: int) -> tuple[np.ndarray, int]:
-    """The window's pixels as the X server holds them: ((H, W, 3) uint16 channel values, bits per channel)."""
-    x = _libx11()
-    _x_errors.clear()
-    previous = x.XSetErrorHandler(ctypes.cast(_on_x_error, ctypes.c_void_p))
-    try:
-        x.XSync(display, 0)
-        image = x.XGetImage(display, window, 0, 0, width, height, 0xFFFFFFFF, 2)   # ZPixmap
-        x.XSync(display, 0)
-    finally:
-        x.XSetErrorHandler(previous)
-    if not image or _x_errors:
-        raise RuntimeError("XGetImage failed (window not viewable?)")
-    try:
-        im = image.contents
-        if im.bits_per_pixel != 32:
-            raise RuntimeError(f"unsupported X image layout: {im.bits_per_pixel} bits per pixel")
-        raw = np.ctypeslib.as_array(ctypes.cast(im.data, ctypes.POINTER(ctypes.c_uint8)),
-                                    (im.height * im.bytes_per_line,))
-        rows = raw.reshape(im.height, im.bytes_per_line)[:, : im.width * 4]
-        if (im.byte_order, im.red_mask, im.green_mask, im.blue_mask) == (0, 0xFF0000, 0xFF00, 0xFF):
-            return rows.reshape(im.height, im.width, 4)[..., 2::-1].astype(np.uint16), 8   # BGRX bytes
-        order = "<u4" if im.byte_order == 0 else ">u4"        # LSBFirst = 0
-        pixels = rows.copy().view(order).reshape(im.height, im.width).astype(np.uint32)
-        out = np.empty((im.height, im.width, 3), np.uint16)
-        bits = 8
-        for c, mask in enumerate((im.red_mask, im.green_mask, im.blue_mask)):
-            mask = int(mask)
-            shift = (mask & -mask).bit_length() - 1
-            bits = bin(mask).count("1")
-            out[..., c] = ((pixels & mask) >> shift).astype(np.uint16)
-        return out, bits
-    finally:
-        x.XDestroyImage(image)
-
-
 def _monitor_name(glfw: Any, monitor: Any) -> str:
     name = glfw.get_monitor_name(monitor)
     return name.decode(errors="replace") if isinstance(name, bytes) else str(name)
@@ -207,6 +135,15 @@ class ProjectorWindow:
         self._closed = False
         self._x11 = False
         self._worker = _window_thread()
+        if config.x_display:
+            # GLFW takes the X display from $DISPLAY when it starts: the rig file's display wins over the session's
+            if _windows and os.environ.get("DISPLAY") != config.x_display:
+                self._closed = True
+                raise RigError(f"{self.label}: another projector window is open on DISPLAY="
+                               f"{os.environ.get('DISPLAY')!r}; one process drives one X display")
+            os.environ["DISPLAY"] = config.x_display
+            os.environ.pop("WAYLAND_DISPLAY", None)
+            self.label = f"projector (display {config.display} of X display {config.x_display})"
         if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
             self._closed = True
             raise RigError(f"{self.label}: no display to open the projector window on ($DISPLAY and "
@@ -385,8 +322,8 @@ class ProjectorWindow:
         glfw.make_context_current(self._window)
         if self._x11:
             # what the X server shows (Mesa's software rasteriser reads GL_FRONT of a window as zeros)
-            values, bits = _x11_window_image(glfw.get_x11_display(), glfw.get_x11_window(self._window),
-                                             c.width, c.height)
+            values, bits = window_image(glfw.get_x11_display(), glfw.get_x11_window(self._window),
+                                         c.width, c.height)
         else:
             GL = _import_gl()
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, 0)

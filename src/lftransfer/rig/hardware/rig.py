@@ -3,15 +3,23 @@
 :class:`HardwareRig` opens the devices a rig file names (:mod:`.config`): the projector window
 (:class:`~.projector.ProjectorWindow`, black at first), the LF camera and the view camera (:mod:`.camera`).
 
-- :meth:`HardwareRig.setup` asks the operator: the ``operator`` callback gets the set-up's
-  :meth:`prompt` text and returns once the operator has done it (the CLI prints the prompt and waits for Enter).
-  The rig remembers the set-up and asks again only when a different one is requested; it starts in
-  :class:`~lftransfer.rig.requests.RealScene`, as the protocol says (the operator starts a run with the real
-  scene in place). Without a callback, a set-up change raises RigError ("needs an operator").
-- :meth:`HardwareRig.project` shows the image and waits the rig file's ``projector.settle_s``.
-- :meth:`HardwareRig.capture_lf` drops ``projector.drop_frames`` stale frames, averages
-  max(request.frames, lf_camera.frames) frames and rounds them to uint16 codes; an exposure scale other than 1
-  sets the camera's exposure to base * scale (RigError where the camera does not allow it).
+- :meth:`HardwareRig.setup` asks the operator (:mod:`.operator`): by default a person, through the ``operator``
+  callback that gets the set-up's :meth:`prompt` text and returns once it is done (the CLI prints the prompt and
+  waits for Enter); or the endpoint the rig file's ``[operator]`` table names (an HTTP URL or a command: a
+  motorised stage, the device twin), which gets the typed set-up itself. The rig remembers the set-up and asks
+  again only when a different one is requested; it starts in :class:`~lftransfer.rig.requests.RealScene`, as the
+  protocol says. Without a callback, a set-up change for a person raises RigError ("needs an operator").
+- :meth:`HardwareRig.project` shows the image. Frames that arrive before the swap + ``projector.settle_s`` are
+  stale: cameras read continuously (network streams) skip them by their arrival time, and for the others the rig
+  sleeps ``settle_s`` and drops ``projector.drop_frames`` frames. The same holds after a set-up or an exposure
+  change.
+- Stale check (``projector.stale_check``, cameras read continuously): after a change, the first frames are
+  compared; one that still changed after ``settle_s`` is dropped, the capture waits for the image to hold still,
+  and :attr:`HardwareRig.stale_captures` counts it (a warning names the camera, the step and the rig file's
+  ``settle_s``). A settle time set too low is thus detected rather than averaged into captures.
+- :meth:`HardwareRig.capture_lf` averages max(request.frames, lf_camera.frames) fresh frames and rounds them to
+  uint16 codes; an exposure scale other than 1 sets the camera's exposure to base * scale (RigError where the
+  camera does not allow it).
 - :meth:`HardwareRig.capture_view` linearises every frame with the rig file's response,
   radiance = radiance_scale * (code / (2^bits - 1)) ^ response_gamma, and averages.
 
@@ -31,6 +39,7 @@ import numpy as np
 from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware.camera import Camera, open_camera
 from lftransfer.rig.hardware.config import HardwareRigConfig, load_rig_file
+from lftransfer.rig.hardware.operator import arranger
 from lftransfer.rig.hardware.projector import ProjectorWindow
 from lftransfer.rig.requests import (SETUPS, LFCapture, LFFrame, RealScene, RigInfo, Setup, ViewCapture,
                                      ViewFrame)
@@ -77,7 +86,11 @@ class HardwareRig:
                  projector: ProjectorWindow | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
         self.config = config if isinstance(config, HardwareRigConfig) else load_rig_file(config)
         self._operator: Operator = operator or no_operator
+        self._arrange, self._endpoint = arranger(self.config.operator, lambda prompt: self._operator(prompt))
         self._sleep = sleep
+        self._changed: dict[str, bool] = {"lf": False, "view": False}
+        self.stale_captures = 0
+        """Captures in which a frame taken ``settle_s`` after a change still changed (``settle_s`` too short)."""
         self._setup: Setup = RealScene()
         self._after = "after opening"
         self._closed = False
@@ -95,6 +108,12 @@ class HardwareRig:
             self.close()
             raise
         self._info = self.config.info
+        if self._endpoint:                   # an endpoint can put the real scene in place itself
+            try:
+                self._arrange(RealScene())
+            except BaseException:
+                self.close()
+                raise
 
     # -- Rig ---------------------------------------------------------------------------------------------------
 
@@ -125,13 +144,15 @@ class HardwareRig:
         if not isinstance(request, tuple(SETUPS.values())):
             raise TypeError(f"setup needs one of {sorted(SETUPS)}, got {type(request).__name__}")
         self._check_open(f"setup {request.kind}")
-        if request == self._setup or (isinstance(request, RealScene) and isinstance(self._setup, RealScene)):
+        if request == self._setup or (isinstance(request, RealScene) and isinstance(self._setup, RealScene)
+                                      and not self._endpoint):
             self._setup = request            # a later moment of the real scene: its objects move by themselves
             return
         _log.info("set-up: %s", request.kind)
-        self._operator(request.prompt())
+        self._arrange(request)
         self._setup = request
         self._after = f"after the set-up {request.kind}"
+        self._change(time.monotonic())
 
     def project(self, image: np.ndarray) -> None:
         """Show ``image`` and wait the rig file's ``settle_s``.
@@ -146,9 +167,74 @@ class HardwareRig:
         image = self._info.check_projector_image(image)
         self._check_open("project")
         assert self._projector is not None
-        self._projector.show(image, step="project")
-        self._sleep(self.config.projector.settle_s)
+        shown = self._projector.show(image, step="project")
         self._after = "after projecting"
+        self._change(shown if shown is not None else time.monotonic())
+
+    def _change(self, at: float) -> None:
+        """What the cameras see changed at monotonic time ``at``: frames before ``at + settle_s`` are stale."""
+        settle = self.config.projector.settle_s
+        cameras = [c for c in (self._lf, self._view) if c is not None]
+        for cam in cameras:
+            cam.mark_change(at + settle)
+        self._changed = {"lf": True, "view": True}
+        if any(not cam.continuous for cam in cameras):
+            self._sleep(max(0.0, at + settle - time.monotonic()))
+
+    def _grab(self, camera: Camera, which: str, frames: int, step: str,
+              transform: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+        """The mean of ``frames`` fresh frames; after a change, on a camera read continuously, the first frames are
+        checked for staleness first (:meth:`_fresh_start`)."""
+        drop = self.config.projector.drop_frames
+        if not (camera.continuous and self.config.projector.stale_check and self._changed[which]):
+            return camera.grab(frames, drop=drop, step=step, transform=transform)
+        self._changed[which] = False
+        for _ in range(drop):
+            camera.read_frame(step)
+        used = self._fresh_start(camera, step)
+        while len(used) < frames:
+            used.append(camera.read_frame(step)[0])
+        used = used[:frames]
+        if transform is not None:
+            used = [np.asarray(transform(f), np.float32) for f in used]
+        return (np.sum(np.asarray(used, np.float64), axis=0) / len(used)).astype(np.float32)
+
+    STALE_RATIO = 3.0               # a step this many times the frame-to-frame noise is a change
+    STALE_TOLERANCE = 2e-4          # ... and larger than this fraction of full scale (mean over 8 x 8 blocks)
+    STALE_MAX_FRAMES = 8            # frames waited for the image to hold still
+
+    def _fresh_start(self, camera: Camera, step: str) -> list[np.ndarray]:
+        """Frames from the first one that no longer changes: with frames a, b, c in a row, a is stale where
+        |a - b| is well above |b - c| (the noise), i.e. the change still arrived after ``settle_s``. Stale frames
+        are dropped (counted in :attr:`stale_captures` and logged once per capture), never averaged."""
+        levels = float(camera.config.levels)
+
+        def small(frame: np.ndarray) -> np.ndarray:
+            h, w = (frame.shape[0] // 8) * 8, (frame.shape[1] // 8) * 8
+            f = frame[:h, :w] if h and w else frame
+            return f.reshape(max(1, h // 8), -1, max(1, w // 8), 8, 3).mean(axis=(1, 3)) if h and w else f
+
+        def diff(a: np.ndarray, b: np.ndarray) -> float:
+            return float(np.mean(np.abs(small(a) - small(b)))) / levels
+
+        seen = [camera.read_frame(step)[0] for _ in range(3)]
+        stale = 0
+        while True:
+            a, b, c = seen[-3:]
+            if not diff(a, b) > self.STALE_RATIO * diff(b, c) + self.STALE_TOLERANCE:
+                break
+            stale += 1
+            if stale >= self.STALE_MAX_FRAMES:
+                _log.warning("%s: the image kept changing for %d frames after %s (%s); going on with the last "
+                             "frames", camera.label, stale, self._after, step)
+                break
+            seen.append(camera.read_frame(step)[0])
+        if stale:
+            self.stale_captures += 1
+            _log.warning("%s: %d stale frame(s) %s (%s): the change arrived later than projector.settle_s = %.3f s "
+                         "of the rig file; they were dropped, not averaged. Run `lft calibrate latency` to measure "
+                         "the delay.", camera.label, stale, self._after, step, self.config.projector.settle_s)
+        return seen[-2:]
 
     def capture_lf(self, request: LFCapture = LFCapture()) -> LFFrame:
         """LF camera image of the current state.
@@ -167,8 +253,10 @@ class HardwareRig:
         self._check_open(step)
         assert self._lf is not None
         c = self.config.lf_camera
-        self._lf.set_exposure_scale(request.exposure_scale, step=step)
-        mean = self._lf.grab(max(request.frames, c.frames), drop=self.config.projector.drop_frames, step=step)
+        if self._lf.set_exposure_scale(request.exposure_scale, step=step):
+            self._lf.mark_change(time.monotonic() + self.config.projector.settle_s)
+            self._changed["lf"] = True
+        mean = self._grab(self._lf, "lf", max(request.frames, c.frames), step)
         codes = np.clip(np.round(mean), 0, c.levels).astype(np.uint16)
         return LFFrame(codes=codes, bits=c.bits, exposure_scale=request.exposure_scale)
 
@@ -196,7 +284,7 @@ class HardwareRig:
         def linear(codes: np.ndarray) -> np.ndarray:
             return scale * np.power(np.clip(codes * inv_levels, 0.0, 1.0), gamma)
 
-        radiance = self._view.grab(frames, drop=self.config.projector.drop_frames, step=step, transform=linear)
+        radiance = self._grab(self._view, "view", frames, step, transform=linear)
         return ViewFrame(radiance=radiance.astype(np.float32))
 
     def close(self) -> None:

@@ -1,0 +1,146 @@
+"""The projector as the twin sees it: what the window system shows on the projector's monitor, over time.
+
+:class:`ProjectorScreen` reads the monitor's pixels from the X server (:class:`lftransfer.rig.hardware.x11.XScreen`)
+at the display's refresh rate and keeps the moments they changed, so a camera frame taken at time t can show the
+image that was on the screen at t minus the display-to-capture latency. It sees whatever the window system drew
+(a window in the wrong place, a half-drawn frame, a desktop where no window is), not what the pipeline meant.
+
+:func:`start_xvfb` starts a private virtual X server of the projector's size when no display is given.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import os
+import shutil
+import subprocess
+import threading
+import time
+
+import numpy as np
+
+from lftransfer.rig.hardware.x11 import XScreen
+from lftransfer.sim.twin.world import digest
+
+__all__ = ["ProjectorScreen", "start_xvfb"]
+
+_log = logging.getLogger(__name__)
+
+
+def start_xvfb(width: int, height: int, timeout_s: float = 10.0) -> tuple[str, subprocess.Popen]:
+    """Start Xvfb with one ``width`` x ``height`` x 24 screen; returns (":N", the process).
+
+    Raises:
+        RuntimeError: Xvfb is not installed or did not start.
+    """
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        raise RuntimeError("Xvfb is not installed (scripts/bootstrap.sh installs Debian's xvfb); or give --display")
+    read_fd, write_fd = os.pipe()
+    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", f"{width}x{height}x24",
+                             "-nolisten", "tcp", "-noreset"], pass_fds=(write_fd,),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    number = b""
+    deadline = time.monotonic() + timeout_s
+    try:
+        os.set_blocking(read_fd, False)
+        while not number.endswith(b"\n") and time.monotonic() < deadline and proc.poll() is None:
+            try:
+                chunk = os.read(read_fd, 64)
+            except BlockingIOError:
+                time.sleep(0.02)
+                continue
+            if not chunk:
+                break
+            number += chunk
+    finally:
+        os.close(read_fd)
+    if not number.strip().isdigit():
+        proc.kill()
+        raise RuntimeError("Xvfb did not start")
+    return f":{number.strip().decode()}", proc
+
+
+class ProjectorScreen:
+    """The projector's monitor, read from an X display.
+
+    Args:
+        x_display: the X display (":N").
+        size: (width, height) of the projector, pixels (the region read, from the screen's top-left corner).
+        bits: the projector's bit depth (the screen's 8-bit channels are scaled to it).
+        refresh_hz: how often the screen is read (a projector's refresh rate).
+        missing: the projector is unplugged: the screen is never read, the projector shows black.
+
+    Raises:
+        RuntimeError: the display cannot be opened, or its screen is smaller than the projector.
+    """
+
+    KEEP = 256                       # screen changes remembered
+
+    def __init__(self, x_display: str, size: tuple[int, int], bits: int = 8, refresh_hz: float = 60.0,
+                 missing: bool = False) -> None:
+        self.size = (int(size[0]), int(size[1]))
+        self.bits = int(bits)
+        self._period = 1.0 / refresh_hz
+        black = np.zeros((self.size[1], self.size[0], 3), np.uint8 if bits <= 8 else np.uint16)
+        self._times = [time.monotonic() - 3600.0]
+        self._images = [(digest(black), black)]
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.changes = 0
+        self.error: str | None = None
+        self._thread = None
+        if missing:
+            return
+        screen = XScreen(x_display)
+        if screen.size[0] < self.size[0] or screen.size[1] < self.size[1]:
+            screen.close()
+            raise RuntimeError(f"the X display {x_display} is {screen.size[0]}x{screen.size[1]}, smaller than the "
+                               f"projector's {self.size[0]}x{self.size[1]}")
+        self._thread = threading.Thread(target=self._watch, args=(screen,), name="twin-projector", daemon=True)
+        self._thread.start()
+
+    def _codes(self, rgb8: np.ndarray) -> np.ndarray:
+        if self.bits <= 8:
+            return rgb8
+        return np.round(rgb8.astype(np.float64) * (((1 << self.bits) - 1) / 255.0)).astype(np.uint16)
+
+    def _watch(self, screen: XScreen) -> None:
+        last = None
+        next_t = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                try:
+                    rgb = screen.grab(*self.size)
+                except RuntimeError as exc:
+                    self.error = str(exc)
+                    _log.warning("projector screen: %s", exc)
+                    self._stop.wait(0.5)
+                    continue
+                t = time.monotonic()
+                if last is None or not np.array_equal(rgb, last):
+                    last = rgb
+                    codes = self._codes(rgb)
+                    with self._lock:
+                        self._times.append(t)
+                        self._images.append((digest(codes), codes))
+                        if len(self._times) > self.KEEP:
+                            del self._times[0], self._images[0]
+                        self.changes += 1
+                next_t = max(next_t + self._period, time.monotonic())
+                self._stop.wait(max(0.0, next_t - time.monotonic()))
+        finally:
+            screen.close()
+
+    def at(self, t: float) -> tuple[str, np.ndarray]:
+        """(digest, (H, W, 3) projector codes) of what the screen showed at monotonic time ``t``."""
+        with self._lock:
+            i = bisect.bisect_right(self._times, t) - 1
+            return self._images[max(i, 0)]
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
