@@ -55,10 +55,11 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
                                                                      "file names an X display with no server."),
               port: int = typer.Option(0, "--port", min=0, max=65535, metavar="PORT",
                                        help="TCP port of the streams and endpoints (0: a free one)."),
-              capture_spp: int = typer.Option(4, "--capture-spp", min=1, metavar="N",
-                                              help="Rays per LF camera pixel."),
-              view_spp: int = typer.Option(16, "--view-spp", min=1, metavar="N",
-                                           help="Samples per view camera pixel."),
+              capture_spp: Optional[int] = typer.Option(None, "--capture-spp", min=1, metavar="N",
+                                                        help="Rays per LF camera pixel (default: the simulated "
+                                                             "rig's, as lft run)."),
+              view_spp: Optional[int] = typer.Option(None, "--view-spp", min=1, metavar="N", help=(
+                  "Samples per view camera pixel, rendered once per state (default: the simulated rig's).")),
               serve_for_s: Optional[float] = typer.Option(None, "--serve-for-s", min=0.0, metavar="S",
                                                           help="Stop serving after this long (default: until "
                                                                "Ctrl-C or SIGTERM).")) -> None:
@@ -177,7 +178,7 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
         _row(table, k, "undefined" if v is None else f"{v:.4g}")
     if scored.calibration_errors is not None:
         e = scored.calibration_errors
-        _row(table, "lenslet centres / projector mapping", f"{e.lenslet_centre_rms_px:.3f} / "
-                                                          f"{e.projector_mapping_rms_px:.3f} px")
+        _row(table, "calibration vs truth: projector mapping", f"{e.projector_mapping_rms_px:.3f} px")
+        _row(table, "calibration vs truth: pose", f"{e.pose_position_rms_mm:.2f} mm, {e.pose_rotation_deg:.3f} deg")
     Console().print(table)
     Console().print(escape(f"wrote {report_path}, {run_dir / 'ground_truth.png'}"), soft_wrap=True)

@@ -396,6 +396,10 @@ class OpenCVCamera(Camera):
 
 # -- network streams --------------------------------------------------------------------------------------------
 
+_STREAM_OPEN = threading.Lock()
+_FFMPEG_OPTIONS = "OPENCV_FFMPEG_CAPTURE_OPTIONS"
+
+
 class StreamCamera(Camera):
     """A network camera: a stream at a URL (``http://``, ``tcp://``, ``rtsp://``, ...) read by OpenCV's FFmpeg back-end.
 
@@ -446,13 +450,32 @@ class StreamCamera(Camera):
         raw = c.bits > 8 or c.planar
         if raw:
             params += [cv2.CAP_PROP_CONVERT_RGB, 0]
-        cap = (self._factory or cv2.VideoCapture)(c.source, cv2.CAP_FFMPEG, params)
+        with _STREAM_OPEN:
+            # FFmpeg probes a stream for seconds of frames before it opens (analyzeduration, 5 s at most): a
+            # camera's stream holds one video stream whose first frame says all, so it is not probed (unless the
+            # user's own OPENCV_FFMPEG_CAPTURE_OPTIONS say otherwise); OpenCV reads the variable at each open
+            own = _FFMPEG_OPTIONS not in os.environ
+            if own:
+                os.environ[_FFMPEG_OPTIONS] = "analyzeduration;0|probesize;32"
+            try:
+                cap = (self._factory or cv2.VideoCapture)(c.source, cv2.CAP_FFMPEG, params)
+            finally:
+                if own:
+                    os.environ.pop(_FFMPEG_OPTIONS, None)
         if cap is None or not cap.isOpened():
             if cap is not None:
                 cap.release()
             raise RigError(f"{self.label}: cannot open the camera: no stream at this URL (is the camera, or the "
                            "twin, running?)")
         return cap
+
+    def open(self) -> "Camera":
+        """Connect (FFmpeg's own time-outs fire first: the worker waits a little longer, so it is not left stuck
+        inside FFmpeg) and start the reader thread."""
+        self._call(self._open, step="opening the camera", doing="opening the stream",
+                   timeout=self.config.timeout_s + 2.0)
+        _log.info("%s: open", self.label)
+        return self
 
     def _open(self) -> None:
         cap = self._connect()

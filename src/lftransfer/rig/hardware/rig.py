@@ -201,40 +201,45 @@ class HardwareRig:
 
     STALE_RATIO = 3.0               # a step this many times the frame-to-frame noise is a change
     STALE_TOLERANCE = 2e-4          # ... and larger than this fraction of full scale (mean over 8 x 8 blocks)
+    STALE_WINDOW = 4                # frames that must hold still (a change up to 3 frames late is caught)
     STALE_MAX_FRAMES = 8            # frames waited for the image to hold still
 
     def _fresh_start(self, camera: Camera, step: str) -> list[np.ndarray]:
-        """Frames from the first one that no longer changes: with frames a, b, c in a row, a is stale where
-        |a - b| is well above |b - c| (the noise), i.e. the change still arrived after ``settle_s``. Stale frames
-        are dropped (counted in :attr:`stale_captures` and logged once per capture), never averaged."""
+        """Frames from the first one that no longer changes. Of :attr:`STALE_WINDOW` frames in a row, the steps
+        between neighbours must all be noise: a step well above the smallest one (:attr:`STALE_RATIO`) is a change
+        that arrived after ``settle_s``, and the frames before it are stale. They are dropped (counted in
+        :attr:`stale_captures` and logged once per capture), never averaged; the last two frames of the still
+        window start the capture."""
         levels = float(camera.config.levels)
 
         def small(frame: np.ndarray) -> np.ndarray:
             h, w = (frame.shape[0] // 8) * 8, (frame.shape[1] // 8) * 8
-            f = frame[:h, :w] if h and w else frame
-            return f.reshape(max(1, h // 8), -1, max(1, w // 8), 8, 3).mean(axis=(1, 3)) if h and w else f
+            if not (h and w):
+                return frame
+            return frame[:h, :w].reshape(h // 8, 8, w // 8, 8, -1).mean(axis=(1, 3))
 
-        def diff(a: np.ndarray, b: np.ndarray) -> float:
-            return float(np.mean(np.abs(small(a) - small(b)))) / levels
-
-        seen = [camera.read_frame(step)[0] for _ in range(3)]
+        frames = [camera.read_frame(step)[0] for _ in range(self.STALE_WINDOW)]
+        seen = [small(f) for f in frames]
         stale = 0
         while True:
-            a, b, c = seen[-3:]
-            if not diff(a, b) > self.STALE_RATIO * diff(b, c) + self.STALE_TOLERANCE:
+            steps = [float(np.mean(np.abs(a - b))) / levels for a, b in zip(seen[-self.STALE_WINDOW:-1],
+                                                                            seen[-self.STALE_WINDOW + 1:])]
+            if not max(steps) > self.STALE_RATIO * min(steps) + self.STALE_TOLERANCE:
                 break
             stale += 1
             if stale >= self.STALE_MAX_FRAMES:
-                _log.warning("%s: the image kept changing for %d frames after %s (%s); going on with the last "
+                _log.warning("%s: the image kept changing for %d frames %s (%s); going on with the last "
                              "frames", camera.label, stale, self._after, step)
                 break
-            seen.append(camera.read_frame(step)[0])
+            frames.append(camera.read_frame(step)[0])
+            seen.append(small(frames[-1]))
         if stale:
             self.stale_captures += 1
-            _log.warning("%s: %d stale frame(s) %s (%s): the change arrived later than projector.settle_s = %.3f s "
-                         "of the rig file; they were dropped, not averaged. Run `lft calibrate latency` to measure "
-                         "the delay.", camera.label, stale, self._after, step, self.config.projector.settle_s)
-        return seen[-2:]
+            _log.warning("%s: a change arrived up to %d frame(s) later than projector.settle_s = %.3f s of the rig "
+                         "file %s (%s); the frames before it were dropped, not averaged. Run `lft calibrate "
+                         "latency` to measure the delay.", camera.label, stale, self.config.projector.settle_s,
+                         self._after, step)
+        return frames[-2:]
 
     def capture_lf(self, request: LFCapture = LFCapture()) -> LFFrame:
         """LF camera image of the current state.

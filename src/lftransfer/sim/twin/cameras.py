@@ -37,7 +37,8 @@ class CameraTiming:
 
     Attributes:
         fps: frames per second.
-        latency_s: display-to-capture latency, seconds (the projector's input lag and the camera's own delay).
+        latency_s: display-to-capture latency, seconds (the projector's input lag and the camera's own delay), up to the frame leaving the camera: the twin's own
+            time to make and encode a frame counts in it.
         jitter_s: each frame's latency is drawn uniformly within latency_s +- jitter_s.
         drop_rate: probability that a frame is lost on its way.
         stop_after_s: the stream stops this long after the twin started, or None.
@@ -94,6 +95,7 @@ class TwinCamera:
         self.dropped = 0
         self.rerendered = 0
         self.shape: tuple[int, int] | None = None
+        self.delay_s = 0.0                 # mean time from a tick to its frame on the wire (exposure, encoding)
         self._started = time.monotonic()
         self._thread = threading.Thread(target=self._run, name=f"twin-{name}", daemon=True)
 
@@ -104,7 +106,8 @@ class TwinCamera:
 
     # -- clients --------------------------------------------------------------------------------------------
     def subscribe(self) -> queue.Queue | None:
-        """A queue of the frames to come, or None while the stream is stopped."""
+        """A queue of the frames to come ((tick time, (3 H, W) uint16), None at the end), or None while the stream
+        is stopped."""
         with self._lock:
             if self.down:
                 return None
@@ -157,7 +160,7 @@ class TwinCamera:
                     self._publish(None)
                     with self._lock:
                         self._clients.clear()
-            if down:
+            if down or not self.clients:          # nobody watches: no frame to make (the clock goes on)
                 next_t = now + period
                 continue
             try:
@@ -171,7 +174,7 @@ class TwinCamera:
                 self.dropped += 1
             else:
                 self.shape = image.shape
-                self._publish(image)
+                self._publish((now, image))
                 self.published += 1
             next_t += period
             if next_t < time.monotonic():        # a long render: the ticks it covered are gone
@@ -182,7 +185,8 @@ class TwinCamera:
         screen change before the frame could go out."""
         for _ in range(3):
             latency = self._latency()
-            t_state = max(last_state, now - latency)
+            # the frame leaves latency after the state it shows: its own making (noise, encoding) counts in
+            t_state = max(last_state, now + self.delay_s - latency)
             key, image = self._state(t_state)
             radiance = self._render(image)
             after = time.monotonic()
@@ -191,6 +195,10 @@ class TwinCamera:
             self.rerendered += 1
             now = after
         return t_state, self._frame(radiance)
+
+    def note_sent(self, tick_to_wire_s: float) -> None:
+        """A client's encoder says how long a frame took from its tick to the wire (a running mean is kept)."""
+        self.delay_s = tick_to_wire_s if self.delay_s == 0 else 0.8 * self.delay_s + 0.2 * tick_to_wire_s
 
     def stop(self) -> None:
         self._stop.set()

@@ -60,7 +60,8 @@ class TwinOptions:
         display: the X display the projector window goes to (":N"), or None: the twin starts its own Xvfb of the
             projector's size.
         host, port: where the twin listens (port 0: a free one).
-        capture_spp: rays per LF camera pixel; view_spp: samples per view camera pixel.
+        capture_spp: rays per LF camera pixel; view_spp: samples per view camera pixel (None: the simulated
+            rig's defaults, so the twin's physics is the in-process rig's).
         settle_s: ``projector.settle_s`` written into a new rig file (not measured; ``lft calibrate latency`` does).
         camera_timeout_s: the rig file's cameras' ``timeout_s`` (above the longest render of a new state).
     """
@@ -78,8 +79,8 @@ class TwinOptions:
     display: str | None = None
     host: str = "127.0.0.1"
     port: int = 0
-    capture_spp: int = 4
-    view_spp: int = 16
+    capture_spp: int | None = None
+    view_spp: int | None = None
     settle_s: float = 0.1
     camera_timeout_s: float = 30.0
 

@@ -20,6 +20,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from fractions import Fraction
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Callable
@@ -74,16 +75,18 @@ def _stream(handler: BaseHTTPRequestHandler, camera: TwinCamera) -> None:
         container = av.open(_SocketWriter(handler.wfile), mode="w", format="nut",
                            container_options={"flush_packets": "1"})
         stream = container.add_stream("ffv1", rate=Fraction(camera.timing.fps).limit_denominator(1000))
-        stream.height, stream.width = first.shape
+        stream.height, stream.width = first[1].shape
         stream.pix_fmt = "gray16le"
-        frame, index = first, 0
-        while frame is not None:
+        item, index = first, 0
+        while item is not None:
+            tick, frame = item
             vf = av.VideoFrame.from_ndarray(frame, format="gray16le")
             vf.pts = index
             for packet in stream.encode(vf):
                 container.mux(packet)
+            camera.note_sent(time.monotonic() - tick)
             index += 1
-            frame = q.get()
+            item = q.get()
     except (BrokenPipeError, ConnectionResetError, OSError) as exc:
         _log.info("twin %s stream: client gone (%s)", camera.name, type(exc).__name__)
     finally:

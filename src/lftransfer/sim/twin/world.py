@@ -36,17 +36,19 @@ class TwinWorld:
         world: the scene as it really is (:func:`lftransfer.sim.hidden_world`'s scene: real objects, true lights).
         truth: the true rig model, or None for the rig file's.
         truth_seed: the operator's seed (the hand errors of held boards), as the in-process rig takes it.
-        capture_spp: rays per LF camera pixel.
-        view_spp: samples per view camera pixel of the view camera's images.
+        capture_spp: rays per LF camera pixel (None: the simulated rig's default, as ``lft run`` on it).
+        view_spp: samples per view camera pixel of the view camera's images (None: the simulated rig's default).
+            The in-process rig renders a capture at the samples a request asks for (``ViewCapture.quality``); a
+            camera cannot, so the twin renders each state once at this number and a request's ``quality`` becomes
+            frames averaged (:class:`~lftransfer.rig.hardware.HardwareRig`).
         keep: renders kept per camera.
     """
 
-    def __init__(self, world, truth, truth_seed: int | None, *, capture_spp: int = 4, view_spp: int = 16,
-                 keep: int = 6) -> None:
+    def __init__(self, world, truth, truth_seed: int | None, *, capture_spp: int | None = None,
+                 view_spp: int | None = None, keep: int = 6) -> None:
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="twin-render")
         self._lock = threading.Lock()
         self._noise_lock = threading.Lock()
-        self.view_spp = int(view_spp)
         self._keep = keep
         self._cache: dict[str, collections.OrderedDict] = {"lf": collections.OrderedDict(),
                                                            "view": collections.OrderedDict()}
@@ -55,17 +57,24 @@ class TwinWorld:
         self.renders = {"lf": 0, "view": 0}
         self.render_s = {"lf": 0.0, "view": 0.0}
         self._shown: str | None = None
+        self._moving = bool(getattr(world, "moving", False))
 
         def build():
             from lftransfer.sim import SimRig
 
-            return SimRig(world, truth=truth, capture_spp=capture_spp, operator_seed=truth_seed)
+            kwargs = {k: v for k, v in (("capture_spp", capture_spp), ("view_spp", view_spp)) if v is not None}
+            return SimRig(world, truth=truth, operator_seed=truth_seed, **kwargs)
 
         self.sim = self._pool.submit(build).result()
+        self.view_spp = self.sim.view_spp
         self.info = self.sim.info
 
     def arrange(self, request: Setup) -> int:
         """Apply a set-up (once) and start a new epoch; returns the epoch."""
+        if isinstance(request, RealScene) and isinstance(self.setup, RealScene) and not self._moving:
+            self.setup = request                    # a later moment of a still scene: nothing changes
+            return self.epoch
+
         def apply() -> int:
             self.sim.setup(request)
             with self._lock:
