@@ -94,6 +94,7 @@ class TwinCamera:
         self.published = 0
         self.dropped = 0
         self.rerendered = 0
+        self.missed = 0
         self.shape: tuple[int, int] | None = None
         self.delay_s = 0.0                 # mean time from a tick to its frame on the wire (exposure, encoding)
         self._started = time.monotonic()
@@ -169,35 +170,40 @@ class TwinCamera:
                 _log.exception("twin %s camera: a frame failed", self.name)
                 next_t = time.monotonic() + period
                 continue
-            last_state, image = frame
+            if frame is None:
+                next_t = time.monotonic()
+                continue
+            last_state, made, image = frame
             if self.timing.drop_rate > 0 and self._rng.random() < self.timing.drop_rate:
                 self.dropped += 1
             else:
                 self.shape = image.shape
-                self._publish((now, image))
+                self._publish((made, image))
                 self.published += 1
             next_t += period
             if next_t < time.monotonic():        # a long render: the ticks it covered are gone
                 next_t = time.monotonic()
 
-    def _make(self, now: float, last_state: float) -> tuple[float, np.ndarray]:
-        """(state time, frame) of a tick at ``now``; made again (at most 3 times) where a long render let the
-        screen change before the frame could go out."""
+    def _make(self, now: float, last_state: float) -> tuple[float, float, np.ndarray] | None:
+        """(state time, frame time, frame) of a tick at ``now``. A frame whose making (a render of a new state) let
+        the state change meanwhile is made again from the state of its new moment; after 3 tries it is not sent (a
+        missed frame): a frame never leaves showing a state older than its moment minus the latency."""
         for _ in range(3):
             latency = self._latency()
-            # the frame leaves latency after the state it shows: its own making (noise, encoding) counts in
+            # the frame leaves latency after the state it shows: its own encoding time counts in
             t_state = max(last_state, now + self.delay_s - latency)
             key, image = self._state(t_state)
             radiance = self._render(image)
             after = time.monotonic()
-            if after - now < 0.5 / self.timing.fps or self._state(max(t_state, after - latency))[0] == key:
-                break
+            if self._state(max(t_state, after + self.delay_s - latency))[0] == key:
+                return t_state, after, self._frame(radiance)
             self.rerendered += 1
             now = after
-        return t_state, self._frame(radiance)
+        self.missed += 1
+        return None
 
     def note_sent(self, tick_to_wire_s: float) -> None:
-        """A client's encoder says how long a frame took from its tick to the wire (a running mean is kept)."""
+        """A client's encoder says how long a frame took from its making to the wire (a running mean is kept)."""
         self.delay_s = tick_to_wire_s if self.delay_s == 0 else 0.8 * self.delay_s + 0.2 * tick_to_wire_s
 
     def stop(self) -> None:
