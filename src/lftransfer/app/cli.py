@@ -591,9 +591,13 @@ def render_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml", help
                  + ("" if trend is None else f", same trend in {100 * trend:.0f} % of steps"))
         _row(table, "effect curve", f"{out / 'effect.png'}")
     _row(table, "rig model", report["rig_model"])
+    if "stale_captures" in summary:
+        _row(table, "stale captures (hardware rig)", str(summary["stale_captures"]))
     for note in report["approximations"]:
         _row(table, "approximation", note)
     _row(table, "videos", f"{out / 'composite.mp4'}, {out / 'bounces.mp4'}")
+    for line in report.get("warnings", []):
+        warn(line)
     Console().print(table)
 
 
@@ -1003,7 +1007,9 @@ def calibrate_lenslets(image: Path = typer.Argument(..., metavar="IMAGE",
 def calibrate_latency_cmd(rig_file: Path = typer.Argument(..., metavar="RIG.toml", help="Hardware rig file (TOML)."),
                           tries: int = typer.Option(20, min=1, metavar="N", help="Marker flashes to time (>= 1)."),
                           timeout_s: float = typer.Option(2.0, min=0.001, metavar="SECONDS",
-                                                          help="Longest wait for one marker, seconds (> 0).")) -> None:
+                                                          help="Longest wait for one marker, seconds (> 0)."),
+                          json_out: Optional[Path] = typer.Option(None, "--json", metavar="FILE.json",
+                                                                  help="Also write the measurement as JSON.")) -> None:
     """Measure the projector-to-LF-camera delay (median and max over the tries) and write settle_s into the rig
     file."""
     from lftransfer.rig.base import RigError
@@ -1024,6 +1030,14 @@ def calibrate_latency_cmd(rig_file: Path = typer.Argument(..., metavar="RIG.toml
     Console().print(escape(f"display -> capture delay: median {1000 * result.median_s:.1f} ms, max "
                            f"{1000 * result.max_s:.1f} ms over {len(result.samples)} tries; wrote projector.settle_s "
                            f"= {result.settle_s:.3f} s into {rig_file}"), soft_wrap=True)
+    if result.frame_s > 0:
+        Console().print(escape(f"the camera's frames come every {1000 * result.frame_s:.0f} ms: display-to-frame "
+                               f"latency about {1000 * result.latency_s:.0f} ms (the median less half a frame)"),
+                        soft_wrap=True)
+    if json_out is not None:
+        from lftransfer.imageio_utils import write_json
+
+        write_json(json_out, result.to_json())
 
 
 @calibrate_app.command("intrinsics", cls=_Command)

@@ -681,7 +681,7 @@ def _run(scene, out: Path, options: RunOptions, opened: OpenedRig, progress: Pro
     comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
     if not verified:                      # what a later scoring against a truth needs (lft twin score)
         write_views(out / VIEWS_FILE, result)
-    stale = getattr(rig, "stale_captures", 0)
+    stale = getattr(getattr(rig, "inner", rig), "stale_captures", 0)      # a hardware rig's (recorded or not)
     if stale:
         warning(f"{stale} capture(s) saw frames that still changed after the rig file's settle_s: they were "
                 "dropped, not averaged, and the captures waited; settle_s is too short (lft calibrate latency)")

@@ -363,6 +363,13 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                                                               settings, todo, step)
             step("write the videos")
             report["summary"] = _summary(report["frames"])
+            stale = getattr(getattr(opened.rig, "inner", opened.rig), "stale_captures", None)
+            if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
+                report["summary"]["stale_captures"] = int(stale)
+                if stale:
+                    report["warnings"] = [f"{stale} capture(s) saw frames that still changed after the rig file's "
+                                          "settle_s: they were dropped, not averaged, and the captures waited; "
+                                          "settle_s is too short (lft calibrate latency)"]
             _write_videos(out, n, report["fps"])
             write_json(report_path, report)
         finally:

@@ -17,6 +17,7 @@ from rich.table import Table
 
 from lftransfer.app.cli import _Command, _Group, _flag, _load, _QUICK_HELP, _row, _truth_seed_option, _EXACT_HELP
 from lftransfer.app.terminal import FAILED, fail
+from lftransfer.sim.twin.serve import VIEW_SPP
 
 twin_app = typer.Typer(cls=_Group, no_args_is_help=True,
                        help="The device twin: the simulated world in its own process behind real device interfaces "
@@ -58,8 +59,9 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
               capture_spp: Optional[int] = typer.Option(None, "--capture-spp", min=1, metavar="N",
                                                         help="Rays per LF camera pixel (default: the simulated "
                                                              "rig's, as lft run)."),
-              view_spp: Optional[int] = typer.Option(None, "--view-spp", min=1, metavar="N", help=(
-                  "Samples per view camera pixel, rendered once per state (default: the simulated rig's).")),
+              view_spp: int = typer.Option(VIEW_SPP, "--view-spp", min=1, metavar="N", help=(
+                  "Samples per view camera pixel, rendered once per state (the quality the calibration's "
+                  "photographs ask for).")),
               serve_for_s: Optional[float] = typer.Option(None, "--serve-for-s", min=0.0, metavar="S",
                                                           help="Stop serving after this long (default: until "
                                                                "Ctrl-C or SIGTERM).")) -> None:
@@ -93,6 +95,9 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
         table.add_column("")
         _row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
         _row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
+        _row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
+                              "both as three stacked GRAY16LE planes in FFV1 (lossless; OpenCV's FFmpeg reader "
+                              "returns 16-bit colour as 8 bits), planar = true in the rig file")
         _row(table, "operator endpoint", f"{twin.server.url}/operator")
         _row(table, "projector", "missing (--projector-missing)" if projector_missing else
              f"display 0 of X display {twin.display}")

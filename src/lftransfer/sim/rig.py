@@ -206,15 +206,12 @@ class SimRig:
         """(H, W, 3) float32 radiance reaching the LF camera's pixels in the current set-up and projection, before
         exposure and sensor noise (the device twin, :mod:`lftransfer.sim.twin`, exposes it once per frame)."""
         if isinstance(self._setup, Collimator):
-            make = lambda: self._collimated_radiance(self._setup.direction)     # noqa: E731
-        elif isinstance(self._setup, WhiteField):
-            make = self._white_radiance
-        elif isinstance(self._setup, FocalPlaneDiffuser):
-            make = lambda: self._focal_plane_radiance(self._setup.transmission)  # noqa: E731
-        else:
-            lights = self._setup_lights()
-            make = lambda: self._lf_radiance(self._world, lights)               # noqa: E731
-        return make()
+            return self._collimated_radiance(self._setup.direction)
+        if isinstance(self._setup, WhiteField):
+            return self._white_radiance()
+        if isinstance(self._setup, FocalPlaneDiffuser):
+            return self._focal_plane_radiance(self._setup.transmission)
+        return self._lf_radiance(self._world, self._setup_lights())
 
     def expose_lf(self, radiance: np.ndarray, frames: int = 1) -> np.ndarray:
         """LF camera codes of ``radiance`` ((H, W, 3) float32, exposure scale applied): the mean of ``frames``

@@ -79,3 +79,13 @@ def test_04_a_command_operator_gets_the_typed_set_up(tmp_path):
     terminal = arranger(parse_rig_file(RIG).operator, asked.append)
     terminal[0](board)
     assert asked == [board.prompt()] and not terminal[1]
+
+
+def test_05_latency_read_from_the_median_less_half_a_frame():
+    from lftransfer.rig.hardware.latency import LatencyResult
+
+    r = LatencyResult(median_s=0.13, max_s=0.2, samples=(0.13,), black_level=0.0, marker_level=1.0, frame_s=0.1)
+    assert r.latency_s == pytest.approx(0.08)
+    assert r.to_json()["latency_s"] == pytest.approx(0.08) and r.to_json()["frame_s"] == 0.1
+    unknown = LatencyResult(median_s=0.05, max_s=0.2, samples=(0.05,), black_level=0.0, marker_level=1.0)
+    assert unknown.latency_s == 0.05

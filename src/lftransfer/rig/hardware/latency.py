@@ -59,6 +59,7 @@ class LatencyResult:
         black_level: mean camera code while the projector shows black.
         marker_level: mean camera code while it shows the marker.
         settle_s: the ``projector.settle_s`` written to the rig file (:func:`calibrate_latency`), else None.
+        frame_s: the camera's frame period measured while priming, seconds (0 where unknown).
     """
 
     median_s: float
@@ -67,6 +68,19 @@ class LatencyResult:
     black_level: float
     marker_level: float
     settle_s: float | None = None
+    frame_s: float = 0.0
+
+    @property
+    def latency_s(self) -> float:
+        """The display-to-frame latency: the median delay less half a frame (the markers are shown at random
+        phases of the camera's frame clock, so the wait for the next frame is uniform over one frame)."""
+        return max(0.0, self.median_s - 0.5 * self.frame_s)
+
+    def to_json(self) -> dict:
+        """The result as JSON data (seconds), with :attr:`latency_s`."""
+        return {"median_s": self.median_s, "max_s": self.max_s, "latency_s": self.latency_s,
+                "frame_s": self.frame_s, "settle_s": self.settle_s, "samples": list(self.samples),
+                "black_level": self.black_level, "marker_level": self.marker_level}
 
 
 def settle_time(result: LatencyResult, margin: float = 0.25, min_margin_s: float = 0.02) -> float:
@@ -198,7 +212,7 @@ def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, 
     projector.show(black, step=step)
     a = np.asarray(delays)
     return LatencyResult(median_s=float(np.median(a)), max_s=float(a.max()), samples=tuple(float(x) for x in a),
-                         black_level=b, marker_level=w)
+                         black_level=b, marker_level=w, frame_s=period)
 
 
 def calibrate_latency(rig_file: str | Path, tries: int = 20, *, timeout_s: float = 2.0, margin: float = 0.25,

@@ -155,7 +155,8 @@ class HardwareRig:
         self._change(time.monotonic())
 
     def project(self, image: np.ndarray) -> None:
-        """Show ``image`` and wait the rig file's ``settle_s``.
+        """Show ``image``; frames that arrive before the swap + ``settle_s`` are stale from now on (cameras read
+        continuously skip them; for the others the rig sleeps until then).
 
         Args:
             image: (H, W, 3) uint8 for an 8-bit projector, else uint16 codes.

@@ -41,6 +41,12 @@ __all__ = ["Twin", "TwinOptions", "manifest_path"]
 _log = logging.getLogger(__name__)
 
 VIEW_HEADROOM = 16.0       # the view camera's full scale: this many times the brightest pixel of the real scene
+VIEW_SPP = 16
+"""Samples per view camera pixel of the twin's image of a state. A camera cannot render a capture at the samples a
+request asks for (the in-process rig renders ``ViewCapture.quality``); the hardware rig averages that many frames
+instead, and the twin's frames of one state are one image. So the twin renders each state at the quality the
+calibration's photographs ask for (16: the pose's and the point light's boards), not the in-process rig's default
+of 4 for plain captures: its board photographs are then as clean as in process, and its plain views cleaner."""
 
 
 @dataclass(frozen=True)
@@ -60,8 +66,9 @@ class TwinOptions:
         display: the X display the projector window goes to (":N"), or None: the twin starts its own Xvfb of the
             projector's size.
         host, port: where the twin listens (port 0: a free one).
-        capture_spp: rays per LF camera pixel; view_spp: samples per view camera pixel (None: the simulated
-            rig's defaults, so the twin's physics is the in-process rig's).
+        capture_spp: rays per LF camera pixel (None: the simulated rig's default, as ``lft run`` on it).
+        view_spp: samples per view camera pixel of the image of each state (:data:`VIEW_SPP`; None: the simulated
+            rig's default).
         settle_s: ``projector.settle_s`` written into a new rig file (not measured; ``lft calibrate latency`` does).
         camera_timeout_s: the rig file's cameras' ``timeout_s`` (above the longest render of a new state).
     """
@@ -80,7 +87,7 @@ class TwinOptions:
     host: str = "127.0.0.1"
     port: int = 0
     capture_spp: int | None = None
-    view_spp: int | None = None
+    view_spp: int | None = VIEW_SPP
     settle_s: float = 0.1
     camera_timeout_s: float = 30.0
 
