@@ -47,15 +47,17 @@ def test_01_latency_is_measured_and_a_short_settle_time_is_caught(twin_factory, 
         for v in (60, 220, 60, 220):
             rig.project(np.full((*rig.info.projector_shape, 3), v, np.uint8))
             means.append(float(rig.capture_lf().codes.mean()))
-        assert rig.stale_captures >= 2                     # detected ...
+        assert rig.stale_captures >= 3                     # detected ...
         assert means[1] > means[0] * 1.05 and means[3] > means[2] * 1.05   # ... and not mixed in: each capture
         assert means[1] == pytest.approx(means[3], rel=0.02)                # shows its own projection
     write_rig_value(twin.rig_file, "projector.settle_s", result.settle_s)
     with HardwareRig(twin.rig_file) as rig:
-        for v in (60, 220, 60):
+        for v in (60, 220, 60, 220):
             rig.project(np.full((*rig.info.projector_shape, 3), v, np.uint8))
             rig.capture_lf()
-        assert rig.stale_captures == 0
+        # the measured settle time (the largest of 8 delays + 25 %) covers them; one late frame on a loaded machine
+        # is the most a tail beyond those 8 delays allows, against every capture with the settle time too short
+        assert rig.stale_captures <= 1
 
 
 def test_02_a_stream_that_stops_names_the_camera_and_resume_goes_on(twin_factory, tmp_path):
@@ -134,3 +136,27 @@ def test_04_a_missing_projector_display_is_named(twin_factory, tmp_path, monkeyp
     display = twin.manifest["display"]
     with pytest.raises(RigError, match=f"projector .*X display {display}.*cannot be reached"):
         HardwareRig(twin.rig_file)
+
+
+def test_05_dropped_frames_in_process_twin(tmp_path, monkeypatch):
+    """The twin as a library (``Twin``), with half its frames lost on the way: captures still come, from the frames
+    that arrive, and the twin counts what it dropped."""
+    import shutil
+
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (scripts/bootstrap.sh installs Debian's xvfb)")
+    from lftransfer.rig.hardware import HardwareRig
+    from lftransfer.scenes import load_scene
+    from lftransfer.sim.twin import Twin, TwinOptions
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml"))
+    with Twin(scene, tmp_path / "twin.toml", TwinOptions(lf_fps=20.0, drop_rate=0.5, truth_seed=3)) as twin:
+        with HardwareRig(tmp_path / "twin.toml") as rig:
+            first = rig.capture_lf().codes
+            rig.project(np.full((*rig.info.projector_shape, 3), 200, np.uint8))
+            lit = rig.capture_lf().codes
+        status = twin.status()
+    assert first.shape == (120, 160, 3) and lit.mean() > first.mean() * 1.05
+    lf = status["cameras"]["lf"]
+    assert lf["dropped"] > 0.25 * (lf["dropped"] + lf["published"]), lf
