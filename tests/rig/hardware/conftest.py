@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
-import time
 
 import pytest
 
@@ -22,32 +20,14 @@ def xvfb():
     if exe is None:
         pytest.skip("Xvfb is not installed (scripts/bootstrap.sh installs Debian's xvfb)")
     pytest.importorskip("glfw", reason="glfw is not installed (pip install -e '.[test]')")
-    read_fd, write_fd = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", f"{SCREEN[0]}x{SCREEN[1]}x24",
-                             "-nolisten", "tcp", "-noreset"], pass_fds=(write_fd,),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    os.close(write_fd)
-    number = b""
-    deadline = time.monotonic() + 10.0
+    from lftransfer.sim.twin.display import start_xvfb
+
     try:
-        os.set_blocking(read_fd, False)
-        while not number.endswith(b"\n") and time.monotonic() < deadline and proc.poll() is None:
-            try:
-                chunk = os.read(read_fd, 64)
-            except BlockingIOError:
-                time.sleep(0.02)
-                continue
-            if not chunk:
-                break
-            number += chunk
-    finally:
-        os.close(read_fd)
-    if not number.strip().isdigit():
-        proc.kill()
-        err = proc.communicate(timeout=5)[1].decode(errors="replace")[-500:]
-        pytest.fail(f"Xvfb did not start: {err}")
+        name, proc = start_xvfb(*SCREEN)
+    except RuntimeError as exc:
+        pytest.fail(f"Xvfb did not start: {exc}")
     try:
-        yield f":{number.strip().decode()}"
+        yield name
     finally:
         proc.terminate()
         try:

@@ -98,11 +98,11 @@ def test_02_a_stream_that_stops_names_the_camera_and_resume_goes_on(twin_factory
 def test_03_calibration_and_two_bounces_through_the_twin(tmp_path):
     """Fig. 4 at quarter size through the hardware path: the rig is calibrated through the streams and the operator
     endpoint, two bounces are transferred, and ``lft twin score`` scores it against the twin's ground truth."""
-    twin = start_twin(tmp_path / "twin", "fig4", "--quick", "--lf-fps", "30", "--view-fps", "30",
+    twin = start_twin(tmp_path / "twin", "fig4", "--quick", "--lf-fps", "15", "--view-fps", "30",
                       "--capture-spp", "2", "--view-spp", "8", "--truth-seed", "4")
     try:
         subprocess.run([sys.executable, "-m", "lftransfer", "calibrate", "latency", str(twin.rig_file),
-                        "--tries", "6"], check=True, capture_output=True, timeout=120)
+                        "--tries", "12"], check=True, capture_output=True, timeout=180)
         out = tmp_path / "run"
         done = subprocess.run([sys.executable, "-m", "lftransfer", "run", "fig4", "--quick", "--rig",
                                f"hardware:{twin.rig_file}", "--bounces", "2", "--out", str(out)],

@@ -76,7 +76,9 @@ class TwinCamera:
         seed: seed of the jitter and the drops.
     """
 
-    QUEUE = 8                          # frames queued per client before new ones are lost (a slow reader)
+    QUEUE = 2                          # frames queued per client: a client (or its encoder) that falls behind
+    #                                    loses the oldest, as a camera's own small buffer does; it never gets a
+    #                                    backlog of old frames late
 
     def __init__(self, name: str, timing: CameraTiming, state: Callable[[float], tuple[str, np.ndarray]],
                  render: Callable[[np.ndarray], np.ndarray], frame: Callable[[np.ndarray], np.ndarray],
@@ -95,6 +97,7 @@ class TwinCamera:
         self.dropped = 0
         self.rerendered = 0
         self.missed = 0
+        self.overrun = 0                   # frames lost because a client fell behind
         self.shape: tuple[int, int] | None = None
         self.delay_s = 0.0                 # mean time from a tick to its frame on the wire (exposure, encoding)
         self._started = time.monotonic()
@@ -125,18 +128,20 @@ class TwinCamera:
         with self._lock:
             return len(self._clients)
 
-    def _publish(self, frame: np.ndarray | None) -> None:
+    def _publish(self, frame) -> None:
+        """Queue ``frame`` for every client; where a client's queue is full its oldest frame is lost."""
         with self._lock:
             for q in list(self._clients):
-                try:
-                    q.put_nowait(frame)
-                except queue.Full:
-                    if frame is None:            # the end must get through: make room
+                while True:
+                    try:
+                        q.put_nowait(frame)
+                        break
+                    except queue.Full:
                         try:
                             q.get_nowait()
+                            self.overrun += 1
                         except queue.Empty:
                             pass
-                        q.put_nowait(None)
 
     # -- the clock ------------------------------------------------------------------------------------------
     def _latency(self) -> float:

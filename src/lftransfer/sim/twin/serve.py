@@ -269,7 +269,7 @@ timeout_s = 600.0
             "screen_changes": self.screen.changes, "screen_error": self.screen.error,
             "renders": dict(self.world.renders), "render_s": {k: round(v, 3) for k, v in self.world.render_s.items()},
             "lf_exposure": self._lf_exposure,
-            "cameras": {name: {"published": c.published, "dropped": c.dropped, "rerendered": c.rerendered, "missed": c.missed,
+            "cameras": {name: {"published": c.published, "dropped": c.dropped, "rerendered": c.rerendered, "missed": c.missed, "overrun": c.overrun,
                                "clients": c.clients, "down": c.down, "fps_set": c.timing.fps,
                                "fps_delivered": round(c.published / up, 2) if up > 0 else None}
                         for name, c in self.cameras.items()},
