@@ -1,0 +1,82 @@
+"""Every choice a run makes, with its values and its one default (docs/architecture.md, "Settings").
+
+Each choice is a ``Literal`` type; its values are read off the type (``values(Renderer)``), so the scene model
+(pydantic), the command line (typer), studies and :func:`lftransfer.settings.resolve_settings` share one
+definition. Nothing else in the project writes a choice's default.
+
+This module imports nothing of the project, so the scene format, the renderer and the faces can all use it.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+LightingModel = Literal["point", "area", "prefiltered"]
+"""How the captured light field lights the synthetic scene: ``"area"`` (lenslet apertures sampled), ``"point"``
+(the paper's projective point lights) or ``"prefiltered"`` (:mod:`lftransfer.render.lights`)."""
+
+Reconstruction = Literal["box", "linear"]
+"""Area model: how the captured light field is read between lenslet centres, ``"linear"`` (blended across the
+three lenslets around each aperture point) or ``"box"`` (one sample per lenslet over its whole aperture)."""
+
+Projection = Literal["box", "depth"]
+"""Area model: what the projector is sent, ``"depth"`` (prefiltered from the real scene's depth, measured
+through the rig with one extra frame) or ``"box"`` (each entry the mean of the synthetic light over its lenslet's
+aperture; :mod:`lftransfer.transfer.projection`)."""
+
+Window = Literal["edge", "cut"]
+"""Area model: what the synthetic scene receives from beyond the lenslets' window, ``"edge"`` (the captured light
+field read at the window's edge) or ``"cut"`` (nothing)."""
+
+Renderer = Literal["auto", "fast", "exact"]
+"""The synthetic renderer: ``"auto"`` (the fast path where the synthetic scene allows it), ``"fast"``
+(:mod:`lftransfer.render.fast`) or ``"exact"`` (path tracing, every lenslet summed at every ray)."""
+
+RigModel = Literal["calibrated", "nominal", "oracle"]
+"""What the pipeline knows of the rig: ``"calibrated"`` (calibrate through the rig first), ``"nominal"`` (the rig
+file's values) or ``"oracle"`` (the simulated rig's hidden truth: a verification baseline)."""
+
+LIGHTING_MODELS: tuple[str, ...] = get_args(LightingModel)
+RECONSTRUCTIONS: tuple[str, ...] = get_args(Reconstruction)
+PROJECTIONS: tuple[str, ...] = get_args(Projection)
+WINDOWS: tuple[str, ...] = get_args(Window)
+RENDERERS: tuple[str, ...] = get_args(Renderer)
+RIG_MODELS: tuple[str, ...] = get_args(RigModel)
+
+DEFAULT_LIGHTING_MODEL: LightingModel = "area"
+DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
+DEFAULT_PROJECTION: Projection = "depth"
+DEFAULT_WINDOW: Window = "edge"
+DEFAULT_RENDERER: Renderer = "auto"
+DEFAULT_RIG_MODEL: RigModel = "calibrated"
+"""Runs calibrate by default; a study defaults to it too (its ``rig_model``)."""
+
+NON_AREA = {"reconstruction": "box", "projection": "box", "window": "cut"}
+"""What reconstruction, projection and window become when the lighting model is not the area model: those three
+choices only exist for lenslets treated as the area lights they are."""
+
+DEFAULT_BOUNCES = 2
+"""N, light field exchanges after the direct frame."""
+MAX_BOUNCES = 20
+"""The most bounces any run, sequence, live loop or study accepts (each adds one exchange; the energy of bounce
+n falls roughly as the product of both sides' albedo and form factor, 1e-2 per bounce on Fig. 4)."""
+
+DEFAULT_ANGULAR_SAMPLES = 48
+DEFAULT_APERTURE_SAMPLES = 4
+DEFAULT_SPP = 4
+DEFAULT_GT_SPP = 2048
+DEFAULT_CAPTURE_SPP = 4
+"""Rays per LF camera pixel in the simulated rig."""
+DEFAULT_PROJECTOR_FILL = 0.95
+
+
+def values(choice) -> tuple[str, ...]:
+    """The values of a choice's ``Literal`` type, in their documented order."""
+    return get_args(choice)
+
+
+def check_choice(name: str, value, choice) -> None:
+    """Raise ValueError naming ``name`` when ``value`` is not one of ``choice``'s values (None passes: it means
+    "the scene's")."""
+    if value is not None and value not in get_args(choice):
+        raise ValueError(f"{name}: expected one of {', '.join(get_args(choice))}, got {value!r}")
