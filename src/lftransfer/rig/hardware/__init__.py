@@ -4,6 +4,8 @@
   ``example_rig.toml`` beside this module documents every field.
 - :mod:`.camera`: OpenCV (``cv2.VideoCapture``) and GenICam (``harvesters``, the ``genicam`` extra) cameras
   with bounded waits.
+- :mod:`.stream`: :class:`~.stream.StreamCamera`, a network stream (URL) read by FFmpeg on a reader thread that
+  notes every frame's arrival (re-exported by :mod:`.camera`).
 - :mod:`.projector`: the full-screen projector window (GLFW + OpenGL, the ``hardware`` extra).
 - :mod:`.rig`: :class:`HardwareRig`, the :class:`~lftransfer.rig.base.Rig` over them.
 - :mod:`.latency`: :func:`measure_latency` and :func:`calibrate_latency` (writes ``projector.settle_s``).
