@@ -3,7 +3,7 @@ VENV  ?= .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test quick bench calibration-table setup clean
+.PHONY: demo test quick bench calibration-table setup clean runs results cli-docs
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml scripts/bootstrap.sh
@@ -25,6 +25,21 @@ calibration-table: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -q tests
+
+# Measured results: `make runs` runs the commands behind docs/results.md (the lft commands a user types) and
+# stores their JSON with provenance in docs/runs/ (hours on 2 cores for all of them; RUNS="--quick" for the
+# quarter-resolution ones, RUNS="demo bench" for some); `make results` rewrites docs/results.md and docs/cli.md.
+RUNS ?=
+runs: $(STAMP)
+	$(PY) scripts/store_runs.py $(RUNS)
+
+results: $(STAMP) cli-docs
+	$(PY) -m lftransfer.app.results docs/runs docs/results.md
+
+# docs/cli.md: typer's own generator (`typer lftransfer.app.cli utils docs --name lft`). The module is imported
+# first because cli.py and twin_cli.py import each other, which fails when typer loads cli.py afresh on its own.
+cli-docs: $(STAMP)
+	$(PY) -c "import sys, lftransfer.app.cli; from typer.cli import main; sys.argv = ['typer', 'lftransfer.app.cli', 'utils', 'docs', '--name', 'lft', '--output', 'docs/cli.md']; main()"
 
 clean:
 	rm -rf out .pytest_cache

@@ -1,0 +1,143 @@
+"""docs/results.md is generated from the stored runs' JSON (``make results``): the values, the provenance and the
+command that reproduces each table; a missing run says so; a malformed file is one error naming it and the field."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from lftransfer.app.results import NOT_STORED, RUN_BY_NAME, ResultsError, load_store, main, render_results
+
+PROVENANCE = {"commands": ["lft demo --quick --out out/runs/demo_quick"], "commit": "0123abcd4567ef", "dirty": False,
+              "date": "2031-02-03 04:05 UTC",
+              "machine": {"cpus": 7, "platform": "Linux-test-x86_64", "load_average": [0.25, 0.5, 0.75]},
+              "wall_s": 123.4}
+
+
+def demo_data(**over) -> dict:
+    m = lambda c, p, o: {"cross_transfer_rel_error": c, "psnr_db": p, "psnr_objects_db": o}  # noqa: E731
+    data = {**m(0.1234, 61.234, 52.346), "psnr_db_direct_only": 50.5, "gt_noise_psnr_db": 77.7,
+            "cross_gt_noise_rel": 0.0321, "lighting_model": "area", "reconstruction": "linear",
+            "projection": "depth", "window": "edge",
+            "by_lighting_model": {"area": m(0.1234, 61.234, 52.346), "point": m(0.2222, 60.0, 51.0)},
+            "by_window": {"edge": m(0.1234, 61.234, 52.346), "cut": m(0.1556, 60.5, 51.5)},
+            "negative_control": {"rig_model": "nominal (rig file)", "cross_transfer_rel_error": 0.5432,
+                                 "psnr_objects_db": 44.4, "cross_error_margin": 0.4198,
+                                 "psnr_objects_margin_db": 7.945, "measurably_worse": True},
+            "cross_by_side": {"real": {"rel_error": 0.1417, "energy_ratio": 0.96, "rel_error_shape": 0.14,
+                                       "gt_noise_rel": 0.03, "pixels": 3284}},
+            "bounces": [{"index": 0, "real_energy": 0.0056, "synthetic_energy": 0.0043, "projector_gain": None}],
+            "calibration_errors": {"pose_position_rms_mm": 0.1876},
+            "timings_s": {"calibration": 401.25, "total": 706.5},
+            "resolution": {"lenslets": [10, 12], "lattice": "hex", "lf_camera": [512, 384], "projector": [256, 192],
+                           "view": [256, 192], "angular_samples": 16}}
+    data.update(over)
+    return data
+
+
+def write(folder, name, kind, data, provenance=PROVENANCE):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.json").write_text(json.dumps({"run": name, "kind": kind, "provenance": provenance,
+                                                     "data": data}))
+
+
+def test_01_values_provenance_and_the_command(tmp_path):
+    store = tmp_path / "runs"
+    write(store, "demo_quick", "demo", demo_data())
+    md = render_results(load_store(store))
+    section = md.split("### Fig. 4 at quarter resolution")[1].split("\n### ")[0]
+    # the values, as the run wrote them
+    for text in ("0.123", "61.23 dB", "52.35 dB", "0.222", "0.156", "nominal (rig file)", "0.543", "0.420",
+                 "7.95 dB", "0.142", "0.188", "401.25", "706.50", "10 x 12 hex lenslets"):
+        assert text in section, text
+    # the provenance: command, commit, date, machine (CPUs, platform, load), wall time
+    assert "Reproduce: `lft demo --quick --out out/runs/demo_quick`" in section
+    assert "scripts/store_runs.py demo_quick" in section
+    for text in ("0123abcd4567ef", "2031-02-03 04:05 UTC", "7 CPUs", "Linux-test-x86_64", "0.25 / 0.50 / 0.75",
+                 "wall time 123 s"):
+        assert text in section, text
+    assert "uncommitted" not in section
+
+
+def test_02_a_missing_run_is_not_invented(tmp_path):
+    store = tmp_path / "runs"
+    write(store, "demo_quick", "demo", demo_data())
+    md = render_results(load_store(store))
+    section = md.split("### Fig. 4 at the paper's resolution (`lft demo`)")[1].split("\n### ")[0]
+    assert NOT_STORED in section
+    assert RUN_BY_NAME["demo"].command_line in section
+    assert "|" not in section                      # no table
+    # every registered run without a file says so; an empty store gives only those lines
+    md = render_results(load_store(tmp_path))
+    assert md.count(NOT_STORED) == len(RUN_BY_NAME)
+
+
+@pytest.mark.parametrize("drop, field", [
+    (("data", "psnr_objects_db"), "data.psnr_objects_db"),
+    (("provenance", "commit"), "provenance.commit"),
+    (("data", "negative_control", "rig_model"), "data.negative_control.rig_model"),
+])
+def test_03_a_missing_field_names_the_file_and_the_field(tmp_path, drop, field):
+    store = tmp_path / "runs"
+    write(store, "demo_quick", "demo", demo_data())
+    path = store / "demo_quick.json"
+    raw = json.loads(path.read_text())
+    node = raw
+    for key in drop[:-1]:
+        node = node[key]
+    del node[drop[-1]]
+    path.write_text(json.dumps(raw))
+    with pytest.raises(ResultsError) as err:
+        render_results(load_store(store))
+    assert str(path) in str(err.value) and f"'{field}'" in str(err.value)
+
+
+def test_04_not_json_and_the_command_line(tmp_path, capsys):
+    store = tmp_path / "runs"
+    write(store, "bench_quick", "bench", {"pipeline_iteration_ms": 16.25})
+    assert main([str(store), str(tmp_path / "results.md")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "bench_quick.json" in err and "'data.pipeline_fps'" in err
+    (store / "bench_quick.json").write_text("{ not json")
+    assert main([str(store), str(tmp_path / "results.md")]) == 2
+    assert "bench_quick.json: not valid JSON" in capsys.readouterr().err
+    assert not (tmp_path / "results.md").exists()
+
+
+def test_05_every_kind_renders(tmp_path):
+    store = tmp_path / "runs"
+    spread = lambda x: {"median": x, "min": x - 1, "max": x + 1, "stdev": 0.5}  # noqa: E731
+    write(store, "bench_quick", "bench", {
+        "pipeline_iteration_ms": 16.25, "pipeline_iteration": spread(16.25), "pipeline_fps": 61.5, "step_fps": 3.7,
+        "stages_ms": {"encode": spread(0.8), "incident_light": spread(2.5)}, "capture_ms": 232.0,
+        "rig_stages_ms": {"capture_lf": spread(197.0)}, "unstaged_ms": 1.5, "floor_ms": 1.7,
+        "floor": {"rays": [122880, 196608]}, "iteration_over_floor": 9.56,
+        "fast_vs_exact": {"psnr_db": 76.31, "psnr_objects_db": 64.02}, "peer": None, "peak_rss_mb": 452.0,
+        "settings": {"resolution": {"lenslets": [10, 12], "lattice": "hex", "lf_camera": [512, 384],
+                                    "projector": [256, 192], "view": [256, 192]}, "angular_samples": 16}})
+    write(store, "fig6_quick", "sequence", {
+        "report": {"mode": "live", "summary": {"frames": 48, "cross_transfer_rel_error_max": 0.6412},
+                   "frames": [{"index": 6, "time_s": 0.25, "metrics": {"psnr_objects_db": 30.71,
+                                                                       "cross_transfer_rel_error": 0.6123}},
+                              {"index": 7, "time_s": 0.29, "metrics": None}]},
+        "effect": {"kind": "reflection", "on": "bowl", "by": "photo", "agreement_bound": 0.2,
+                   "worst_relative_error": {"added_radiance": 0.1612}, "same_trend": {"added_radiance": 1.0},
+                   "points": [{"index": 6, "time_s": 0.25, "distance_m": 0.2651,
+                               "transfer": {"added_radiance": 0.00871}, "truth": {"added_radiance": 0.00872}}]}})
+    write(store, "calibration_seeds", "calibration_seeds", {
+        "seeds": {"1": {"pose_position_rms_mm": 0.391}, "2": {"pose_position_rms_mm": 0.2}},
+        "summary": {"pose_position_rms_mm": {"worst": 0.391, "mean": 0.3, "target": 1.0, "met": True}}})
+    write(store, "twin_compare", "twin_compare", {
+        "scene": "fig4", "quick": True, "gt_spp": 4096, "live_frames": 10,
+        "inproc": {"cross_transfer_rel_error": 0.1564, "psnr_objects_db": 37.03},
+        "hardware": {"cross_transfer_rel_error": 0.1432, "psnr_objects_db": 39.9},
+        "latency": [{"configured_ms": 60, "median_ms": 173.6}]},
+        provenance={**PROVENANCE, "machine": "x86_64, vm", "wall_s": None, "dirty": True})
+    md = render_results(load_store(store))
+    for text in ("16.2 (15.2 to 17.2)", "61.5 / 3.70", "`incident_light`", "122,880 + 196,608", "9.56",
+                 "76.31 dB / 64.02 dB", "0.612", "30.71 dB", "265.1", "0.00871 / 0.00872", "0.161",
+                 "seed 1", "0.391", "met", "0.156", "0.143", "39.90 dB", "0.013 apart", "174 ms",
+                 "machine: x86_64, vm", "wall time not recorded", "uncommitted"):
+        assert text in md, text
+    assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 4
