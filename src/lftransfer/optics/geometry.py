@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 __all__ = ["apply_homography", "backproject", "plane_axes", "project", "rectangle_to_world", "rotation_2d",
-           "rotation_xy", "rotation_z", "view_camera"]
+           "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
 
 
 def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -41,6 +41,16 @@ def rotation_xy(tilt: tuple[float, float]) -> np.ndarray:
         (3, 3) float64 rotation matrix ``R_y @ R_x``.
     """
     return Rotation.from_euler("xy", [float(tilt[0]), float(tilt[1])]).as_matrix()
+
+
+def rotation_matrix(euler_deg) -> np.ndarray:
+    """Rotation about the world x axis by ``euler_deg[0]``, then y by ``euler_deg[1]``, then z by ``euler_deg[2]``
+    (degrees; the scene format's ``rotate_deg``).
+
+    Returns:
+        (3, 3) float64 rotation matrix ``R_z @ R_y @ R_x`` (scipy's extrinsic ``"xyz"``).
+    """
+    return Rotation.from_euler("xyz", np.asarray(euler_deg, np.float64).reshape(3), degrees=True).as_matrix()
 
 
 def plane_axes(normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

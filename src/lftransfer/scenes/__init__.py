@@ -7,7 +7,10 @@ Example:
     'red block'
 """
 
-from lftransfer.scenes.format import (
+from lftransfer.scenes.assets import read_mesh
+from lftransfer.scenes.builtins import builtin_scene, builtin_scenes
+from lftransfer.scenes.loader import SceneError, load_scene, with_overrides
+from lftransfer.scenes.models import (
     DiffuseMaterial,
     EffectConfig,
     EmitterMaterial,
@@ -15,20 +18,12 @@ from lftransfer.scenes.format import (
     LightConfig,
     Material,
     MetalMaterial,
-    ObjectConfig,
     RenderConfig,
     RigConfig,
-    SceneConfig,
-    SceneError,
-    SyntheticScene,
     ViewConfig,
-    builtin_scene,
-    builtin_scenes,
-    check_synthetic,
-    load_scene,
-    read_mesh,
-    with_overrides,
 )
+from lftransfer.scenes.objects import ObjectConfig
+from lftransfer.scenes.scene import SceneConfig, SyntheticScene, check_synthetic
 
 __all__ = [
     "DiffuseMaterial",

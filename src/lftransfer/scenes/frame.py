@@ -10,7 +10,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lftransfer.optics.geometry import rotation_xy
-from lftransfer.scenes.format import SceneConfig, SyntheticScene, with_overrides
+from lftransfer.scenes.loader import with_overrides
+from lftransfer.scenes.scene import SceneConfig, SyntheticScene
 
 __all__ = ["rotation_xy", "scene_in_frame"]
 

@@ -1,0 +1,175 @@
+"""Whole scenes: :class:`SceneConfig` (a scene file, real objects included, for the simulated rig and its ground
+truth) and :class:`SyntheticScene` (the part the pipeline may know: never the real objects).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import AliasChoices, Field, ValidationInfo, field_validator, model_validator
+
+from lftransfer.scenes.models import (
+    MAX_LIGHTS,
+    AnimationConfig,
+    EffectConfig,
+    LightConfig,
+    RenderConfig,
+    RigConfig,
+    ViewConfig,
+    _Model,
+)
+from lftransfer.scenes.objects import ObjectConfig, RealObject, SyntheticObject
+
+__all__ = ["SceneConfig", "SyntheticScene", "check_synthetic"]
+
+
+class _SceneBase(_Model):
+    """What every scene has: the rig file's nominal values, the view camera, the point light, the render
+    settings and the time line; the subclasses add the objects.
+
+    Attributes:
+        rig: light field interface hardware (nominal values; defaults: the paper's rig).
+        view: the view camera.
+        lights: the real point lights (their positions as measured by hand): ``[light]`` (one) or
+            ``[[light]]`` (several) in the file; empty: the scene is lit by its emitting synthetic objects alone
+            (through the projector on the real side).
+        render: render settings.
+        animation: the time line of keyframed objects (``[animation]``), or None for a still scene.
+        source: the TOML file it was loaded from, or None.
+    """
+
+    rig: RigConfig = Field(default_factory=RigConfig)
+    view: ViewConfig = Field(default_factory=ViewConfig)
+    lights: list[LightConfig] = Field(default_factory=list, validation_alias=AliasChoices("light", "lights"),
+                                      max_length=MAX_LIGHTS)
+    render: RenderConfig = Field(default_factory=RenderConfig)
+    animation: AnimationConfig | None = None
+    source: Path | None = None
+
+    def _sides(self) -> dict[str, list[ObjectConfig]]:
+        return {side: getattr(self, side) for side in ("real", "synthetic") if side in type(self).model_fields}
+
+    @property
+    def moving(self) -> bool:
+        """Whether any object has keyframes."""
+        return any(o.moves for objs in self._sides().values() for o in objs)
+
+    def frame_times(self) -> np.ndarray:
+        """(F,) float64 frame times of the ``[animation]``, seconds; ``[0.0]`` for a still scene."""
+        return self.animation.frame_times() if self.animation is not None else np.zeros(1)
+
+    def at(self, t: float):
+        """The scene at time ``t`` (seconds): every keyframed object posed (:meth:`ObjectConfig.at`)."""
+        if not self.moving:
+            return self
+        return self.model_copy(update={side: [o.at(t) for o in objs] for side, objs in self._sides().items()})
+
+    @property
+    def emitters(self) -> list[ObjectConfig]:
+        """The synthetic objects that emit light."""
+        return [o for o in self.synthetic if o.material.type == "emitter"]
+
+    @field_validator("lights", mode="before")
+    @classmethod
+    def _one_or_several(cls, value):
+        # ``[light]`` is one table, ``[[light]]`` a list of them; None (from older code) is no light
+        return [] if value is None else [value] if isinstance(value, (dict, LightConfig)) else value
+
+    @model_validator(mode="after")
+    def _something_lights_it(self):
+        if not self.lights and not self.emitters:
+            raise ValueError("nothing lights the scene: give a [light] table (the real point light) or a synthetic "
+                             "object with material type = 'emitter'")
+        return self
+
+    @model_validator(mode="after")
+    def _animation_fits(self):
+        sides = self._sides()
+        keyed = [(side, i, o) for side, objs in sides.items() for i, o in enumerate(objs) if o.moves]
+        if not keyed:
+            return self
+        if self.animation is None:
+            side, i, o = keyed[0]
+            raise ValueError(f"{side}[{i}] ({o.name!r}) has keyframes, but the scene has no [animation] table "
+                             "(duration_s, fps)")
+        for side, i, o in keyed:
+            late = [k.time_s for k in o.keyframes if k.time_s > self.animation.duration_s]
+            if late:
+                raise ValueError(f"{side}[{i}] ({o.name!r}).keyframes: time_s {late[0]} is after the end of the "
+                                 f"animation (duration_s = {self.animation.duration_s})")
+            times = np.union1d(self.animation.frame_times(), [k.time_s for k in o.keyframes])
+            for t in times:
+                posed = o.at(float(t))
+                if np.min(posed.scale3) <= 0:
+                    raise ValueError(f"{side}[{i}] ({o.name!r}): its interpolated scale is not positive at "
+                                     f"t = {t:.4g} s ({posed.scale3.tolist()})")
+                lo, hi = posed.bounds()
+                if (side == "real" and lo[2] <= 0) or (side == "synthetic" and hi[2] >= 0):
+                    half = "z > 0" if side == "real" else "z < 0"
+                    raise ValueError(f"{side}[{i}] ({o.name!r}) leaves its half-space ({half}) at t = {t:.4g} s: "
+                                     f"it spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
+        return self
+
+
+class SyntheticScene(_SceneBase):
+    """What the pipeline may know of a scene: the rig file's nominal values, the view camera, the point light as
+    measured by hand, the render settings, the time line and the synthetic objects; never the real objects.
+
+    Attributes:
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+    """
+
+    synthetic: list[SyntheticObject] = Field(default_factory=list)
+
+
+class SceneConfig(_SceneBase):
+    """A whole scene file, real objects included (for the simulated rig and its ground truth).
+
+    Attributes:
+        real: objects of the real half-space (bounding boxes in z > 0).
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        effect: the effect measured per verified frame (``[effect]``), or None; verification data, like the
+            real objects, so the pipeline's part of the scene does not hold it.
+    """
+
+    real: list[RealObject] = Field(default_factory=list)
+    synthetic: list[SyntheticObject] = Field(default_factory=list, validate_default=True)
+    effect: EffectConfig | None = None
+
+    @field_validator("synthetic")
+    @classmethod
+    def _some_object(cls, value: list[ObjectConfig], info: ValidationInfo) -> list[ObjectConfig]:
+        real = info.data.get("real")
+        if real is not None and not real and not value:
+            raise ValueError("a scene needs at least one [[real]] or [[synthetic]] object, found none")
+        return value
+
+    @model_validator(mode="after")
+    def _effect_names_objects(self):
+        e = self.effect
+        if e is None:
+            return self
+        real, synthetic = [o.name for o in self.real], [o.name for o in self.synthetic]
+        if real.count(e.on) != 1:
+            raise ValueError(f"effect.on: expected the name of one [[real]] object ({', '.join(map(repr, real))}), "
+                             f"found {e.on!r}" + (" (more than one object has it)" if e.on in real else ""))
+        if synthetic.count(e.by) != 1:
+            raise ValueError(f"effect.by: expected the name of one [[synthetic]] object "
+                             f"({', '.join(map(repr, synthetic))}), found {e.by!r}"
+                             + (" (more than one object has it)" if e.by in synthetic else ""))
+        if e.kind == "shadow" and not self.lights and len(self.emitters) == 1 and self.emitters[0].name == e.by:
+            raise ValueError(f"effect.by: {e.by!r} is the only light of the scene: it cannot shadow anything")
+        return self
+
+    def synthetic_part(self) -> SyntheticScene:
+        """The part of the scene the pipeline is given (everything but the real objects)."""
+        return SyntheticScene.model_construct(**{k: getattr(self, k) for k in SyntheticScene.model_fields})
+
+
+def check_synthetic(scene) -> SyntheticScene:
+    """``scene`` if it is the synthetic part of a scene, else a TypeError: the pipeline never gets real objects."""
+    if not isinstance(scene, SyntheticScene):
+        raise TypeError(f"the pipeline takes the synthetic part of a scene (SceneConfig.synthetic_part()), "
+                        f"never the real objects; got {type(scene).__name__}")
+    return scene
