@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.render import fast
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.culling import TILE, RayTiles
 from lftransfer.render.fast import CachedRenderer
+from lftransfer.render.fast import rays as rays_module
 from lftransfer.render.lights import PointLight
 from tests.render.test_fast import ARRAY, _objects
 
@@ -80,7 +80,7 @@ def test_03_culled_renders_equal_whole_ones(variant, monkeypatch):
 
     monkeypatch.setattr(RayTiles, "meeting", recorded)
     for cull in (1.0, 0.0):              # always cull / never
-        monkeypatch.setattr(fast, "CULL_BELOW", cull)
+        monkeypatch.setattr(rays_module, "CULL_BELOW", cull)
         r = CachedRenderer(_objects())
         ball = CachedRenderer(_objects()[1:])            # small: most light field tiles miss it
         for _ in range(2):           # the tiles are built at a ray set's second render

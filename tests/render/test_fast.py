@@ -9,6 +9,7 @@ from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.fast import CachedRenderer, supports, tessellate
+from lftransfer.render.fast.irradiance import IrradianceCache
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.scenes.format import ObjectConfig
@@ -145,13 +146,13 @@ def test_06_irradiance_is_kept_per_light(variant, monkeypatch):
     cache = CachedRenderer(_objects())
     point = PointLight(np.array([0.3, 0.1, -0.02]), np.array([1.0, 1.0, 1.0]))
     computed = []
-    original = CachedRenderer._irradiance_of
+    original = IrradianceCache.irradiance_of
 
     def counting(self, light, seed):
         computed.append(light)
         return original(self, light, seed)
 
-    monkeypatch.setattr(CachedRenderer, "_irradiance_of", counting)
+    monkeypatch.setattr(IrradianceCache, "irradiance_of", counting)
     o, d = np.array([[0.3, 0.0, -0.08]], np.float32), np.array([[-1.0, 0.0, 0.0]], np.float32)
     first = LightFieldLight(_incident(), side="synthetic", model="area")
     both = cache.render_rays(o, d, [point, first])[0]
@@ -310,9 +311,9 @@ def test_12_lenslet_visibility_is_cached_until_objects_move(variant):
     lights = [LightFieldLight(_incident(), "synthetic", model="area")]
     fast = CachedRenderer([plate, blocker])
     blocked = fast.render_view(sensor, 64, 48, lights, spp=4)
-    table = fast._visibility[(ARRAY, "synthetic")]
+    table = fast.lobes.visibility.tables[(ARRAY, "synthetic")]
     fast.render_view(sensor, 64, 48, [LightFieldLight(_incident(), "synthetic", model="area")], spp=4)
-    assert fast._visibility[(ARRAY, "synthetic")] is table
+    assert fast.lobes.visibility.tables[(ARRAY, "synthetic")] is table
     exact = HalfSpaceRenderer([plate, blocker], max_depth=1).render_view(sensor, 64, 48, lights, spp=4)
     free = CachedRenderer([plate]).render_view(sensor, 64, 48, lights, spp=4)
     mask = (exact.alpha >= 1.0) & (exact.depth > 0.25)          # the plate, not the blocker
@@ -320,7 +321,7 @@ def test_12_lenslet_visibility_is_cached_until_objects_move(variant):
     assert free.rgb[mask].sum() > 1.1 * exact.rgb[mask].sum()
     assert _rel(blocked.rgb, exact.rgb, mask) < 0.08
     assert fast.update([plate, blocker.model_copy(update={"translate": [0.0, 0.03, -0.04]})])
-    assert (ARRAY, "synthetic") not in fast._visibility
+    assert (ARRAY, "synthetic") not in fast.lobes.visibility.tables
 
 
 def test_15_shared_corners_and_moves(variant):
@@ -353,9 +354,9 @@ def test_15_shared_corners_and_moves(variant):
     r.relight(light)
     fresh = CachedRenderer([moved, ball])
     fresh.relight(light)
-    for e, f in zip(r._irradiance, fresh._irradiance):
+    for e, f in zip(r.irradiance.values, fresh.irradiance.values):
         np.testing.assert_allclose(np.array(e), np.array(f), rtol=1e-5, atol=1e-7)
-    assert np.array(r._irradiance[0]).max() > 0
+    assert np.array(r.irradiance.values[0]).max() > 0
 
 
 def _facing_panels(material):
@@ -402,20 +403,21 @@ def test_17_view_glossy_lobes_from_the_cache_points(variant, monkeypatch):
     """A view camera's rays share one origin, so a rough lobe's radiance towards it is computed once per cache
     point (with more lobe directions) and interpolated: as accurate as sampling the lobe at every ray, here more
     (measured 0.032 against 0.043 for a metal of roughness 0.3); light field rays (many origins) sample per ray."""
-    from lftransfer.render import fast as fast_module
+    from lftransfer.render.fast import glossy as glossy_module
+    from lftransfer.render.fast.glossy import GlossyLobes
 
     material = {"type": "metal", "roughness": 0.3, "specular": [0.9, 0.7, 0.5]}
     calls = []
-    inner = CachedRenderer._pinhole_glossy
+    inner = GlossyLobes.pinhole
 
     def counted(self, *args, **kwargs):
         calls.append(args[0])
         return inner(self, *args, **kwargs)
 
-    monkeypatch.setattr(CachedRenderer, "_pinhole_glossy", counted)
+    monkeypatch.setattr(GlossyLobes, "pinhole", counted)
     at_points, plain, reference, mask = _glossy_views(material, "field")
     assert len(calls) == 1 and np.allclose(calls[0], [0.3, 0.1, 0.0], atol=1e-6)
-    monkeypatch.setattr(fast_module, "PINHOLE_ROUGHNESS", 10.0)         # control: every lobe per ray
+    monkeypatch.setattr(glossy_module, "PINHOLE_ROUGHNESS", 10.0)         # control: every lobe per ray
     per_ray, _, _, _ = _glossy_views(material, "field")
     assert len(calls) == 1
     assert _rel(at_points, reference, mask) < 0.045
@@ -450,7 +452,8 @@ def test_18_a_covered_surface_matches_the_exact_path(variant, monkeypatch):
     converged exact path the frame and photograph then match; the control (nothing filled, nothing cast) shows
     bands along the edges."""
     from lftransfer.backend import mitsuba
-    from lftransfer.render import fast as fast_module
+    from lftransfer.render.fast import visibility as visibility_module
+    from lftransfer.render.fast.interreflection import Arrangement
 
     mi = mitsuba()
     w, h = 120, 90
@@ -465,8 +468,8 @@ def test_18_a_covered_surface_matches_the_exact_path(variant, monkeypatch):
     mask = reference.alpha >= 1.0
     assert mask.sum() > 2000
     fast = CachedRenderer(objects, view_lobe_samples=64).render_view(sensor, w, h, lights(), spp=16, seed=3)
-    monkeypatch.setattr(fast_module, "VARYING_VISIBILITY", 2.0)
-    monkeypatch.setattr(fast_module.CachedRenderer, "_buried", lambda self: None)
+    monkeypatch.setattr(visibility_module, "VARYING_VISIBILITY", 2.0)
+    monkeypatch.setattr(Arrangement, "burial", lambda self: None)
     control = CachedRenderer(objects, view_lobe_samples=64).render_view(sensor, w, h, lights(), spp=16, seed=3)
     from scipy.ndimage import binary_dilation, binary_erosion
 
@@ -482,25 +485,25 @@ def test_19_objects_that_move_as_one_keep_their_gather(variant):
     """Objects keyframed apart but moving as one (fig1b's photograph and frame drift by 0.01 mm) keep their
     interreflection gather and buried points; the drift is measured from the arrangement the gather was cast for,
     so it cannot add up unseen; a real move between them (1 mm) casts it again."""
-    from lftransfer.render import fast as fast_module
+    from lftransfer.render.fast.interreflection import TOGETHER
 
     objects = _facing_panels({"type": "diffuse", "albedo": [0.9, 0.9, 0.9]})
     light = [PointLight(np.array([0.0, 0.03, -0.09]), np.array([1.0, 1.0, 1.0]))]
     r = CachedRenderer(objects, bounces=2)
     r.relight(light)
-    gather = r._interreflection()
+    gather = r.arrangement.gather()
 
     def moved(dx_left, dx_right):
         return [o.model_copy(update={"translate": (np.array(o.translate) + [dx, 0.01, 0.0]).tolist()})
                 for o, dx in zip(objects, (dx_left, dx_right))]
 
     steps = [moved(0.0, 0.00004 * i) for i in range(1, 4)]       # 0.04 mm more drift each step
-    assert r.update(steps[0]) and r._interreflection() is gather
-    assert r.update(steps[1]) and r._interreflection() is gather            # 0.08 mm from the gather's arrangement
-    assert r.update(steps[2]) and r._interreflection() is not gather        # 0.12 mm > TOGETHER
-    assert fast_module.TOGETHER == pytest.approx(1e-4)
-    gather = r._interreflection()
-    assert r.update(moved(0.001, 0.0)) and r._interreflection() is not gather
+    assert r.update(steps[0]) and r.arrangement.gather() is gather
+    assert r.update(steps[1]) and r.arrangement.gather() is gather            # 0.08 mm from the gather's arrangement
+    assert r.update(steps[2]) and r.arrangement.gather() is not gather        # 0.12 mm > TOGETHER
+    assert TOGETHER == pytest.approx(1e-4)
+    gather = r.arrangement.gather()
+    assert r.update(moved(0.001, 0.0)) and r.arrangement.gather() is not gather
 
 
 @pytest.mark.parametrize("hits", [0, 1, 57, 4000])

@@ -70,10 +70,10 @@ def test_03_linear_blend_is_found_once_and_lights_the_neighbours_of_a_lit_lensle
     first = LightFieldLight(lf, "synthetic", model="area", reconstruction="linear", seed=3)
     second = LightFieldLight(lf, "synthetic", model="area", reconstruction="linear", seed=3)
     assert second._blend_idx is not first._blend_idx                   # its own Dr.Jit arrays ...
-    from lftransfer.render.lights import _linear_blend
+    from lftransfer.render.lights.sampling import linear_blend
 
-    blend = _linear_blend(array, first.pool, 3)
-    assert _linear_blend.cache_info().hits >= 1                          # ... from the same blend
+    blend = linear_blend(array, first.pool, 3)
+    assert linear_blend.cache_info().hits >= 1                          # ... from the same blend
     idx = blend.index.reshape(array.K, -1)
     w = blend.weight.reshape(array.K, -1)
     expected = np.flatnonzero(((idx == lit) & (w > 0)).any(axis=1))
@@ -88,7 +88,8 @@ def test_04_edge_table_gathered_by_drjit_equals_the_numpy_extension(variant):
     steep-ray set) is :func:`extend_beyond_window`'s table bit for bit: without a depth, and with a depth whose
     check drops some steep rays (those read zero). A second light of the same steep rays reuses the index."""
     from lftransfer.lightfield.window import extend_beyond_window, steep_rays
-    from lftransfer.render import lights as lights_module
+    from lftransfer.backend import mitsuba
+    from lftransfer.render.lights import sampling
     from lftransfer.render.lights import EDGE_REACH, extended_table
 
     array = LensArray(lattice="hex", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
@@ -103,7 +104,7 @@ def test_04_edge_table_gathered_by_drjit_equals_the_numpy_extension(variant):
         np.testing.assert_array_equal(got, expected.ravel())
         if d is not None:
             assert steep.kept < 1.0 and (expected == 0).any()          # the check dropped some: zeros read
-        index = lights_module._edge_index(steep, lights_module.mitsuba().variant())
+        index = sampling._edge_index(steep, mitsuba().variant())
         light = LightFieldLight(lf, "synthetic", model="area", window="edge", steep=steep)
-        assert lights_module._edge_index(steep, lights_module.mitsuba().variant()) is index
+        assert sampling._edge_index(steep, mitsuba().variant()) is index
         np.testing.assert_array_equal(np.array(light._table), expected.ravel())

@@ -1,102 +1,24 @@
-"""Light sources of the renderer: the point light, emitting objects and a light field seen through the lens array.
-
-Each light adds its reflected radiance at a batch of surface points in one call (next-event estimation with
-shadow rays). The light field light is the paper's interface seen from one half-space: every lenslet k is an
-emitter whose radiance depends on direction only (DESIGN.md section 3). Three lighting models:
-
-- ``"point"``: the paper's approximation. Lenslet k collapses to a projective point light at its centre c_k
-  with intensity I_k(w) = L_k(w) A |w_z|; a point x receives I_k cos(theta_x) / r^2.
-- ``"area"``: the physical model. The aperture (lattice cell) is sampled with M stratified points p and
-  x receives sum_p L_k(w(p -> x)) cos(theta_p) cos(theta_x) / |x - p|^2 * A / M.
-- ``"prefiltered"``: point-light cost, one lookup per lenslet in the angular texture blurred by the angle
-  that the aperture subtends from x (a box filter of half-width sqrt(A) / (2 |x_z|) in (u, v)), with
-  one shadow ray to the centre.
-
-How the light field is read between lenslet centres (the area model's ``reconstruction``):
-
-- ``"box"``: every point of lenslet k's aperture sends L_k(w), one spatial sample per lenslet (what the
-  projector's lenslets physically do).
-- ``"linear"``: the aperture point p sends sum_j b_j(p) L_j(w), the barycentric blend of the three lenslets of
-  the lattice triangle around p at the same direction (:meth:`LensArray.interpolation`): continuous in
-  position, the same flux per lenslet. A captured sample L_k(w) is the average of the true light field over
-  aperture k, so this is the piecewise-linear reading of those averages.
-
-What arrives from beyond the lenslets' window (|u| or |v| > a, about 26.6 degrees off the normal: light no
-lenslet's pixels record), the light field light's ``window``:
-
-- ``"cut"``: nothing, the light field as the hardware records it.
-- ``"edge"``: the window's edge, out to |(u, v)| <= :data:`EDGE_REACH` a: lenslet k's table extended beyond its
-  window, each sample there the nearest one inside (:func:`lftransfer.lightfield.window.extend_beyond_window`).
-  Steep light from a real surface is read at the nearest direction the lenslet saw it from, which is right for
-  diffuse real surfaces whose radiance changes slowly with direction (the point the edge direction sees lies
-  beside the one the steep direction meets). Further out the guess overshoots: the real objects end, and at
-  grazing angles the synthetic ones see past them. Given the real scene's depth, each steep sample is kept only
-  where the steep ray, followed to the depth of the edge sample it reads, still meets a surface.
-
-All lenslets are summed at every shading point (not one picked at random), inside one Dr.Jit loop over the
-lenslets that carry light. Shapes of inputs are written as (N,) for N shading points.
-
-For the fast path's glossy lobes (:mod:`lftransfer.render.fast`) the light field light also answers what
-arrives along a given direction (:meth:`LightFieldLight.incident`, the area lenslets read where the ray meets
-the array plane, through :func:`plane_lookup`) and sums its lenslets with occlusion from a cache instead of
-shadow rays (:meth:`LightFieldLight.reflect`); ``illuminate`` takes a BSDF context (only some lobes) and a
-weighted irradiance (:data:`Irradiance`) for the same purpose.
-"""
+"""The light field light: a light field entering one half-space through the lens array, every lenslet an emitter
+whose radiance depends on direction only, under the point, area or prefiltered lighting model, read between the
+lenslets by the box or linear reconstruction and beyond their window as cut or edge
+(:mod:`lftransfer.render.lights`). Shapes of inputs are written as (N,) for N shading points."""
 
 from __future__ import annotations
 
-import functools
-from dataclasses import dataclass
-from typing import Callable, Literal, NamedTuple, Union
+from typing import Literal, NamedTuple
 
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.choices import LIGHTING_MODELS, RECONSTRUCTIONS, WINDOWS, LightingModel, Reconstruction, Window
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.window import SteepRays, extend_beyond_window, steep_rays
+from lftransfer.render.lights.jit import jit_array
+from lftransfer.render.lights.sampling import (EDGE_REACH, aperture_points, extended_table, linear_blend,
+                                               plane_lookup)
+from lftransfer.render.lights.sources import Irradiance, direction_weight
 
 SAMPLING_POOL = 1024        # aperture points of a jittered area model (a stratified pool)
-LightingModel = Literal["point", "area", "prefiltered"]
-LIGHTING_MODELS: tuple[str, ...] = ("point", "area", "prefiltered")
-Reconstruction = Literal["box", "linear"]
-RECONSTRUCTIONS: tuple[str, ...] = ("box", "linear")
-Window = Literal["edge", "cut"]
-WINDOWS: tuple[str, ...] = ("edge", "cut")
-#: How far ``window="edge"`` reads beyond the window: |(u, v)| <= EDGE_REACH a (36.9 degrees off the normal for
-#: a = 0.5). Measured on Fig. 4 and five other scenes (docs/architecture.md, "Light from beyond the window"):
-#: 1.5 brings the synthetic side's energy to within 1 % of the ground truth's on the four whose real objects
-#: stand near the synthetic ones; unbounded it overshoots by 3 to 5 % and the error grows again.
-EDGE_REACH = 1.5
-#: What ``illuminate`` returns: False, the radiance reflected towards ``-si.wi`` (BSDF-weighted); True, the
-#: irradiance on the surface with normal ``si.n`` (each direction weighted by its cosine), W m^-2; a function
-#: ``weight(cosine) -> mi.Float`` (per shading point, (N,)), each direction weighted by ``weight(cosine)``
-#: instead (the cache of the fast path weights by the cosine times a BSDF's diffuse transmittance).
-Irradiance = Union[bool, Callable]
-
-
-def jit_array(kind, values: np.ndarray):
-    """A Dr.Jit array (``kind``, e.g. ``mi.Float``) holding ``values`` (any shape, flattened), from a 64-byte
-    aligned NumPy buffer.
-
-    Dr.Jit reads a NumPy buffer in place, and the kernels that load from it are specialised to its alignment,
-    which varies from one NumPy allocation to the next: such kernels would be compiled again call after call
-    (hundreds of milliseconds each on the LLVM back-end). An aligned buffer keeps them the same.
-    """
-    flat = np.asarray(values).ravel()
-    dtype = np.float32 if kind.__name__.startswith("Float") else np.uint32
-    buf = np.empty(len(flat) + 64 // np.dtype(dtype).itemsize, dtype=dtype)
-    start = (-buf.ctypes.data % 64) // buf.itemsize
-    aligned = buf[start:start + len(flat)]
-    aligned[:] = flat
-    return kind(aligned)
-
-
-def jit_rays(origins: np.ndarray, directions: np.ndarray):
-    """``mi.Ray3f`` of (N, 3) origins and directions (any float dtype, stored as float32 through
-    :func:`jit_array`)."""
-    mi = mitsuba()
-    return mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, origins[:, i]) for i in range(3))),
-                    mi.Vector3f(*(jit_array(mi.Float, directions[:, i]) for i in range(3))))
 
 
 class Incident(NamedTuple):
@@ -111,117 +33,6 @@ class Incident(NamedTuple):
     radiance: object
     lenslet: object
     density: object
-
-
-def to_numpy(color) -> np.ndarray:
-    """(N, 3) float32 of a mi.Color3f (N,), evaluated first on its own: converting it directly would fuse the
-    conversion, whose layout names N, into the kernel that computes it, and every new N would compile that
-    kernel again."""
-    import drjit as dr
-
-    dr.eval(color)
-    return np.stack([np.array(color[c], dtype=np.float32) for c in range(3)], axis=1)
-
-
-@dataclass
-class PointLight:
-    """An isotropic point light.
-
-    Args:
-        position: (3,) metres.
-        intensity: (3,) radiant intensity per channel, W/sr.
-    """
-
-    position: np.ndarray
-    intensity: np.ndarray
-
-    def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
-        """Light from this light at the points ``si`` (mi.Color3f, (N,)).
-
-        Returns the radiance reflected towards ``-si.wi`` (BSDF-weighted, the BSDF components that ``ctx``
-        enables, all by default), or with ``irradiance=True`` the irradiance on the surface with normal ``si.n``
-        (W m^-2), for caches of diffuse shading (or, with a weight function, the weighted irradiance: see
-        :data:`Irradiance`).
-        """
-        mi = mitsuba()
-        import drjit as dr
-
-        p = mi.Point3f(*[float(c) for c in self.position])
-        w = p - si.p
-        r2 = dr.squared_norm(w)
-        wn = w * dr.rsqrt(r2)
-        visible = active & ~scene.ray_test(si.spawn_ray_to(p), active)
-        f = _weight(si, wn, visible, irradiance, ctx)
-        intensity = mi.Color3f(*[float(c) for c in self.intensity])
-        return dr.select(visible, f * intensity / r2, 0.0)
-
-
-class EmitterLight:
-    """The emitting objects of a half-space (an ``emitter`` material, e.g. the sun of the paper's Fig. 5).
-
-    They light the other objects by next-event estimation: ``samples`` directions per shading point drawn by
-    Mitsuba's emitter sampling of the scene the renderer traces (solid-angle sampling of the visible cap for
-    spheres), stratified on a sqrt(samples) x sqrt(samples) grid of the sample square when ``samples`` is a
-    square (a sun half hidden behind the horizon of the point it lights is then sampled along its edge, not at
-    random), with shadow rays; a ray that meets an emitter sees its radiance (:meth:`emitted`). Give this light
-    to a render only where the emitters' own light belongs (the direct frame), never with a captured light
-    field that already carries it back.
-
-    Args:
-        samples: emitter samples per shading point.
-        seed: seeds the samples (each shading point and call draws its own).
-    """
-
-    def __init__(self, samples: int = 16, seed: int = 0) -> None:
-        if samples < 1:
-            raise ValueError(f"samples must be >= 1, got {samples}")
-        self.samples = int(samples)
-        self.seed = int(seed)
-
-    def emitted(self, scene, si, active):
-        """Radiance the hit emitters send back along the rays (mi.Color3f, (N,)); zero where no emitter."""
-        mi = mitsuba()
-        import drjit as dr
-
-        active = mi.Bool(active) & si.is_valid()
-        return dr.select(active, si.emitter(scene, active).eval(si, active), 0.0)
-
-    def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
-        """Light from the scene's emitters at the points ``si`` (mi.Color3f, (N,)), reflected towards ``-si.wi``
-        (the BSDF components ``ctx`` enables) or, with ``irradiance``, the (weighted) irradiance on the surface
-        with normal ``si.n``."""
-        mi = mitsuba()
-        import drjit as dr
-
-        result = mi.Color3f(0.0)
-        if len(scene.emitters()) == 0:
-            return result
-        n = dr.width(si.p)
-        rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
-        active = mi.Bool(active)
-        side = int(round(np.sqrt(self.samples)))
-        strata = side if side * side == self.samples else 1
-        for j in range(self.samples):
-            x, y = (j % strata, j // strata) if strata > 1 else (0, 0)
-            sample = mi.Point2f((x + rng.next_float32()) / strata, (y + rng.next_float32()) / strata)
-            ds, value = scene.sample_emitter_direction(si, sample, True, active)
-            ok = active & (ds.pdf > 0.0)
-            f = _weight(si, ds.d, ok, irradiance, ctx)
-            result += dr.select(ok, f * value, 0.0)
-        return result / self.samples
-
-
-def _weight(si, wn, active, irradiance: Irradiance, ctx=None):
-    """BSDF value times cosine for direction ``wn`` (world, towards the light; the components ``ctx`` enables),
-    or the plain cosine (``irradiance=True``), or ``irradiance(cosine)`` (a weight function)."""
-    mi = mitsuba()
-    import drjit as dr
-
-    if callable(irradiance):
-        return mi.Color3f(irradiance(dr.maximum(dr.dot(si.n, wn), 0.0)))
-    if irradiance:
-        return mi.Color3f(dr.maximum(dr.dot(si.n, wn), 0.0))
-    return si.bsdf().eval(ctx if ctx is not None else mi.BSDFContext(), si, si.to_local(wn), active)
 
 
 class LightFieldLight:
@@ -315,13 +126,13 @@ class LightFieldLight:
         self.seed = int(seed)
         self.pool = SAMPLING_POOL if (model == "area" and jitter) else self.M
         if model == "area":
-            offsets = _aperture_points(array, self.pool, int(seed))
+            offsets = aperture_points(array, self.pool, int(seed))
         else:
             offsets = np.zeros((1, 2), np.float32)
         self._ox = jit_array(mi.Float, offsets[:, 0])
         self._oy = jit_array(mi.Float, offsets[:, 1])
         if reconstruction == "linear":
-            blend = _linear_blend(array, self.pool if model == "area" else 0, int(seed))
+            blend = linear_blend(array, self.pool if model == "area" else 0, int(seed))
             carries = carries | (blend.reads & carries[None, :]).any(axis=1)   # a dark lenslet next to a lit one
             self._blend_idx = jit_array(mi.UInt32, blend.index)
             self._blend_w = jit_array(mi.Float, blend.weight)
@@ -608,157 +419,9 @@ class LightFieldLight:
             if irradiance is not False:   # no shadow ray towards lenslets behind the surface
                 lit &= dr.dot(si.n, wn) > 0.0
             visible = lit & ~scene.ray_test(si.spawn_ray_to(p), lit)
-            f = _weight(si, wn, visible, irradiance, ctx)
+            f = direction_weight(si, wn, visible, irradiance, ctx)
             acc += dr.select(visible, f * radiance * (cos_p * weight / r2), 0.0)
             return i + 1, acc
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
-
-
-def extended_table(data: np.ndarray, steep: SteepRays):
-    """:func:`~lftransfer.lightfield.window.extend_beyond_window`'s table, gathered by Dr.Jit: mi.Float
-    (K * Ve * Ue * 3,), equal to ``extend_beyond_window(lf, steep).data.ravel()`` bit for bit.
-
-    The gather's index depends only on ``steep`` and is uploaded once per :class:`SteepRays` (a live loop builds a
-    light per frame from the same one); per frame only the light field itself is uploaded (a third of the
-    extended table) and the gather runs on the renderer's threads.
-
-    Args:
-        data: (K, V, U, 3) float32 radiance, C-contiguous.
-        steep: :func:`~lftransfer.lightfield.window.steep_rays` of light fields of this shape.
-    """
-    import drjit as dr
-
-    mi = mitsuba()
-    steep.check(data.shape)
-    index = _edge_index(steep, mi.variant())
-    table = dr.gather(mi.Float, jit_array(mi.Float, data), index, index < data.size)   # 0 past the end
-    dr.eval(table)
-    dr.sync_thread()        # finished here, so that a stage timer charges the gather to the light's construction
-    return table
-
-
-_EDGE_INDEX: list = []      # (SteepRays, variant, mi.UInt32) of the last few steep-ray sets, newest last
-
-
-def _edge_index(steep: SteepRays, variant: str):
-    """mi.UInt32 (K * Ve * Ue * 3,) the float each entry of the extended table reads (3 K V U: zero), per steep-ray
-    set (recognised by identity; a few are kept)."""
-    mi = mitsuba()
-    for kept, var, index in _EDGE_INDEX:
-        if kept is steep and var == variant:
-            return index
-    floats = steep.entries.astype(np.uint32)[..., None] * np.uint32(3) + np.arange(3, dtype=np.uint32)
-    index = jit_array(mi.UInt32, floats)
-    del _EDGE_INDEX[:-3]
-    _EDGE_INDEX.append((steep, variant, index))
-    return index
-
-
-@functools.lru_cache(maxsize=16)
-def _aperture_points(array, pool: int, seed: int) -> np.ndarray:
-    """(pool, 2) float32 aperture offsets of an area model, metres (``LensArray.sample_aperture``): the same for
-    every light of a rig and seed, so found once (a live loop builds a light per frame)."""
-    points = array.sample_aperture(pool, seed=seed).astype(np.float32)
-    points.flags.writeable = False
-    return points
-
-
-@dataclass(frozen=True)
-class _LinearBlend:
-    """The linear reconstruction's lenslets and weights at every aperture point of every lenslet.
-
-    Attributes:
-        index: (K * P * 3,) uint32 lenslets read (P aperture points, three corners each).
-        weight: (K * P * 3,) float32 their barycentric weights.
-        reads: (K, K) bool: lenslet k's aperture reads lenslet j.
-    """
-
-    index: np.ndarray
-    weight: np.ndarray
-    reads: np.ndarray
-
-
-@functools.lru_cache(maxsize=16)
-def _linear_blend(array, pool: int, seed: int) -> _LinearBlend:
-    """:class:`_LinearBlend` at the aperture points of :func:`_aperture_points` (``pool`` 0: the lenslets'
-    centres), found once per rig and seed: 38 ms at the paper's 120 lenslets and 1024 points."""
-    offsets = _aperture_points(array, pool, seed) if pool else np.zeros((1, 2), np.float32)
-    K = array.K
-    idx, w = array.interpolation(array.centres[:, None, :] + offsets[None].astype(np.float64))   # (K, P, 3)
-    idx = np.where(w > 0, idx, np.arange(K)[:, None, None])
-    reads = np.zeros((K, K), bool)
-    reads[np.repeat(np.arange(K), idx.shape[1] * 3), idx.ravel()] = True
-    blend = _LinearBlend(index=idx.astype(np.uint32).ravel(), weight=w.astype(np.float32).ravel(), reads=reads)
-    for a in (blend.index, blend.weight, blend.reads):
-        a.flags.writeable = False
-    return blend
-
-
-@dataclass(frozen=True)
-class PlaneLookup:
-    """A raster of the array plane: which lenslets send light from each cell, and with what weight.
-
-    Attributes:
-        x0, y0: corner of the raster (the array's extent), metres.
-        cell: cell size, metres (pitch / 64).
-        nx, ny: raster size.
-        terms: lenslets per cell, 1 (``"box"``) or 3 (``"linear"``).
-        lenslets: mi.UInt32 (ny * nx * 3,) lenslet indices per cell (row-major, y then x).
-        weights: mi.Float (ny * nx * 3,) their weights, zero outside every aperture.
-        own: mi.UInt32 (ny * nx,) the lenslet whose aperture contains the cell's centre, K outside every aperture.
-    """
-
-    x0: float
-    y0: float
-    cell: float
-    nx: int
-    ny: int
-    terms: int
-    lenslets: object
-    weights: object
-    own: object
-
-
-PLANE_CELLS_PER_PITCH = 64
-
-
-def plane_lookup(array, reconstruction: Reconstruction = "box") -> PlaneLookup:
-    """The :class:`PlaneLookup` of a lens array, cached per array and reconstruction.
-
-    Each cell is read at its centre: ``"box"``, the lenslet whose aperture contains it
-    (:meth:`LensArray.lenslet_at` and :meth:`LensArray.in_aperture`); ``"linear"``, the three lenslets and
-    weights of :meth:`LensArray.interpolation` there (inside an aperture only). A point is therefore read as
-    the nearest cell centre reads it, at most pitch / 128 away.
-    """
-    if reconstruction not in RECONSTRUCTIONS:
-        raise ValueError(f"reconstruction must be one of {RECONSTRUCTIONS}, got {reconstruction!r}")
-    return _plane_lookup(array, reconstruction, mitsuba().variant())
-
-
-@functools.lru_cache(maxsize=8)
-def _plane_lookup(array, reconstruction: str, variant: str) -> PlaneLookup:
-    mi = mitsuba()
-    cell = array.pitch / PLANE_CELLS_PER_PITCH
-    xmin, xmax, ymin, ymax = array.extent()
-    nx, ny = int(np.ceil((xmax - xmin) / cell)), int(np.ceil((ymax - ymin) / cell))
-    gx = xmin + (np.arange(nx) + 0.5) * cell
-    gy = ymin + (np.arange(ny) + 0.5) * cell
-    centres = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)          # (ny * nx, 2), row-major
-    own = array.lenslet_at(centres)
-    inside = own >= 0
-    inside[inside] = array.in_aperture(centres[inside] - array.centres[own[inside]])
-    idx = np.zeros((len(centres), 3), np.int64)
-    w = np.zeros((len(centres), 3), np.float64)
-    if reconstruction == "box":
-        idx[inside, 0] = own[inside]
-        w[inside, 0] = 1.0
-    else:
-        idx[inside], w[inside] = array.interpolation(centres[inside])
-        w[idx < 0] = 0.0
-        idx[idx < 0] = 0
-    own = np.where(inside, own, array.K)
-    return PlaneLookup(float(xmin), float(ymin), float(cell), nx, ny, 1 if reconstruction == "box" else 3,
-                       jit_array(mi.UInt32, idx.astype(np.uint32).ravel()),
-                       jit_array(mi.Float, w.astype(np.float32).ravel()), jit_array(mi.UInt32, own.astype(np.uint32)))
