@@ -105,7 +105,8 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
                        pp_offset=(12.0, -8.0), shift=(0.3, 0.6), sigma: float = 1.2, aperture: float = 0.9,
                        shape_kind: str | None = None, edge: float = 0.8, falloff: float = 0.4,
                        inner_falloff: float = 0.3, full_well: float = 5000.0, read_noise: float = 3.0,
-                       black: float = 0.01, bits: int = 12, supersample: int = 3, seed: int = 0) -> LensletImage:
+                       black: float = 0.01, bits: int = 12, supersample: int = 3, seed: int = 0,
+                       jitter: float = 0.0) -> LensletImage:
     """Render a spot or white image of a distorted, tilted, rotated lattice with vignetting and noise.
 
     Args:
@@ -129,6 +130,9 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
         bits: 12 or 16.
         supersample: white sub-images are rendered with ``supersample x supersample`` samples per pixel.
         seed: noise seed.
+        jitter: each spot / sub-image is moved off its lattice node by a random Gaussian offset of this standard
+            deviation per axis, in local pitches (drawn from its own generator, seeded by ``seed``): an image
+            of blobs that is not a lens array's, with ``centres`` still the lattice nodes (a negative control).
     """
     rng = np.random.default_rng(seed)
     h, w = shape
@@ -144,6 +148,8 @@ def make_lenslet_image(kind: str = "spots", lattice: str = "hex", *, shape=(800,
                   tilt=tuple(tilt), k=(k1, k2), pp=pp, f=f, uv0=uv0)
     uv = ideal_coordinates(idx, lattice)
     xy = _geometry(uv, **params)
+    if jitter:
+        xy = xy + jitter * pitch * np.random.default_rng([seed, 1]).normal(size=xy.shape)
     in_image = (xy[:, 0] >= -0.5) & (xy[:, 0] <= w - 0.5) & (xy[:, 1] >= -0.5) & (xy[:, 1] <= h - 0.5)
     # local scale and rotation of the lattice at each node (finite differences)
     eps = 1e-3

@@ -129,3 +129,18 @@ def test_06_calibrate_scene_bad_input(tmp_path):
     bad.write_text("[rig]\nrows = -3\n")
     result = runner.invoke(app, ["calibrate", str(bad)])
     assert result.exit_code == 2 and "bad.toml" in _text(result) and "rows" in _text(result)
+
+
+def test_07_lenslets_refuses_a_poor_fit(tmp_path):
+    """Blobs off the lattice at random (not a lens array's image): one line saying why, no centres written."""
+    from .lenslet_images import make_lenslet_image
+
+    im = make_lenslet_image("spots", "hex", shape=(480, 640), pitch=28.0, rotation_deg=-1.0, k1=0.0, seed=13,
+                            jitter=0.02)
+    cv2.imwrite(str(tmp_path / "scene.png"), im.image)
+    result = runner.invoke(app, ["calibrate", "lenslets", str(tmp_path / "scene.png"), "--lattice", "hex",
+                                 "--out", str(tmp_path / "c.csv")])
+    text = _text(result)
+    assert result.exit_code == 2 and "scene.png" in text and "poor lattice fit" in text, result.output
+    assert "expected a spot image or a white image of the lens array" in text
+    assert not (tmp_path / "c.csv").exists()

@@ -117,10 +117,15 @@ def _pitch_rotation(hom, shape):
 
 @pytest.mark.parametrize("sigma", [1.0, 1.5, 2.0])
 def test_01_clean_spots_subpixel(sigma):
+    # Sub-pixel phases all over the pixel, on a lattice (a non-integer pitch, rotated by 1.3 deg, shifted at
+    # random): spots off a lattice at random are no lens array's image (test_15).
     rng = np.random.default_rng(int(sigma * 10))
-    pitch = 16.0
+    pitch = 16.37
     r, c = np.divmod(np.arange(6 * 8), 8)
-    truth = np.stack([20 + c * pitch, 18 + r * pitch], 1) + rng.uniform(-0.5, 0.5, (48, 2))
+    a = math.radians(1.3)
+    x = 20 + pitch * (c * math.cos(a) - r * math.sin(a))
+    y = 18 + pitch * (c * math.sin(a) + r * math.cos(a))
+    truth = np.stack([x, y], 1) + rng.uniform(-0.5, 0.5, 2)
     img = _render((120, 150), truth, np.full(48, 0.8), sigma)
     fit = find_lenslet_centres(img, "rect")
     j = _match(fit.centres, truth)
@@ -440,3 +445,48 @@ def test_14_kind_and_metric_controls():
     toward = fit.centres - 1.2e-4 * (fit.centres - [(w - 1) / 2, (h - 1) / 2])
     shrunk = _score(LatticeFit(**{**fit.__dict__, "centres": toward}), im)
     assert shrunk["radial_bias"] < -0.025 and shrunk["rms"] < 0.1
+
+
+# ------------------------------------------------------------------------ a poor lattice fit is refused
+_POOR = (r"poor lattice fit: .*RMS residual {rms} px = .* % of the .* px pitch, more than the .* px .* expected a "
+         r"spot image or a white image of the lens array: .*kind='spots'.*kind='white'")
+
+
+@pytest.mark.parametrize("kind", ["spots", "white"])
+def test_15_poor_fit_refused(kind):
+    """A lens array's image passes; the same blobs moved off the lattice at random (negative control) do not.
+
+    The jittered image's blobs are found as well as the good one's, on the same lattice, but they lie 0.02 pitch
+    off it (RMS 0.81 px, the limit 0.14 px at this 28 px pitch): the fit is refused with one line that says
+    what was measured and what is expected.
+    """
+    good = make_lenslet_image(kind, "hex", shape=(480, 640), pitch=28.0, rotation_deg=-1.0, k1=0.0, seed=13)
+    fit = find_lenslet_centres(to_grey(good.image, levels=good.levels), "hex", kind=kind)
+    assert fit.rms_px < 0.03 and len(fit.centres) >= 400
+    bad = make_lenslet_image(kind, "hex", shape=(480, 640), pitch=28.0, rotation_deg=-1.0, k1=0.0, seed=13,
+                             jitter=0.02)
+    grey = to_grey(bad.image, levels=bad.levels)
+    with pytest.raises(NoSpotsError, match=_POOR.format(rms=r"0\.8\d\d")) as info:
+        find_lenslet_centres(grey, "hex", kind=kind)
+    message = str(info.value)
+    assert "\n" not in message and "nodes in the" in message
+    with pytest.raises(NoSpotsError, match=r"of 750 lenslets expected \(25 x 30\)"):
+        find_lenslet_centres(grey, "hex", kind=kind, expected_shape=(25, 30))
+
+
+def test_16_scene_photograph_refused(variant):
+    """The simulated LF camera's photograph of the real scene (quick fig4 rig) is no white image: refused."""
+    from lftransfer.rig.requests import RealScene
+    from lftransfer.sim.rig import SimRig
+    from lftransfer.sim.truth import perturbed_rig
+    from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+
+    full = load_scene(builtin_scene("fig4"))
+    scene = with_overrides(full, rig={"lf_camera": [v // 4 for v in full.rig.lf_camera],
+                                      "projector": [v // 4 for v in full.rig.projector], "angular_samples": 16})
+    truth = perturbed_rig(scene.rig, seed=1)
+    rig = SimRig(scene, truth=truth, capture_spp=1)
+    rig.setup(RealScene())
+    grey = to_grey(rig.capture_lf().codes, levels=truth.camera.levels)
+    with pytest.raises(NoSpotsError, match=_POOR.format(rms=r"1\.\d+")):
+        find_lenslet_centres(grey, "hex", kind="white")
