@@ -429,6 +429,332 @@ def _predict_board(model, scene, projector, image: np.ndarray, to_world: np.ndar
     return radiance.reshape(len(xs), spp, 3).mean(1), hit.reshape(len(xs), spp).all(1), view
 
 
+# ---- the stages of calibrate_radiometry -------------------------------------------------------------------------
+@dataclass
+class _FocalPlane:
+    """The focal-plane diffuser captures: projector images of uniform or ramp codes, LF captures as normalised codes.
+
+    Attributes:
+        rig: the rig (its set-up is the :class:`~lftransfer.rig.requests.FocalPlaneDiffuser` while captured).
+        shape: ``(H, W)`` of the projector, pixels.
+        levels: the projector's full-scale code; ``dtype`` its images' dtype.
+        camera_levels: the LF camera's full-scale code.
+        captures: LF captures taken so far.
+    """
+
+    rig: Rig
+    shape: tuple[int, int]
+    levels: int
+    dtype: np.dtype
+    camera_levels: float
+    captures: int = 0
+
+    def capture(self, image: np.ndarray, e: float) -> np.ndarray:
+        """Project ``image`` and capture at exposure scale ``e``: ``(H, W, 3) float32`` codes in [0, 1]."""
+        self.captures += 1
+        self.rig.project(image)
+        codes = self.rig.capture_lf(LFCapture(exposure_scale=float(e))).codes
+        return codes.astype(np.float32) / np.float32(self.camera_levels)
+
+    def uniform(self, codes) -> np.ndarray:
+        """``(H, W, 3)`` projector image of the same codes (3,) everywhere."""
+        prj_h, prj_w = self.shape
+        return np.broadcast_to(np.asarray(codes, self.dtype), (prj_h, prj_w, 3)).copy()
+
+
+@dataclass
+class _CameraResponse:
+    """Step (a): the camera's power-law response.
+
+    Attributes:
+        gamma: ``(3,)`` camera gamma per channel (``code = signal^(1/gamma)``).
+        signal: ``(P, 3)`` linear signal at exposure scale 1 of the sampled ramp pixels (NaN where not fitted).
+        scales: ``(E,)`` exposure scales of the bracket.
+        image_shape: ``(H, W)`` of the LF camera, pixels.
+        diag: the fit's diagnostics (response samples and pixel counts per channel).
+    """
+
+    gamma: np.ndarray
+    signal: np.ndarray
+    scales: np.ndarray
+    image_shape: tuple[int, int]
+    diag: dict
+
+    def linear(self, codes_img: np.ndarray, e: float) -> np.ndarray:
+        """Normalised codes -> linear signal per unit exposure scale."""
+        return np.power(codes_img, self.gamma.astype(np.float32)) / np.float32(e)
+
+
+def _measure_camera_response(fp: _FocalPlane, model, exposures: int, rng: np.random.Generator,
+                             say: Progress) -> _CameraResponse:
+    """Step (a): an exposure bracket of a projector ramp on the focal-plane diffuser; the camera's gamma from it.
+
+    The bracket is ``exposures`` captures, factors of 2 apart, from exposure scale 1 (or longer, where the
+    brightest pixels at 1 are below half scale), on a strided subset of about 60,000 pixels.
+
+    Returns:
+        The camera response: gamma per channel, the sampled pixels' linear signal, the exposure scales.
+    """
+    say(f"camera response: exposure bracket of a projector ramp ({exposures} captures)")
+    fp.rig.setup(FocalPlaneDiffuser())
+    prj_h, prj_w = fp.shape
+    ramp = np.round(np.linspace(0, fp.levels, prj_w)).astype(fp.dtype)
+    ramp_img = np.repeat(np.broadcast_to(ramp[None, :], (prj_h, prj_w))[..., None], 3, axis=2).copy()
+    first = fp.capture(ramp_img, 1.0)
+    h, w = first.shape[:2]
+    stride = _stride(h, w, 60_000)
+    top = 1.0
+    nominal_gamma = np.asarray(model.camera.response.gamma)
+    bright = np.quantile(first[::stride, ::stride].reshape(-1, 3), 0.999, axis=0)
+    if np.all(bright < 0.5):                          # too dark at the normal exposure: lengthen the bracket
+        peak = float(np.max(bright ** nominal_gamma))
+        top = 1.5 / max(peak, 1e-4)
+    scales = top * 0.5 ** np.arange(exposures)
+    stack = [first[::stride, ::stride] if top == 1.0 else fp.capture(ramp_img, top)[::stride, ::stride]]
+    stack += [fp.capture(ramp_img, e)[::stride, ::stride] for e in scales[1:]]
+    codes = np.stack(stack).reshape(exposures, -1, 3).astype(np.float64)
+    gamma, signal, diag = _fit_camera_gamma(codes, scales, rng)
+    return _CameraResponse(gamma=gamma, signal=signal, scales=scales, image_shape=(h, w), diag=diag)
+
+
+@dataclass
+class _FlatField:
+    """Step (b): the camera's vignetting from a flat field.
+
+    Attributes:
+        poly: the vignetting polynomial (1 at its maximum over the fitted area).
+        vmap: ``(H, W) float32`` its map over the LF camera's pixels.
+        mask: ``(H, W) bool`` the pixels the fit used (lit, neither dark nor saturated, eroded by 2 px).
+        exposure: exposure scale of the flat field (nothing saturates at it).
+        white: the full-code projector image that lit it.
+        diag: the fit's diagnostics (RMS, pixels used and rejected).
+    """
+
+    poly: VignettingPolynomial
+    vmap: np.ndarray
+    mask: np.ndarray
+    exposure: float
+    white: np.ndarray
+    diag: dict
+
+
+def _measure_vignetting(fp: _FocalPlane, response: _CameraResponse, degree: int, say: Progress) -> _FlatField:
+    """Step (b): a full-code projector image on the diffuser, linearised; a polynomial of ``degree`` fitted to it.
+
+    The exposure starts where the brightest ramp pixels of step (a) reach 0.6 of full scale and halves (up to 6
+    tries) until under 1e-4 of the lit pixels saturate.
+
+    Returns:
+        The flat field's fit, the pixels it used and its exposure scale.
+
+    Raises:
+        RadiometryError: the flat field saturates at every exposure tried, or too few pixels are usable.
+    """
+    say("camera vignetting: flat field")
+    h, w = response.image_shape
+    white = fp.uniform([fp.levels] * 3)
+    peak_signal = float(np.nanmax(np.nanquantile(response.signal, 0.999, axis=0)))    # brightest ramp pixels, e = 1
+    e_flat = 0.6 / max(peak_signal, 1e-6)
+    for _ in range(6):
+        flat = fp.capture(white, e_flat)
+        lit = flat.max(axis=2) > _DARK
+        if np.mean(flat[lit].max(axis=1) >= _SATURATED) < 1e-4:
+            break
+        e_flat *= 0.5
+    else:
+        raise RadiometryError("vignetting: the flat field saturates at every exposure tried")
+    flat_lin = response.linear(flat, e_flat)
+    level = np.median(flat_lin[lit], axis=0)
+    mask = np.all((flat >= _DARK) & (flat <= _BRIGHT), axis=2) & np.all(flat_lin > 0.25 * level, axis=2)
+    mask = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    poly, diag = _fit_vignetting(flat_lin, mask, degree, _stride(h, w, 200_000))
+    return _FlatField(poly=poly, vmap=poly.map(), mask=mask, exposure=e_flat, white=white, diag=diag)
+
+
+@dataclass
+class _ProjectorFit:
+    """Step (c): the projector's response, cross-talk and black level (up to a common gain).
+
+    Attributes:
+        gamma: ``(3,)`` projector gamma per channel (``drive = code^gamma``).
+        cross_talk: ``(3, 3)`` C, the mean of its diagonal 1.
+        black_level: ``(3,)`` b on the scale of C, clipped to [0, 0.199].
+        scale: ``s``, the mean diagonal of ``G C``: focal-plane signal per unit exposure scale of one channel
+            at full code.
+        levels: ``(L,) int`` the projector codes of the uniform levels.
+        black: ``(3,)`` linear signal of the black image (per unit exposure scale, vignetting divided out).
+        black_exposure: exposure scale of the black image.
+        samples: ``(3, L, 3)`` linear signal of each projector channel (first axis) at each level.
+        fit_rms: ``(3,)`` RMS residual of each channel's power-law fit, relative to its diagonal gain.
+        response_samples: per channel, ``(normalised code, measured normalised drive)`` pairs.
+    """
+
+    gamma: np.ndarray
+    cross_talk: np.ndarray
+    black_level: np.ndarray
+    scale: float
+    levels: np.ndarray
+    black: np.ndarray
+    black_exposure: float
+    samples: np.ndarray
+    fit_rms: list
+    response_samples: list
+
+
+def _measure_projector(fp: _FocalPlane, response: _CameraResponse, flat: _FlatField, projector_levels: int,
+                       say: Progress) -> _ProjectorFit:
+    """Step (c): uniform projector images (black, then ``projector_levels`` levels per channel), mean signals.
+
+    Each capture's codes are linearised by (a), divided by the vignetting of (b) and averaged over a central
+    region (vignetting >= 0.85 within the flat field's mask, strided to about 200,000 pixels); the black image
+    is captured at 8 times the flat field's exposure unless that saturates. Per projector channel a power law
+    is fitted to the levels' signals minus black's.
+
+    Returns:
+        The projector's gamma, cross-talk, black level and the measurements behind them.
+    """
+    n_lv = np.unique(np.round(np.linspace(0, fp.levels, projector_levels + 1)[1:]).astype(int))
+    say(f"projector response, cross-talk, black level ({1 + 3 * len(n_lv)} captures)")
+    vmap, e_flat = flat.vmap, flat.exposure
+    region = flat.mask & (vmap >= 0.85)
+    if region.sum() < 100:
+        region = flat.mask
+    rs = max(1, int(math.ceil(math.sqrt(region.sum() / 200_000))))
+    sub = np.zeros_like(region)
+    sub[::rs, ::rs] = region[::rs, ::rs]
+    region = sub
+    inv_vig = (1.0 / vmap[region])[:, None]
+
+    def measure(image: np.ndarray, e: float) -> tuple[np.ndarray, bool]:
+        img = fp.capture(image, e)[region]
+        return (response.linear(img, e) * inv_vig).mean(axis=0).astype(np.float64), bool(np.any(img >= _SATURATED))
+
+    e_black = 8 * e_flat
+    black, saturated = measure(fp.uniform([0, 0, 0]), e_black)
+    if saturated:                                   # a bright black level: the normal exposure then suffices
+        e_black = e_flat
+        black, _ = measure(fp.uniform([0, 0, 0]), e_black)
+    samples = np.zeros((3, len(n_lv), 3))
+    for j in range(3):
+        for i, n in enumerate(n_lv):
+            code = [0, 0, 0]
+            code[j] = int(n)
+            samples[j, i], _ = measure(fp.uniform(code), e_flat)
+    gain_ct = np.zeros((3, 3))                            # G * C
+    projector_gamma = np.zeros(3)
+    rms = []
+    x_lv = n_lv / fp.levels
+    prj_samples = []
+    for j in range(3):
+        d = samples[j] - black[None, :]
+        projector_gamma[j], gain_ct[:, j], r = _fit_power(x_lv, d)
+        rms.append(float(r / gain_ct[j, j]))
+        prj_samples.append(np.stack([x_lv, d[:, j] / gain_ct[j, j]], 1).round(7).tolist())
+    s = float(np.mean(np.diag(gain_ct)))
+    return _ProjectorFit(gamma=projector_gamma, cross_talk=gain_ct / s, black_level=np.clip(black / s, 0.0, 0.199),
+                         scale=s, levels=n_lv, black=black, black_exposure=e_black, samples=samples, fit_rms=rms,
+                         response_samples=prj_samples)
+
+
+@dataclass
+class _BoardMeasurement:
+    """Step (d): the projector's absolute brightness from a board seen by the view camera.
+
+    Attributes:
+        max_radiance: measured over predicted radiance (at ``max_radiance = 1``), all channels pooled.
+        per_channel: ``(3,)`` the same ratio per channel.
+        measured_mean: ``(3,)`` mean measured radiance of the pixels used.
+        pixels: view pixels used (the board hit by every ray of our render, not dark).
+        held: ``(4, 4)`` ``to_world`` of the board where it really stood (its printed chart's pose).
+        centre_pixel: ``(x, y)`` view pixel of the held board's centre.
+    """
+
+    max_radiance: float
+    per_channel: np.ndarray
+    measured_mean: np.ndarray
+    pixels: int
+    held: np.ndarray
+    centre_pixel: tuple[int, int]
+
+
+def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, white: np.ndarray, *,
+                        board_spp: int | None, predict_spp: int, angular_samples: int, seed: int,
+                        say: Progress) -> _BoardMeasurement:
+    """Step (d, i): the board lit by the full-code projector image, measured and predicted by our own render.
+
+    The view pixels around the held board's centre (a square of half-width 4 % of the view's width, halved up
+    to 3 times until our render's rays all hit the board) are rendered lit by the calibrated projector model at
+    ``max_radiance = 1``.
+
+    Returns:
+        The ratio of measured to predicted radiance and the board measurement.
+
+    Raises:
+        RadiometryError: no board position is seen well, its chart is not found, its centre projects outside
+            the view, or our render of it is dark.
+    """
+    say("projector brightness: board in front of the array (view camera)")
+    centre, normal, view, _ = _board_pose(scene, model)
+    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART))
+    rig.project(white)
+    measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
+    # where the board really stands (held by hand): from the chessboard printed on it
+    held = _held_board(measured, scene.view, normal)
+    cx, cy = (int(round(v)) for v in project(view, held[:3, 3][None])[0])
+    projector = replace(model.projector, response=ResponseCurve(tuple(projector_fit.gamma)), max_radiance=1.0,
+                        cross_talk=projector_fit.cross_talk, black_level=tuple(projector_fit.black_level.tolist()))
+    vw, vh = view.resolution
+    half = max(3, int(round(0.04 * vw)))
+    say("projector brightness: our own render of the board")
+    for _ in range(4):
+        ys, xs = np.mgrid[max(cy - half, 0):min(cy + half + 1, vh), max(cx - half, 0):min(cx + half + 1, vw)]
+        xs, ys = xs.ravel(), ys.ravel()
+        if len(xs) == 0:
+            raise RadiometryError(f"brightness: the board centre projects outside the view camera ({cx}, {cy})")
+        predicted, hit, _ = _predict_board(model, scene, projector, white, held, (xs, ys),
+                                           angular_samples=angular_samples, spp=predict_spp,
+                                           aperture_samples=8, seed=seed)
+        if hit.all() or half <= 3:
+            break
+        half = max(3, half // 2)
+    use = hit & (predicted.sum(1) > 0)
+    if use.sum() < 9:
+        raise RadiometryError("brightness: our render of the board is dark around its centre")
+    meas = measured[ys[use], xs[use]].astype(np.float64)
+    pred = predicted[use].astype(np.float64)
+    return _BoardMeasurement(max_radiance=float(meas.sum() / pred.sum()), per_channel=meas.sum(0) / pred.sum(0),
+                             measured_mean=meas.mean(0), pixels=int(use.sum()), held=held, centre_pixel=(cx, cy))
+
+
+def _diagnostics(response: _CameraResponse, flat: _FlatField, projector_fit: _ProjectorFit,
+                 board: _BoardMeasurement, focal_plane_captures: int, timings: dict[str, float]) -> dict:
+    """The measurements behind the result, JSON-ready (see :func:`calibrate_radiometry`)."""
+    cx, cy = board.centre_pixel
+    return {
+        "camera_response_samples": response.diag["samples"],
+        "camera_response_pixels": response.diag["pixels"],
+        "exposure_scales": response.scales.tolist(),
+        "flat_exposure_scale": flat.exposure,
+        "black_exposure_scale": projector_fit.black_exposure,
+        "vignetting_fit": flat.diag,
+        "projector_levels": projector_fit.levels.tolist(),
+        "projector_response_samples": projector_fit.response_samples,
+        "projector_fit_rms": projector_fit.fit_rms,
+        "black_signal": projector_fit.black.tolist(),
+        "channel_signals": projector_fit.samples.tolist(),
+        "board_pixels": board.pixels,
+        "board_centre_m": board.held[:3, 3].tolist(),
+        "board_centre_pixel": [int(cx), int(cy)],
+        "board_ratio_per_channel": board.per_channel.tolist(),
+        "board_measured_mean": board.measured_mean.tolist(),
+        # focal-plane signal per unit exposure_scale and radiance = diffuser transmission x camera exposure
+        "exposure_times_diffuser": projector_fit.scale / board.max_radiance,
+        "camera_exposure_source": "model (no capture measures it)",
+        "captures": {"focal_plane": focal_plane_captures, "board": 1},
+        "timings_s": {k: round(v, 3) for k, v in timings.items()},
+    }
+
+
 def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = None,
                          exposures: int = 5, projector_levels: int = 4, vignetting_degree: int = 4,
                          board_spp: int | None = None, predict_spp: int = 16, angular_samples: int = 64,
@@ -458,169 +784,25 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
     rng = np.random.default_rng(seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    prj_h, prj_w = rig.info.projector_shape
-    p_levels, p_dtype = model.projector.levels, model.projector.dtype
-    c_levels = float(model.camera.levels)
-    n_captures = [0]
+    fp = _FocalPlane(rig, tuple(rig.info.projector_shape), model.projector.levels, model.projector.dtype,
+                     float(model.camera.levels))
 
-    def capture(image: np.ndarray, e: float) -> np.ndarray:
-        n_captures[0] += 1
-        rig.project(image)
-        return rig.capture_lf(LFCapture(exposure_scale=float(e))).codes.astype(np.float32) / np.float32(c_levels)
-
-    def uniform(codes) -> np.ndarray:
-        return np.broadcast_to(np.asarray(codes, p_dtype), (prj_h, prj_w, 3)).copy()
-
-    # a. camera response ------------------------------------------------------------------------------------
     t = time.perf_counter()
-    say(f"camera response: exposure bracket of a projector ramp ({exposures} captures)")
-    rig.setup(FocalPlaneDiffuser())
-    ramp = np.round(np.linspace(0, p_levels, prj_w)).astype(p_dtype)
-    ramp_img = np.repeat(np.broadcast_to(ramp[None, :], (prj_h, prj_w))[..., None], 3, axis=2).copy()
-    first = capture(ramp_img, 1.0)
-    h, w = first.shape[:2]
-    stride = _stride(h, w, 60_000)
-    top = 1.0
-    nominal_gamma = np.asarray(model.camera.response.gamma)
-    bright = np.quantile(first[::stride, ::stride].reshape(-1, 3), 0.999, axis=0)
-    if np.all(bright < 0.5):                          # too dark at the normal exposure: lengthen the bracket
-        peak = float(np.max(bright ** nominal_gamma))
-        top = 1.5 / max(peak, 1e-4)
-    scales = top * 0.5 ** np.arange(exposures)
-    stack = [first[::stride, ::stride] if top == 1.0 else capture(ramp_img, top)[::stride, ::stride]]
-    stack += [capture(ramp_img, e)[::stride, ::stride] for e in scales[1:]]
-    codes = np.stack(stack).reshape(exposures, -1, 3).astype(np.float64)
-    camera_gamma, signal, cam_diag = _fit_camera_gamma(codes, scales, rng)
+    response = _measure_camera_response(fp, model, exposures, rng, say)                           # a.
     timings["camera_response"] = time.perf_counter() - t
-
-    def linear(codes_img: np.ndarray, e: float) -> np.ndarray:
-        """Normalised codes -> linear signal per unit exposure scale."""
-        return np.power(codes_img, camera_gamma.astype(np.float32)) / np.float32(e)
-
-    # b. vignetting -----------------------------------------------------------------------------------------
     t = time.perf_counter()
-    say("camera vignetting: flat field")
-    white = uniform([p_levels] * 3)
-    peak_signal = float(np.nanmax(np.nanquantile(signal, 0.999, axis=0)))    # brightest ramp pixels, e = 1
-    e_flat = 0.6 / max(peak_signal, 1e-6)
-    for _ in range(6):
-        flat = capture(white, e_flat)
-        lit = flat.max(axis=2) > _DARK
-        if np.mean(flat[lit].max(axis=1) >= _SATURATED) < 1e-4:
-            break
-        e_flat *= 0.5
-    else:
-        raise RadiometryError("vignetting: the flat field saturates at every exposure tried")
-    flat_lin = linear(flat, e_flat)
-    level = np.median(flat_lin[lit], axis=0)
-    mask = np.all((flat >= _DARK) & (flat <= _BRIGHT), axis=2) & np.all(flat_lin > 0.25 * level, axis=2)
-    mask = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    vig_poly, vig_diag = _fit_vignetting(flat_lin, mask, vignetting_degree, _stride(h, w, 200_000))
-    vmap = vig_poly.map()
+    flat = _measure_vignetting(fp, response, vignetting_degree, say)                                # b.
     timings["vignetting"] = time.perf_counter() - t
-
-    # c. projector response, cross-talk, black level -----------------------------------------------------------
     t = time.perf_counter()
-    n_lv = np.unique(np.round(np.linspace(0, p_levels, projector_levels + 1)[1:]).astype(int))
-    say(f"projector response, cross-talk, black level ({1 + 3 * len(n_lv)} captures)")
-    region = mask & (vmap >= 0.85)
-    if region.sum() < 100:
-        region = mask
-    rs = max(1, int(math.ceil(math.sqrt(region.sum() / 200_000))))
-    sub = np.zeros_like(region)
-    sub[::rs, ::rs] = region[::rs, ::rs]
-    region = sub
-    inv_vig = (1.0 / vmap[region])[:, None]
-
-    def measure(image: np.ndarray, e: float) -> tuple[np.ndarray, bool]:
-        img = capture(image, e)[region]
-        return (linear(img, e) * inv_vig).mean(axis=0).astype(np.float64), bool(np.any(img >= _SATURATED))
-
-    e_black = 8 * e_flat
-    black, saturated = measure(uniform([0, 0, 0]), e_black)
-    if saturated:                                   # a bright black level: the normal exposure then suffices
-        e_black = e_flat
-        black, _ = measure(uniform([0, 0, 0]), e_black)
-    samples = np.zeros((3, len(n_lv), 3))
-    for j in range(3):
-        for i, n in enumerate(n_lv):
-            code = [0, 0, 0]
-            code[j] = int(n)
-            samples[j, i], _ = measure(uniform(code), e_flat)
-    gain_ct = np.zeros((3, 3))                            # G * C
-    projector_gamma = np.zeros(3)
-    rms = []
-    x_lv = n_lv / p_levels
-    prj_samples = []
-    for j in range(3):
-        d = samples[j] - black[None, :]
-        projector_gamma[j], gain_ct[:, j], r = _fit_power(x_lv, d)
-        rms.append(float(r / gain_ct[j, j]))
-        prj_samples.append(np.stack([x_lv, d[:, j] / gain_ct[j, j]], 1).round(7).tolist())
-    s = float(np.mean(np.diag(gain_ct)))
-    cross_talk = gain_ct / s
-    black_level = np.clip(black / s, 0.0, 0.199)
+    projector_fit = _measure_projector(fp, response, flat, projector_levels, say)                   # c.
     timings["projector"] = time.perf_counter() - t
-
-    # d. absolute scale ---------------------------------------------------------------------------------------
     t = time.perf_counter()
-    say("projector brightness: board in front of the array (view camera)")
-    centre, normal, view, _ = _board_pose(scene, model)
-    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART))
-    rig.project(white)
-    measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
-    # where the board really stands (held by hand): from the chessboard printed on it
-    held = _held_board(measured, scene.view, normal)
-    cx, cy = (int(round(v)) for v in project(view, held[:3, 3][None])[0])
-    projector = replace(model.projector, response=ResponseCurve(tuple(projector_gamma)), max_radiance=1.0,
-                        cross_talk=cross_talk, black_level=tuple(black_level.tolist()))
-    vw, vh = view.resolution
-    half = max(3, int(round(0.04 * vw)))
-    say("projector brightness: our own render of the board")
-    for _ in range(4):
-        ys, xs = np.mgrid[max(cy - half, 0):min(cy + half + 1, vh), max(cx - half, 0):min(cx + half + 1, vw)]
-        xs, ys = xs.ravel(), ys.ravel()
-        if len(xs) == 0:
-            raise RadiometryError(f"brightness: the board centre projects outside the view camera ({cx}, {cy})")
-        predicted, hit, _ = _predict_board(model, scene, projector, white, held, (xs, ys),
-                                           angular_samples=angular_samples, spp=predict_spp,
-                                           aperture_samples=8, seed=seed)
-        if hit.all() or half <= 3:
-            break
-        half = max(3, half // 2)
-    use = hit & (predicted.sum(1) > 0)
-    if use.sum() < 9:
-        raise RadiometryError("brightness: our render of the board is dark around its centre")
-    meas = measured[ys[use], xs[use]].astype(np.float64)
-    pred = predicted[use].astype(np.float64)
-    per_channel = meas.sum(0) / pred.sum(0)
-    max_radiance = float(meas.sum() / pred.sum())
+    board = _measure_brightness(rig, model, scene, projector_fit, flat.white, board_spp=board_spp,   # d.
+                                predict_spp=predict_spp, angular_samples=angular_samples, seed=seed, say=say)
     timings["brightness"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
-    diagnostics = {
-        "camera_response_samples": cam_diag["samples"],
-        "camera_response_pixels": cam_diag["pixels"],
-        "exposure_scales": scales.tolist(),
-        "flat_exposure_scale": e_flat,
-        "black_exposure_scale": e_black,
-        "vignetting_fit": vig_diag,
-        "projector_levels": n_lv.tolist(),
-        "projector_response_samples": prj_samples,
-        "projector_fit_rms": rms,
-        "black_signal": black.tolist(),
-        "channel_signals": samples.tolist(),
-        "board_pixels": int(use.sum()),
-        "board_centre_m": held[:3, 3].tolist(),
-        "board_centre_pixel": [int(cx), int(cy)],
-        "board_ratio_per_channel": per_channel.tolist(),
-        "board_measured_mean": (meas.mean(0)).tolist(),
-        # focal-plane signal per unit exposure_scale and radiance = diffuser transmission x camera exposure
-        "exposure_times_diffuser": s / max_radiance,
-        "camera_exposure_source": "model (no capture measures it)",
-        "captures": {"focal_plane": n_captures[0], "board": 1},
-        "timings_s": {k: round(v, 3) for k, v in timings.items()},
-    }
-    return Radiometry(camera_gamma=camera_gamma, camera_exposure=model.camera.exposure, vignetting_poly=vig_poly,
-                      projector_gamma=projector_gamma, cross_talk=cross_talk, black_level=black_level,
-                      max_radiance=max_radiance, diagnostics=diagnostics)
+    return Radiometry(camera_gamma=response.gamma, camera_exposure=model.camera.exposure, vignetting_poly=flat.poly,
+                      projector_gamma=projector_fit.gamma, cross_talk=projector_fit.cross_talk,
+                      black_level=projector_fit.black_level, max_radiance=board.max_radiance,
+                      diagnostics=_diagnostics(response, flat, projector_fit, board, fp.captures, timings))
