@@ -215,6 +215,8 @@ def num(v, digits: int = 3) -> str:
         return "-" if math.isnan(v) else str(v)
     if v == 0:
         return "0"
+    if 0.999 <= abs(v) < 1:                    # an agreement of 0.99997 is not 1.000
+        return f"{v:.{digits + 3}f}"
     mag = math.floor(math.log10(abs(v)))
     if -4 <= mag < 6:
         return f"{v:.{max(digits - 1 - mag, 0)}f}"
