@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from lftransfer.settings import Overrides
 from lftransfer.app.pipeline import RunOptions, run_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
@@ -25,7 +26,7 @@ def test_01_fig4_small_rig(variant, tmp_path):
     Measured (llvm_ad_rgb, 128 ground-truth samples per pixel): cross-transfer error 0.279 with the area model,
     0.309 with the point model; other ground-truth seed pairs give 0.279 to 0.284, so the bounds are these plus
     0.05. (Most of the error is the ground truth's own noise at 128 samples: 0.215 at 512.)"""
-    report = run_scene(small_fig4(), tmp_path, RunOptions(bounces=2, compare_models=("point",), capture_spp=2,
+    report = run_scene(small_fig4(), tmp_path, RunOptions(settings=Overrides(bounces=2, compare=(("lighting_model", ("point",)),)), capture_spp=2,
                                                           truth_seed=None, rig_model="nominal"))
     for name in ("composite.png", "composite.exr", "ground_truth.png", "bounces.png", "captured_lf.png",
                  "projected_lf.png", "report.json"):
@@ -54,7 +55,7 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
 
     scene = quick_scene(load_scene(builtin_scene("fig4")))
     scene = with_overrides(scene, render={"gt_spp": 512})
-    report = run_scene(scene, tmp_path, RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=4,
+    report = run_scene(scene, tmp_path, RunOptions(settings=Overrides(bounces=1), capture_spp=2, truth_seed=4,
                                                    negative_control=True))
     assert report["rig_model"] == "calibrated"
     for name in ("calibration.json", "calibration_errors.json", "calibration_report.html"):
@@ -73,7 +74,7 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     assert control["psnr_objects_margin_db"] > 0 and control["cross_error_margin"] > 0.06
     assert not [w for w in report["warnings"] if "negative control" in w]
     # the calibration file runs the pipeline again without calibrating
-    again = run_scene(scene, tmp_path / "again", RunOptions(bounces=1, compare_models=(), capture_spp=2,
+    again = run_scene(scene, tmp_path / "again", RunOptions(settings=Overrides(bounces=1), capture_spp=2,
                                                            truth_seed=4, calibration=tmp_path / "calibration.json"))
     assert again["rig_model"].startswith("calibration file")
     assert again["cross_transfer_rel_error"] == pytest.approx(report["cross_transfer_rel_error"], abs=0.02)
@@ -88,7 +89,7 @@ def test_03_record_then_replay_is_bit_identical(variant, tmp_path):
     from lftransfer.rig.replay import ReplayError
 
     scene = with_overrides(quick_scene(load_scene(builtin_scene("fig4"))), render={"gt_spp": 32})
-    options = RunOptions(bounces=1, compare_models=(), capture_spp=1, truth_seed=5)
+    options = RunOptions(settings=Overrides(bounces=1), capture_spp=1, truth_seed=5)
     session = tmp_path / "session"
     first = run_scene(scene, tmp_path / "first", RunOptions(**{**options.__dict__, "record": session}))
     manifest = json.loads((session / "manifest.json").read_text())
@@ -124,14 +125,14 @@ def test_04_two_point_lights(variant, tmp_path):
     scene = with_overrides(small_fig4(), rig={"exposure": 0.1})
     second = {"position": [0.22, -0.10, 0.0], "intensity": [1.5, 1.5, 1.5]}
     two = with_overrides(scene, lights=[*scene.lights, second], render={"gt_spp": 1024})
-    report = run_scene(two, tmp_path, RunOptions(bounces=2, compare_models=(), capture_spp=2, truth_seed=None,
+    report = run_scene(two, tmp_path, RunOptions(settings=Overrides(bounces=2), capture_spp=2, truth_seed=None,
                                                  rig_model="nominal"))
     assert report["cross_transfer_rel_error"] < 0.25
     assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
     assert report["lf_camera_saturated_fraction"] < 0.01 and not [w for w in report["warnings"] if "full scale" in w]
     # at the file's exposure the brighter real side clips 5 % of the LF camera's codes: said, not silently lost
     bright = run_scene(with_overrides(two, rig={"exposure": 0.25}), tmp_path / "bright",
-                       RunOptions(bounces=1, compare_models=(), capture_spp=2, truth_seed=None, rig_model="nominal",
+                       RunOptions(settings=Overrides(bounces=1), capture_spp=2, truth_seed=None, rig_model="nominal",
                                   verify=False))
     assert bright["lf_camera_saturated_fraction"] > 0.03
     assert [w for w in bright["warnings"] if "of the LF camera's codes are at full scale" in w]

@@ -60,9 +60,9 @@ def test_builtin_scene_by_name():
     """A built-in scene's name stands for its file; an unknown name lists the built-in scenes."""
     from pathlib import Path
 
-    from lftransfer.app.cli import _load
+    from lftransfer.app.cli.common import load
 
-    assert _load(Path("fig6"), quick=True).effect.on == "bowl"
+    assert load(Path("fig6"), quick=True).effect.on == "bowl"
     result = runner.invoke(app, ["render", "fig7", "--quick"])
     assert result.exit_code != 0 and "fig7: no such file (built-in scenes: fig1b, fig4, fig5, fig6)" in _text(result)
 

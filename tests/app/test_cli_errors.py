@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import lftransfer.app.cli as cli
 from lftransfer.app.cli import app
 from tests.app.small import nominal_calibration, tiny_scene_text, write_tiny_scene
 from tests.app.test_paths import read_only_dir  # noqa: F401  (fixture)
@@ -30,8 +29,9 @@ def no_work(monkeypatch):
     def started(*args, **kwargs):
         raise WorkStarted()
 
-    monkeypatch.setattr(cli, "_run", started)
+    monkeypatch.setattr("lftransfer.app.cli.run._run", started)
     monkeypatch.setattr("lftransfer.app.pipeline.open_rig", started)
+    monkeypatch.setattr("lftransfer.app.rigs.open_rig", started)
 
 
 @pytest.fixture
@@ -180,7 +180,7 @@ def test_12_unexpected_errors_are_one_line_unless_debug(scene, tmp_path, monkeyp
     def broken(*args, **kwargs):
         raise ZeroDivisionError("float division by zero")
 
-    monkeypatch.setattr(cli, "_run", broken)
+    monkeypatch.setattr("lftransfer.app.cli.run._run", broken)
     args = ["run", scene, "--out", tmp_path / "o", "--rig-model", "nominal"]
     line = _one_line_error(_invoke(args), code=1)
     assert line == "error: ZeroDivisionError: float division by zero (lft --debug ... shows the traceback)"
@@ -225,7 +225,7 @@ def test_15_a_calibration_that_cannot_measure_the_rig(scene, tmp_path, monkeypat
     def blind(*args, **kwargs):
         raise PoseError("the printed 7 x 5 chessboard was not found in the view camera image")
 
-    monkeypatch.setattr("lftransfer.app.pipeline.calibrate_rig", blind)
+    monkeypatch.setattr("lftransfer.app.rigs.calibrate_rig", blind)
     line = _one_line_error(_invoke(["calibrate", scene, "--out", tmp_path / "cal.json"]), code=1, progress=True)
     assert "calibration failed: the printed 7 x 5 chessboard was not found" in line
     assert "view camera 48 x 36" in line and "--rig-model nominal" in line

@@ -114,7 +114,7 @@ def test_05_demo_reports_its_negative_control(tmp_path, monkeypatch):
     ground truth) and reports it in report.json and one line of the summary. The Fig. 4 scene is swapped for the
     tiny rig here, and the oracle model stands in for calibration (seconds instead of minutes)."""
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24), gt_spp=4))
-    monkeypatch.setattr("lftransfer.app.cli._load", lambda path, quick: scene)
+    monkeypatch.setattr("lftransfer.app.cli.run.load", lambda path, quick: scene)
     out = tmp_path / "out"
     result = runner.invoke(app, ["demo", "--rig-model", "oracle", "--bounces", "1", "--out", str(out)],
                            env={"COLUMNS": "250"})
@@ -139,12 +139,12 @@ def test_06_negative_control_is_skipped_with_a_reason_where_it_cannot_tell_anyth
 
     from lftransfer.app.pipeline import RigSpec, RunOptions, negative_control_skipped
 
-    assert negative_control_skipped(RunOptions(negative_control=True)) is None
-    assert negative_control_skipped(RunOptions(negative_control=True, rig_model="oracle")) is None
-    assert negative_control_skipped(RunOptions(rig_model="nominal", calibration=Path("c.json"))) is None
-    for options, words in ((RunOptions(rig_model="nominal"), "itself uses the nominal"),
-                           (RunOptions(truth_seed=None), "--exact-rig"),
-                           (RunOptions(bounces=0), "0 bounces"),
-                           (RunOptions(verify=False), "not verified"),
-                           (RunOptions(rig=RigSpec("replay", Path("session"))), "simulated rig only")):
-        assert words in negative_control_skipped(options), options
+    assert negative_control_skipped(RunOptions(negative_control=True), 2) is None
+    assert negative_control_skipped(RunOptions(negative_control=True, rig_model="oracle"), 2) is None
+    assert negative_control_skipped(RunOptions(rig_model="nominal", calibration=Path("c.json")), 2) is None
+    for options, bounces, words in ((RunOptions(rig_model="nominal"), 2, "itself uses the nominal"),
+                                    (RunOptions(truth_seed=None), 2, "--exact-rig"),
+                                    (RunOptions(), 0, "0 bounces"),
+                                    (RunOptions(verify=False), 2, "not verified"),
+                                    (RunOptions(rig=RigSpec("replay", Path("session"))), 2, "simulated rig only")):
+        assert words in negative_control_skipped(options, bounces), options

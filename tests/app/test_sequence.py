@@ -128,8 +128,8 @@ def test_05_the_synthetic_lights_stand_where_the_model_says(variant, tmp_path):
     opened = open_rig(scene, RunOptions(truth_seed=3))
     try:
         oracle = acquire_model(opened, scene, RunOptions(truth_seed=3, rig_model="oracle"), tmp_path, False, print)
-        assert [lt.position for lt in oracle.scene.lights] == [lt.position for lt in opened.world.lights]
-        assert oracle.scene.lights != scene.lights and oracle.model is opened.truth
+        assert [lt.position for lt in oracle.scene.lights] == [lt.position for lt in opened.oracle.world.lights]
+        assert oracle.scene.lights != scene.lights and oracle.model is opened.oracle.model
         nominal = acquire_model(opened, scene, RunOptions(truth_seed=3, rig_model="nominal"), tmp_path, False, print)
         assert nominal.scene.lights == scene.lights
         cal = nominal_calibration(scene.synthetic_part())
@@ -148,6 +148,7 @@ def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_fiel
     """The live loop measures the real scene's depth once, so a scene whose real objects move is projected the box
     light field, and its report says so; a converged sequence measures the depth in every frame."""
     from lftransfer.app.sequence import _projection
+    from lftransfer.settings import Overrides, resolve_settings
     from lftransfer.transfer.bounce import TransferSettings
 
     still = _moving_scene()
@@ -155,7 +156,7 @@ def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_fiel
     x, y, z = block["translate"]
     block["keyframes"] = [{"time_s": 0.0}, {"time_s": 0.5, "translate": [x, y + 0.01, z]}]
     moving = with_overrides(still, real=[block])
-    settings = TransferSettings.for_scene(still)
+    settings = resolve_settings(still).transfer
     assert settings.projection == "depth"                          # the scenes' default
     kept, note = _projection(still, SequenceOptions(), settings)
     assert kept.projection == "depth" and "measured once" in note[0]
@@ -163,5 +164,5 @@ def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_fiel
     assert box.projection == "box" and "the real objects move" in note[0]
     converged, note = _projection(moving, SequenceOptions(mode="converged"), settings)
     assert converged.projection == "depth" and "in every frame" in note[0]
-    plain, note = _projection(moving, SequenceOptions(), TransferSettings.for_scene(moving, projection="box"))
+    plain, note = _projection(moving, SequenceOptions(), resolve_settings(moving, Overrides(projection="box")).transfer)
     assert plain.projection == "box" and note == []

@@ -161,14 +161,14 @@ def test_mesh_path_relative_to_scene_file_and_bounds(tmp_path):
 def test_light_field_rays_per_entry_default_to_spp():
     """``render.lf_spp`` sets the outgoing light field's rays per entry (fig5 takes 16); unset, it is ``spp``;
     the view keeps ``spp`` either way."""
-    from lftransfer.transfer.bounce import TransferSettings
+    from lftransfer.settings import resolve_settings
 
     fig4, fig5 = (load_scene(builtin_scene(name)) for name in ("fig4", "fig5"))
     assert fig4.render.lf_spp is None
-    assert (TransferSettings.for_scene(fig4).lf_spp, TransferSettings.for_scene(fig4).view_spp) == (4, 4)
-    assert (TransferSettings.for_scene(fig5).lf_spp, TransferSettings.for_scene(fig5).view_spp) == (16, 4)
+    assert (resolve_settings(fig4).transfer.lf_spp, resolve_settings(fig4).transfer.view_spp) == (4, 4)
+    assert (resolve_settings(fig5).transfer.lf_spp, resolve_settings(fig5).transfer.view_spp) == (16, 4)
     more = with_overrides(fig4, render={"spp": 8})
-    assert TransferSettings.for_scene(more).lf_spp == 8
+    assert resolve_settings(more).transfer.lf_spp == 8
 
 
 def test_with_overrides_revalidates():

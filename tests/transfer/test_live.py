@@ -26,8 +26,8 @@ def test_01_still_scene_converges_to_the_bounce_loop(quick):
     equal the bounce loop's with as many bounces (the exchange reaches the same fixed point)."""
     scene, settings = quick
     opened = open_rig(scene, RunOptions(truth_seed=None))
-    reference = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
-    live = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
+    reference = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
+    live = LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
     frames = [live.step(0.0) for _ in range(4)]
     direct = reference.bounces[0].real_lf.data
     assert not frames[0].projected_lf.data.any()
@@ -53,7 +53,7 @@ def test_02_moving_objects_move_on_both_sides(quick):
     syn["keyframes"] = [{"time_s": 0.0}, {"time_s": 1.0, "translate": [syn["translate"][0] - 0.03, *syn["translate"][1:]]}]
     moving = with_overrides(scene, animation={"duration_s": 1.0, "fps": 2}, real=[real], synthetic=[syn])
     opened = open_rig(moving, RunOptions(truth_seed=None))
-    live = LiveTransfer(opened.rig, opened.truth, moving.synthetic_part(), settings)
+    live = LiveTransfer(opened.rig, opened.oracle.model, moving.synthetic_part(), settings)
     a = live.step(0.0)
     b = live.step(1.0)
     assert b.moved and not a.moved
@@ -75,8 +75,8 @@ def test_02b_depth_projection_is_measured_once_and_converges_to_the_bounce_loop(
     scene, settings = quick
     settings = replace(settings, projection="depth")
     opened = open_rig(scene, RunOptions(truth_seed=None))
-    reference = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
-    live = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
+    reference = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
+    live = LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
     frames = [live.step(0.0) for _ in range(4)]
     assert "measure_depth" in frames[0].timings_s and not any("measure_depth" in f.timings_s for f in frames[1:])
     assert all("prefilter" in f.timings_s for f in frames)
@@ -86,12 +86,12 @@ def test_02b_depth_projection_is_measured_once_and_converges_to_the_bounce_loop(
     assert np.median(np.abs(live.side.prefilter.depth[both] - reference.depth[both])) < 1e-3
     assert _rel(frames[3].real_view, reference.real_view) < 0.005
     # a depth measured earlier is used as given, not measured again (a resumed sequence, the exchange check)
-    given = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), settings, depth=live.depth)
+    given = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, depth=live.depth)
     assert "measure_depth" not in given.timings_s and given.depth is live.depth
     assert _rel(given.real_view, reference.real_view) < 0.005
-    again = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings, depth=live.depth)
+    again = LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, depth=live.depth)
     assert again.depth is live.depth and "measure_depth" not in again.step(0.0).timings_s
-    box = run_transfer(opened.rig, opened.truth, scene.synthetic_part(), replace(settings, projection="box"),
+    box = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), replace(settings, projection="box"),
                        depth=live.depth)
     assert box.depth is None and "prefilter" not in box.timings_s         # nothing prefilters: the depth is unused
 
@@ -104,7 +104,7 @@ def test_03_fig5_the_sun_lights_the_head_through_the_projector(variant):
     assert not scene.lights and scene.moving
     opened = open_rig(scene, RunOptions(truth_seed=None))
     settings = TransferSettings(angular_samples=scene.rig.angular_samples)
-    live = LiveTransfer(opened.rig, opened.truth, scene.synthetic_part(), settings)
+    live = LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
     dark = live.step(4.0)
     lit = live.step(4.0)
     assert float(dark.real_view.max()) == 0.0

@@ -159,7 +159,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     """
     from lftransfer.app.sequence import acquire_model, read_depth
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
-    from lftransfer.sim.verify import cross_transfer_error, render_ground_truth
+    from lftransfer.sim.verify import cross_transfer_error
 
     effect = scene.effect
     warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0
@@ -171,10 +171,11 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     settings = TransferSettings(**{**report["key"]["settings"], "bounce_views": False})
     direct = TransferSettings(**{**report["key"]["settings"], "bounce_views": False, "bounces": 0})
     check = ExchangeCheck(effect=EffectCurve(kind=effect.kind, on=effect.on, by=effect.by) if effect else None)
-    spp = options.gt_spp or scene.render.gt_spp
+    spp = options.resolve(scene).gt_spp
     opened = open_rig(scene, options)
     try:
-        if opened.world is None:
+        oracle = opened.oracle
+        if oracle is None:
             return None
         known = acquire_model(opened, scene, options, out, True, step)
         model, ps = known.model, known.scene
@@ -182,9 +183,9 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
         for f in verified:
             i, t = int(f["index"]), float(f["time_s"])
             step(f"check the exchange: frame {i}")
-            world = opened.world.at(t)
+            world = oracle.world.at(t)
             frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
-            gt = render_ground_truth(world, spp=spp, use_cache=options.use_cache)
+            gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
             alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
             no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
                                     alone.real_view_direct)
@@ -196,7 +197,8 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
                 f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
             if effect is None:
                 continue
-            truth_without = render_ground_truth(_without(world, effect.by), spp=spp, use_cache=options.use_cache).image
+            truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
+                                                use_cache=options.use_cache).image
             result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
             transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
             pixels = object_pixels(world, effect.on)

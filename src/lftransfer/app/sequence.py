@@ -27,7 +27,8 @@ from typing import Callable, Iterable, Literal
 import numpy as np
 
 from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
-from lftransfer.app.pipeline import Knowledge, OpenedRig, RunOptions, knowledge, open_rig, write_calibration
+from lftransfer.app.pipeline import RunOptions
+from lftransfer.app.rigs import Knowledge, OpenedRig, knowledge, open_rig, write_calibration
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
@@ -178,7 +179,7 @@ def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
     except ValueError as exc:
         raise SequenceError(str(exc)) from None
     if calibration is None and known.calibration is not None:
-        write_calibration(kept, known.calibration, opened.truth)
+        write_calibration(kept, known.calibration, opened.oracle)
     return replace(known, rig_model=label or known.rig_model)
 
 
@@ -238,13 +239,11 @@ def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings,
     return replace(result, captured_raw=None), time.perf_counter() - t0
 
 
-def frame_ground_truth(world, time_s: float, spp: int, use_cache: bool):
-    """(the path-traced ground truth of the simulated world at ``time_s``, seconds)
-    (:func:`lftransfer.sim.verify.render_ground_truth`; cached)."""
-    from lftransfer.sim.verify import render_ground_truth
-
+def frame_ground_truth(oracle, time_s: float, spp: int, use_cache: bool):
+    """(the path-traced ground truth of the simulated world at ``time_s``, seconds), through the rig's oracle
+    (:meth:`lftransfer.sim.oracle.Oracle.ground_truth`; cached)."""
     t0 = time.perf_counter()
-    gt = render_ground_truth(world.at(time_s), spp=spp, use_cache=use_cache)
+    gt = oracle.ground_truth(spp=spp, world=oracle.world.at(time_s), use_cache=use_cache)
     return gt, time.perf_counter() - t0
 
 
@@ -273,13 +272,13 @@ class FrameWorker(Worker):
         result, seconds = converged_frame(self.opened, self.model, self.scene, self.settings, index, time_s)
         gt = None
         if spp is not None:
-            gt, gt_seconds = frame_ground_truth(self.opened.world, time_s, spp, use_cache)
+            gt, gt_seconds = frame_ground_truth(self.opened.oracle, time_s, spp, use_cache)
             seconds += gt_seconds
         return ConvergedFrame(index, time_s, result, gt, seconds)
 
 
 def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), seq: SequenceOptions = SequenceOptions(),
-                    *, bounces: int = 2, progress: FrameProgress | None = None,
+                    *, progress: FrameProgress | None = None,
                     step: Callable[[str], None] | None = None) -> dict:
     """Render a sequence (module docstring) and write it into ``out``.
 
@@ -289,10 +288,9 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     Args:
         scene: ``SceneConfig`` (the simulated rig takes its real objects and their keyframes).
         out: the output folder (made).
-        options: the rig, the rig model and the ground truth's samples (:class:`RunOptions`; the lighting model
-            and reconstruction come from the scene's ``[render]``).
+        options: the rig, the rig model and the settings (:class:`RunOptions`: N bounces of each converged
+            frame, the renderer, the ground truth's samples; the rest from the scene's ``[render]``).
         seq: :class:`SequenceOptions`.
-        bounces: N of each converged frame.
         progress: called after each frame with its record, the frames done and the total.
         step: called with a message during set-up (calibration).
 
@@ -303,9 +301,9 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     step = step or (lambda _msg: None)
     times = sequence_times(scene, seq)
     n = len(times)
-    settings = TransferSettings.for_scene(scene, bounces=bounces, renderer=options.renderer,
-                                          bounce_views=seq.mode == "converged")
-    settings, projection_note = _projection(scene, seq, settings)
+    resolved = options.resolve(scene)
+    settings, projection_note = _projection(scene, seq, replace(resolved.transfer,
+                                                                bounce_views=seq.mode == "converged"))
     if seq.cluster is not None and options.rig.kind != "sim":
         raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "
                             f"recording is one device whose frames come one after another")
@@ -341,13 +339,13 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             known = acquire_model(opened, scene, options, out, seq.resume, step)
             model, rig_model, ps = known.model, known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
-                      "renderer": resolve_renderer(ps, options.renderer), "fps": _fps(scene),
+                      "renderer": resolve_renderer(ps, settings.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "projection": settings.projection,
                       "approximations": approximations(ps, settings.renderer) + projection_note}
             writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
-            verify = seq.verify_every > 0 and opened.world is not None
-            gt_spp = options.gt_spp or scene.render.gt_spp
+            verify = seq.verify_every > 0 and opened.oracle is not None
+            gt_spp = resolved.gt_spp
             if seq.mode == "live":
                 _live_frames(writer, opened, model, ps, settings, times, done, out, scene,
                              lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache)
@@ -466,7 +464,7 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
     for i in range(len(done), n):
         t0 = time.perf_counter()
         t = float(times[i])
-        gt = frame_ground_truth(opened.world, t, gt_spp, use_cache)[0] if verified(i) else None
+        gt = frame_ground_truth(opened.oracle, t, gt_spp, use_cache)[0] if verified(i) else None
         frame = live.step(t)
         if writer.scale is None:
             writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)

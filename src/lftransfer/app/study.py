@@ -35,11 +35,12 @@ import math
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Literal, Optional
+from typing import Callable, Optional
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from lftransfer import choices
 from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.imageio_utils import write_json, write_text
@@ -79,8 +80,8 @@ class StudyConfig(BaseModel):
     title: str = "study"
     scenes: list[str] = Field(min_length=1)
     truth_seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
-    rig_model: Literal["calibrated", "nominal", "oracle"] = "oracle"
-    bounces: int = Field(default=2, ge=0, le=8)
+    rig_model: choices.RigModel = choices.DEFAULT_RIG_MODEL
+    bounces: int = Field(default=choices.DEFAULT_BOUNCES, ge=0, le=choices.MAX_BOUNCES)
     quick: bool = False
     gt_spp: Optional[int] = Field(default=None, ge=1)
     setting: list[StudySetting] = Field(min_length=1)
@@ -125,7 +126,9 @@ class Study:
 
     def gt_spp(self, label: str) -> int:
         """Samples per pixel of the ground truth of scene ``label``: the study's ``gt_spp``, else the scene's."""
-        return self.config.gt_spp or self.scenes[label].render.gt_spp
+        from lftransfer.settings import Overrides, resolve_settings
+
+        return resolve_settings(self.scenes[label], Overrides(gt_spp=self.config.gt_spp)).gt_spp
 
 
 def load_study(path: str | Path) -> Study:
@@ -292,7 +295,8 @@ class StudyWorker(Worker):
         self._rigs: dict[tuple[str, int], object] = {}
 
     def _opened(self, label: str, seed: int):
-        from lftransfer.app.pipeline import RunOptions, open_rig
+        from lftransfer.app.pipeline import RunOptions
+        from lftransfer.app.rigs import open_rig
 
         if (label, seed) not in self._rigs:
             self._rigs[(label, seed)] = open_rig(self.study.scene(label), RunOptions(truth_seed=seed))
@@ -301,31 +305,29 @@ class StudyWorker(Worker):
     def prepare(self, label: str, seed: int, use_cache: bool):
         """Round 1 of a (scene, seed) pair: its rig model and synthetic scene, and its ground truth rendered into
         the cache. Returns (model, pipeline scene)."""
-        from lftransfer.sim.verify import render_ground_truth
-
-        from lftransfer.app.pipeline import knowledge
+        from lftransfer.app.rigs import knowledge
 
         opened = self._opened(label, seed)
         scene = self.study.scene(label)
         known = knowledge(opened, scene, self.study.config.rig_model)
-        render_ground_truth(opened.world, spp=self.study.gt_spp(label), use_cache=use_cache)
+        opened.oracle.ground_truth(spp=self.study.gt_spp(label), use_cache=use_cache)
         return known.model, known.scene
 
     def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
         """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared)."""
-        from lftransfer.app.bench.step import transfer_settings
-        from lftransfer.sim.verify import evaluate, render_ground_truth
+        from lftransfer.settings import Overrides, resolve_settings
+        from lftransfer.sim.verify import evaluate
         from lftransfer.transfer.bounce import run_transfer
 
         setting = next(s for s in self.study.config.setting if s.name == setting_name)
         ps = with_overrides(ps, render=setting.render) if setting.render else ps
         opened = self._opened(label, seed)
-        settings = replace(transfer_settings(self.study.scene(label, setting)), bounces=self.study.config.bounces)
+        settings = resolve_settings(self.study.scene(label, setting), Overrides(bounces=self.study.config.bounces)).transfer
         t0 = time.perf_counter()
         opened.start_frame(0)
         result = run_transfer(opened.rig, model, ps, settings)
         seconds = time.perf_counter() - t0
-        gt = render_ground_truth(opened.world, spp=self.study.gt_spp(label), use_cache=use_cache)
+        gt = opened.oracle.ground_truth(spp=self.study.gt_spp(label), use_cache=use_cache)
         metrics = evaluate(result, gt)
         return StudyCell(scene=label, seed=int(seed), setting=setting_name,
                          metrics={m: getattr(metrics, m) for m in METRICS}, seconds=seconds)

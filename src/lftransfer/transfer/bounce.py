@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 
+from lftransfer import choices
 from lftransfer.lightfield import LightField
 from lftransfer.render.renderer import ViewImage
 from lftransfer.rig.base import Rig
@@ -35,7 +36,8 @@ Progress = Callable[[str], None]
 
 @dataclass(frozen=True)
 class TransferSettings:
-    """How a transfer runs.
+    """How a transfer runs. Its defaults are :mod:`lftransfer.choices`'; a run builds it from its scene with
+    :func:`lftransfer.settings.resolve_settings`.
 
     Attributes:
         bounces: N, light field exchanges after the direct frame.
@@ -59,42 +61,25 @@ class TransferSettings:
         seed: Monte Carlo seed of the synthetic renders.
     """
 
-    bounces: int = 2
-    angular_samples: int = 48
-    lighting_model: str = "area"
-    aperture_samples: int = 4
-    reconstruction: str = "box"
-    projection: str = "box"
-    window: str = "cut"
-    lf_spp: int = 4
-    view_spp: int = 4
-    projector_fill: float = 0.95
+    bounces: int = choices.DEFAULT_BOUNCES
+    angular_samples: int = choices.DEFAULT_ANGULAR_SAMPLES
+    lighting_model: choices.LightingModel = choices.DEFAULT_LIGHTING_MODEL
+    aperture_samples: int = choices.DEFAULT_APERTURE_SAMPLES
+    reconstruction: choices.Reconstruction = choices.DEFAULT_RECONSTRUCTION
+    projection: choices.Projection = choices.DEFAULT_PROJECTION
+    window: choices.Window = choices.DEFAULT_WINDOW
+    lf_spp: int = choices.DEFAULT_SPP
+    view_spp: int = choices.DEFAULT_SPP
+    projector_fill: float = choices.DEFAULT_PROJECTOR_FILL
     bounce_views: bool = True
-    renderer: str = "auto"
+    renderer: choices.Renderer = choices.DEFAULT_RENDERER
     seed: int = 0
 
     @property
     def prefilters(self) -> bool:
         """Whether the projected light field is prefiltered from a measured depth (``projection == "depth"``, which
-        needs the area model)."""
-        return self.projection == "depth" and self.lighting_model == "area"
-
-    @classmethod
-    def for_scene(cls, scene, **changes) -> "TransferSettings":
-        """The settings a scene's ``[rig]`` and ``[render]`` ask for (angular samples, lighting model, aperture
-        samples, reconstruction, projection, window, ``render.lf_spp`` (default ``render.spp``) rays per light field
-        entry, ``render.spp`` per view pixel),
-        with ``changes`` applied (None values ignored); the reconstruction and the projection are "box" and the
-        window "cut" unless the lighting model is the area model."""
-        render = scene.render
-        values = dict(angular_samples=scene.rig.angular_samples, lighting_model=render.lighting_model,
-                      aperture_samples=render.aperture_samples, reconstruction=render.reconstruction,
-                      projection=render.projection, window=render.window, lf_spp=render.lf_spp or render.spp,
-                      view_spp=render.spp)
-        values.update({k: v for k, v in changes.items() if v is not None})
-        if values["lighting_model"] != "area":
-            values.update(reconstruction="box", projection="box", window="cut")
-        return cls(**values)
+        needs the area model, and something to project: at least one bounce)."""
+        return self.projection == "depth" and self.lighting_model == "area" and self.bounces > 0
 
 
 @dataclass

@@ -8,7 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from lftransfer.app import pipeline
+from lftransfer.app import pipeline, rigs
+from lftransfer.settings import Overrides
 from lftransfer.app.bench.step import (PIPELINE_STAGES, RIG_STAGES, BenchOptions, count_bench_steps, run_bench,
                                        transfer_settings)
 from lftransfer.imageio_utils import strict_json
@@ -65,8 +66,8 @@ def test_02_the_floor_casts_the_steps_own_rays(oracle_bench, quick_fig4):
     s = transfer_settings(quick_fig4)
     from lftransfer.lightfield import LightField
 
-    opened = pipeline.open_rig(quick_fig4, pipeline.RunOptions(truth_seed=0))
-    array = opened.truth.array                                      # the oracle model's, as the bench used
+    opened = rigs.open_rig(quick_fig4, pipeline.RunOptions(truth_seed=0))
+    array = opened.oracle.model.array                                      # the oracle model's, as the bench used
     opened.rig.close()
     entries = array.K * int(LightField.zeros(array, s.angular_samples, s.angular_samples).mask().sum())
     w, h = quick_fig4.view.resolution
@@ -125,7 +126,7 @@ def test_05_calibrates_first_without_a_file(tiny, monkeypatch):
         done.append(scene)
         return nominal_calibration(tiny)
 
-    monkeypatch.setattr(pipeline, "calibrate", calibrate)
+    monkeypatch.setattr(rigs, "calibrate", calibrate)
     calls = _counting_step(monkeypatch)
     result = run_bench(tiny, BenchOptions(iterations=1, peer=False, accuracy=False))
     assert len(done) == 1 and not hasattr(done[0], "real")                      # the synthetic part only
@@ -136,7 +137,7 @@ def test_05_calibrates_first_without_a_file(tiny, monkeypatch):
 
 def test_06_uses_a_calibration_file(tiny, tmp_path, monkeypatch):
     path = nominal_calibration(tiny).write(tmp_path / "calibration.json")
-    monkeypatch.setattr(pipeline, "calibrate", lambda *a, **k: pytest.fail("calibrated despite the file"))
+    monkeypatch.setattr(rigs, "calibrate", lambda *a, **k: pytest.fail("calibrated despite the file"))
     result = run_bench(tiny, BenchOptions(iterations=1, calibration=path, peer=False, accuracy=False))
     assert result.settings["rig_model"] == f"calibrated (calibration file {path})"
     assert result.settings["calibration_file"] == str(path)
@@ -145,7 +146,7 @@ def test_06_uses_a_calibration_file(tiny, tmp_path, monkeypatch):
 
 def test_07_peer_and_options(tiny):
     result = run_bench(tiny, BenchOptions(iterations=1, rig_model="nominal", accuracy=False, peer_max_spp=4,
-                                          lighting_model="point", renderer="exact"))
+                                          settings=Overrides(lighting_model="point", renderer="exact")))
     assert result.settings["lighting_model"] == "point" and result.settings["reconstruction"] == "box"
     assert result.settings["renderer"]["used"] == "exact" and result.cache_vertices is None
     p = result.peer

@@ -19,9 +19,7 @@ import numpy as np
 from lftransfer.app.cluster import ClusterSpec, Worker
 from lftransfer.calibration.rig import calibrate_rig
 from lftransfer.calibration.targets import TARGETS as CALIBRATION_TARGETS, target
-from lftransfer.sim.rig import SimRig
-from lftransfer.sim.truth import hidden_world
-from lftransfer.sim.verify import calibration_errors
+from lftransfer.sim.oracle import open_simulated_rig
 
 __all__ = ["TARGETS", "CalibrationSeeds", "QuantitySummary", "SeedCalibration", "calibrate_seed", "calibration_seeds",
            "markdown_table"]
@@ -105,11 +103,10 @@ def calibrate_seed(scene, seed: int, *, progress: Callable[[str], None] | None =
         progress: called with a message per calibration step.
     """
     say = progress or (lambda msg: None)
-    world, truth = hidden_world(scene, seed)
-    rig = SimRig(world, truth=truth, operator_seed=seed)
+    rig, oracle = open_simulated_rig(scene, seed)
     t = time.perf_counter()
     cal = calibrate_rig(rig, scene.synthetic_part(), progress=lambda msg: say(f"seed {seed}: {msg}"))
-    errors = calibration_errors(cal, rig.truth, true_lights=[lt.position for lt in world.lights]).to_json()
+    errors = oracle.calibration_errors(cal).to_json()
     placement = cal.diagnostics["pose"]["board_placement"]
     errors["board_depth_mm"] = placement["depth_mm"]
     errors["board_tilt_deg"] = placement["tilt_deg"]

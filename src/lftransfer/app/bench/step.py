@@ -38,17 +38,18 @@ from typing import Callable
 from lftransfer.app.bench.accuracy import FastVsExact, fast_vs_exact
 from lftransfer.app.bench.floor import FloorTiming, RayRecorder, ray_floor
 from lftransfer.app.bench.peer import PeerComparison, peer_comparison
+from lftransfer import choices
+from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings
 from lftransfer.transfer.live import LiveTransfer
 
-__all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "RIG_MODELS", "Spread",
+__all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "Spread",
            "count_bench_steps", "run_bench", "transfer_settings", "with_moving_object"]
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
 PIPELINE_STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "render_view",
                    "composite")
-RIG_MODELS = ("calibrated", "nominal", "oracle")
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
 
@@ -60,11 +61,8 @@ class BenchOptions:
         iterations: timed frames (>= 1).
         warmup: frames run first and not timed (>= 1: the first compiles the kernels, the second builds the
             primary rays' culling tiles, :mod:`lftransfer.render.culling`).
-        lighting_model: None: the scene's ``render.lighting_model`` (as the demo); else "area", "point",
-            "prefiltered" (as ``lft run --lighting-model``).
-        reconstruction: None: the scene's ``render.reconstruction``; else "box" or "linear" (area model only).
-        projection: None: the scene's ``render.projection``; else "box" or "depth" (area model only).
-        renderer: "auto" (as the demo), "fast" or "exact".
+        settings: what the bench overrides of the scene's settings (:class:`lftransfer.settings.Overrides`; none:
+            as the demo runs; a lighting model, reconstruction, projection or renderer as ``lft run`` may).
         truth_seed: seed of the simulated rig's hidden truth (0: the demo's rig), or None: built exactly as the
             rig file says.
         rig_model: "calibrated" (default: calibrate the simulated rig first, unless ``calibration`` is given),
@@ -79,12 +77,9 @@ class BenchOptions:
 
     iterations: int = 10
     warmup: int = 2
-    lighting_model: str | None = None
-    reconstruction: str | None = None
-    projection: str | None = None
-    renderer: str = "auto"
+    settings: Overrides = Overrides()
     truth_seed: int | None = 0
-    rig_model: str = "calibrated"
+    rig_model: choices.RigModel = choices.DEFAULT_RIG_MODEL
     calibration: Path | None = None
     accuracy: bool = True
     exact_aperture_samples: int = 32
@@ -96,8 +91,7 @@ class BenchOptions:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.warmup < 1:
             raise ValueError(f"warmup must be >= 1 (the first frame compiles the kernels), got {self.warmup}")
-        if self.rig_model not in RIG_MODELS:
-            raise ValueError(f"rig_model must be one of {', '.join(RIG_MODELS)}, got {self.rig_model!r}")
+        choices.check_choice("rig_model", self.rig_model, choices.RigModel)
 
 
 @dataclass(frozen=True)
@@ -205,13 +199,9 @@ def with_moving_object(scene, frames: int):
 
 
 def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> TransferSettings:
-    """The live loop's settings as the demo builds them from the scene (``lftransfer.app.pipeline._run``):
-    the rig's angular samples, the scene's lighting model, aperture samples, reconstruction and projection,
-    ``render.spp`` rays per light field sample and per view pixel; ``options`` may pick another lighting model,
-    reconstruction, projection or renderer, as ``lft run`` may."""
-    return TransferSettings.for_scene(scene, lighting_model=options.lighting_model,
-                                      reconstruction=options.reconstruction, projection=options.projection,
-                                      renderer=options.renderer)
+    """The live loop's settings, resolved as a run resolves them (:func:`lftransfer.settings.resolve_settings`)
+    from the scene and ``options.settings``."""
+    return resolve_settings(scene, options.settings).transfer
 
 
 def count_bench_steps(scene, options: BenchOptions) -> int:
@@ -225,7 +215,7 @@ def count_bench_steps(scene, options: BenchOptions) -> int:
 
 def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[object, str, float]:
     """The rig model the step uses, a label for it, and the seconds spent calibrating."""
-    from lftransfer.app import pipeline
+    from lftransfer.app import rigs
     from lftransfer.calibration.rig import load_calibration
     from lftransfer.rig.model import nominal_rig
 
@@ -234,11 +224,11 @@ def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[obj
             f"calibrated (calibration file {options.calibration})", 0.0
     if options.rig_model == "calibrated":
         start = time.perf_counter()
-        cal = pipeline.calibrate(opened.rig, scene.synthetic_part(), progress=say)
+        cal = rigs.calibrate(opened.rig, scene.synthetic_part(), progress=say)
         took = time.perf_counter() - start
         return cal.model, f"calibrated (by the bench through the simulated rig, {took:.0f} s)", took
     if options.rig_model == "oracle":
-        return opened.truth, f"true (oracle): {NOT_WHAT_USERS_RUN}", 0.0
+        return opened.oracle.model, f"true (oracle): {NOT_WHAT_USERS_RUN}", 0.0
     return nominal_rig(scene.rig), f"nominal (rig file): {NOT_WHAT_USERS_RUN}", 0.0
 
 
@@ -285,7 +275,8 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     Returns:
         :class:`BenchResult`.
     """
-    from lftransfer.app.pipeline import RunOptions, open_rig
+    from lftransfer.app.pipeline import RunOptions
+    from lftransfer.app.rigs import open_rig
     from lftransfer.render import fast
 
     say = progress or (lambda _m: None)

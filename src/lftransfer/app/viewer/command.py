@@ -5,26 +5,28 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
+from lftransfer.choices import DEFAULT_RENDERER, DEFAULT_RIG_MODEL
+
 __all__ = ["open_session"]
 
 
-def open_session(scene, *, rig: str = "sim", rig_model: str = "calibrated", calibration: Optional[Path] = None,
-                 truth_seed: Optional[int] = 0, out: Path = Path("out/live"), renderer: str = "auto",
+def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL, calibration: Optional[Path] = None,
+                 truth_seed: Optional[int] = 0, out: Path = Path("out/live"), renderer: str = DEFAULT_RENDERER,
                  progress=None):
     """A :class:`~lftransfer.app.viewer.session.LiveSession` for a scene on a rig: the rig opened, its model had
     (calibrated, a calibration file, nominal or oracle), the live loop built with the scene's render settings."""
-    from lftransfer.app.pipeline import RigSpec, RunOptions, open_rig
+    from lftransfer.app.pipeline import RunOptions
+    from lftransfer.app.rigs import RigSpec, open_rig
     from lftransfer.app.sequence import acquire_model
     from lftransfer.app.viewer.session import LiveSession
-    from lftransfer.transfer.bounce import TransferSettings
+    from lftransfer.settings import Overrides
     from lftransfer.transfer.live import LiveTransfer
 
     out = Path(out)
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
-                         renderer=renderer)
+                         settings=Overrides(renderer=renderer))
     opened = open_rig(scene, options)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
-    settings = TransferSettings.for_scene(scene, renderer=renderer)
-    live = LiveTransfer(opened.rig, known.model, known.scene, settings)
+    live = LiveTransfer(opened.rig, known.model, known.scene, options.resolve(scene).transfer)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
-    return LiveSession(scene, live, out, sim_rig=sim, world=opened.world)
+    return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle)

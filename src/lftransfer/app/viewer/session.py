@@ -33,6 +33,7 @@ from lftransfer.app.report import (bounce_layers, device_image, display_scale, e
 from lftransfer.composite import composite
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.scenes import SceneError, with_overrides
+from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
 
@@ -158,16 +159,17 @@ class LiveSession:
         live: the live loop (rig, rig model, synthetic part of ``scene``).
         out: folder for saved frames and scenes.
         sim_rig: the simulated rig when there is one (its real objects can be moved), else None.
-        world: the simulated rig's hidden world (real objects, true light) for the "ground truth" layer, or None.
+        oracle: the simulated rig's :class:`~lftransfer.sim.oracle.Oracle` (its hidden world: real objects, true
+            light) for the "ground truth" layer, or None.
 
     Example:
         >>> session = LiveSession(scene, LiveTransfer(rig, model, scene.synthetic_part()), Path("out/live"))
         >>> session.start(on_frame=print); session.submit({"type": "pause"}); session.stop()   # doctest: +SKIP
     """
 
-    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, world=None) -> None:
+    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, oracle=None) -> None:
         self.scene = scene
-        self.world = world
+        self.oracle = oracle
         self._gt: tuple[str, np.ndarray] | None = None          # (state key, image) of the latest ground truth
         self._gt_thread: threading.Thread | None = None
         self.live = live
@@ -324,7 +326,9 @@ class LiveSession:
             elif kind == "exchanges":
                 self.exchanges = value
             elif kind == "lighting_model":
-                settings: TransferSettings = replace(self.live.settings, lighting_model=value)
+                settings: TransferSettings = resolve_settings(
+                    self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer),
+                    bounces=self.live.settings.bounces, bounce_views=self.live.settings.bounce_views).transfer
                 self.live.set_scene(self.scene.synthetic_part(), settings)
             elif kind == "object":
                 side, index, edited = value
@@ -439,21 +443,20 @@ class LiveSession:
     def _world_now(self, t: float):
         """The simulated world as it stands now: the real objects (moved by the page), the synthetic ones (edited),
         the true light, posed at ``t``."""
-        real = self.sim_rig.real_objects if self.sim_rig is not None else self.world.real
-        return with_overrides(self.world, real=real, synthetic=list(self.scene.synthetic)).at(t)
+        world = self.oracle.world
+        real = self.sim_rig.real_objects if self.sim_rig is not None else world.real
+        return with_overrides(world, real=real, synthetic=list(self.scene.synthetic)).at(t)
 
     def _ground_truth(self, frame: LiveFrame) -> np.ndarray | None:
         """The path-traced ground truth of the current state beside the composite: rendered on its own thread
         at :data:`GT_SPP` samples per pixel whenever the state changed, the latest finished one shown."""
-        if self.world is None:
+        if self.oracle is None:
             return None
         world = self._world_now(frame.time_s)
         key = world.model_dump_json(exclude={"source"})
         if (self._gt is None or self._gt[0] != key) and (self._gt_thread is None or not self._gt_thread.is_alive()):
             def render() -> None:
-                from lftransfer.sim.verify import render_ground_truth
-
-                self._gt = (key, render_ground_truth(world, spp=GT_SPP, use_cache=False).image)
+                self._gt = (key, self.oracle.ground_truth(spp=GT_SPP, world=world, use_cache=False).image)
             self._gt_thread = threading.Thread(target=render, name="lft-live-gt", daemon=True)
             self._gt_thread.start()
         return self._gt[1] if self._gt is not None else None

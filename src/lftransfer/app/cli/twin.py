@@ -8,31 +8,29 @@ import signal
 import threading
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from lftransfer.app.cli import _Command, _Group, _flag, _load, _QUICK_HELP, _row, _truth_seed_option, _EXACT_HELP
+from lftransfer.app.cli.common import command, load, row, sub_app
+from lftransfer.app.cli.options import GtSpp, Quick, TruthArgs, flag
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.sim.twin.serve import VIEW_SPP
 
-twin_app = typer.Typer(cls=_Group, no_args_is_help=True,
-                       help="The device twin: the simulated world in its own process behind real device interfaces "
+twin_app = sub_app(help="The device twin: the simulated world in its own process behind real device interfaces "
                             "(camera streams, a projector window on an X display, an operator endpoint), for "
-                            "--rig hardware:twin.toml; and the scoring of a run made through it.")
+                 "--rig hardware:twin.toml; and the scoring of a run made through it.")
 
 
-@twin_app.command("serve", cls=_Command)
+@command(twin_app, "serve")
 def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
                                                 help="Scene TOML file, or a built-in scene by name (fig4, ...)."),
               rig_file: Path = typer.Option(Path("twin.toml"), "--rig-file", metavar="RIG.toml",
                                             help="Rig file to write (its manifest RIG.json goes beside it)."),
-              quick: bool = _flag("--quick", _QUICK_HELP),
-              truth_seed: int = _truth_seed_option(),
-              exact_rig: bool = _flag("--exact-rig", _EXACT_HELP),
+              quick: Quick = False, truth: TruthArgs = None,
               display: Optional[str] = typer.Option(None, "--display", metavar=":N", help=(
                   "X display the projector window is shown on (its screen at least the projector's size); "
                   "default: the twin starts its own Xvfb of the projector's size.")),
@@ -52,8 +50,9 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
               down_for_s: Optional[float] = typer.Option(None, "--down-for-s", min=0.0, metavar="S",
                                                          help="The stopped stream comes back after this long "
                                                               "(default: never)."),
-              projector_missing: bool = _flag("--projector-missing", "The projector's display is missing: the rig "
-                                                                     "file names an X display with no server."),
+              projector_missing: Annotated[bool, flag("--projector-missing", "The projector's display is missing: "
+                                                                             "the rig file names an X display with "
+                                                                             "no server.")] = False,
               port: int = typer.Option(0, "--port", min=0, max=65535, metavar="PORT",
                                        help="TCP port of the streams and endpoints (0: a free one)."),
               capture_spp: Optional[int] = typer.Option(None, "--capture-spp", min=1, metavar="N",
@@ -74,8 +73,8 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
         fail(f"--stop-camera: expected lf, view or both, got {stop_camera!r}")
     if rig_file.exists() and rig_file.is_dir():
         fail(f"--rig-file {rig_file}: a folder; expected a file to write (e.g. twin.toml)")
-    scene = _load(scene_file, quick)
-    options = TwinOptions(truth_seed=None if exact_rig else truth_seed, lf_fps=lf_fps, view_fps=view_fps,
+    scene = load(scene_file, quick)
+    options = TwinOptions(truth_seed=truth.seed, lf_fps=lf_fps, view_fps=view_fps,
                           latency_ms=latency_ms, jitter_ms=jitter_ms, drop_rate=drop_rate, stop_after_s=stop_after_s,
                           stop_camera=stop_camera, down_for_s=down_for_s, projector_missing=projector_missing,
                           display=display, port=port, capture_spp=capture_spp, view_spp=view_spp)
@@ -93,18 +92,18 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
         table = Table(title=escape(f"lft twin serve {scene_file}"))
         table.add_column("")
         table.add_column("")
-        _row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
-        _row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
-        _row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
+        row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
+        row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
+        row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
                               "both as three stacked GRAY16LE planes in FFV1 (lossless; OpenCV's FFmpeg reader "
                               "returns 16-bit colour as 8 bits), planar = true in the rig file")
-        _row(table, "operator endpoint", f"{twin.server.url}/operator")
-        _row(table, "projector", "missing (--projector-missing)" if projector_missing else
+        row(table, "operator endpoint", f"{twin.server.url}/operator")
+        row(table, "projector", "missing (--projector-missing)" if projector_missing else
              f"display 0 of X display {twin.display}")
-        _row(table, "cameras", f"LF {lf_fps:g} fps, view {view_fps:g} fps; latency {latency_ms:g} +- {jitter_ms:g} ms"
+        row(table, "cameras", f"LF {lf_fps:g} fps, view {view_fps:g} fps; latency {latency_ms:g} +- {jitter_ms:g} ms"
              + (f"; drop {drop_rate:g}" if drop_rate else "")
              + (f"; {stop_camera} stops after {stop_after_s:g} s" if stop_after_s is not None else ""))
-        _row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{rig_file}")
+        row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{rig_file}")
         console.print(table)
         console.print("serving; Ctrl-C stops the twin", highlight=False)
         stop.wait(serve_for_s)
@@ -113,20 +112,19 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
         twin.close()
 
 
-@twin_app.command("score", cls=_Command)
+@command(twin_app, "score")
 def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run folder of lft run / lft demo made "
                                                                            "with --rig hardware:TWIN.toml."),
               twin: Optional[Path] = typer.Option(None, "--twin", metavar="TWIN.json", help=(
                   "The twin's manifest (default: the one beside the rig file the run names).")),
-              gt_spp: Optional[int] = typer.Option(None, "--gt-spp", min=1, metavar="N",
-                                                   help="Ground-truth samples per pixel (default: the scene's).")) \
-        -> None:
+              gt_spp: GtSpp = None) -> None:
     """Render the ground truth of the twin's hidden world and write the run's metrics into its report.json, the
     same metrics lft run writes on the in-process rig (and the calibration's errors against the true rig)."""
     from lftransfer.app.pipeline import VIEWS_FILE
     from lftransfer.app.report import display_scale
     from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
     from lftransfer.sim.twin import manifest_path
+    from lftransfer.settings import Overrides, resolve_settings
     from lftransfer.sim.twin.score import SavedViews, score_views
 
     report_path = run_dir / "report.json"
@@ -146,8 +144,8 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
         fail(f"{twin}: not a twin manifest ({exc})")
     if manifest.get("format") != "lftransfer-twin":
         fail(f"{twin}: format: expected 'lftransfer-twin', found {manifest.get('format')!r}")
-    scene = _load(Path(manifest["scene"]), bool(manifest.get("quick")))
-    spp = gt_spp or scene.render.gt_spp
+    scene = load(Path(manifest["scene"]), bool(manifest.get("quick")))
+    spp = resolve_settings(scene, Overrides(gt_spp=gt_spp)).gt_spp
     try:
         views = SavedViews.read(run_dir / VIEWS_FILE)
         t = time.perf_counter()
@@ -180,10 +178,10 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
     table.add_column("value", justify="right")
     for k in ("cross_transfer_rel_error", "psnr_objects_db", "psnr_db", "cross_gt_noise_rel"):
         v = report.get(k)
-        _row(table, k, "undefined" if v is None else f"{v:.4g}")
+        row(table, k, "undefined" if v is None else f"{v:.4g}")
     if scored.calibration_errors is not None:
         e = scored.calibration_errors
-        _row(table, "calibration vs truth: projector mapping", f"{e.projector_mapping_rms_px:.3f} px")
-        _row(table, "calibration vs truth: pose", f"{e.pose_position_rms_mm:.2f} mm, {e.pose_rotation_deg:.3f} deg")
+        row(table, "calibration vs truth: projector mapping", f"{e.projector_mapping_rms_px:.3f} px")
+        row(table, "calibration vs truth: pose", f"{e.pose_position_rms_mm:.2f} mm, {e.pose_rotation_deg:.3f} deg")
     Console().print(table)
     Console().print(escape(f"wrote {report_path}, {run_dir / 'ground_truth.png'}"), soft_wrap=True)

@@ -1,0 +1,182 @@
+"""``lft demo``, ``lft run`` and ``lft record``: one complete run (:func:`lftransfer.app.pipeline.run_scene`)
+with a progress bar and a summary table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from lftransfer import choices
+from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, rig_options,
+                                           row)
+from lftransfer.app.cli.options import (Bounces, GtSpp, LightingModel, MaxMemory, NoCache, OutDir, Projection,
+                                            Quick, Reconstruction, Renderer, RigArgs, SceneArg, TruthArgs, Window,
+                                            flag, option)
+from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
+from lftransfer.settings import Overrides
+
+__all__ = ["register"]
+
+METRICS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
+           "cross_transfer_rel_error", "gt_noise_psnr_db", "cross_gt_noise_rel")
+
+
+def _run(scene, out: Path, options) -> dict:
+    """Run the pipeline with a progress bar; a fault, a calibration file that does not fit or Ctrl-C ends in one
+    line that says where the run folder stands."""
+    from lftransfer.app.pipeline import count_run_steps, run_scene
+    from lftransfer.app.rigs import CalibrationFailedError
+    from lftransfer.calibration.rig import CalibrationFileError
+    from lftransfer.rig.base import RigError
+
+    total = count_run_steps(scene, options)
+    status = out / "status.json"
+    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console, transient=False) as bar:
+        task = bar.add_task("starting", total=total)
+
+        def progress(msg: str, done: int) -> None:
+            bar.update(task, description=escape(msg[:58]), completed=min(done, total))
+
+        try:
+            report = run_scene(scene, out, options, progress=progress, operator=operator(bar), warn=warn)
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; what was written so far is in {out}, and {status} says 'interrupted'", INTERRUPTED)
+        except CalibrationFileError as exc:
+            bar.stop()
+            fail(str(exc))
+        except (RigError, CalibrationFailedError) as exc:
+            bar.stop()
+            fail(f"{exc} (what was written so far is in {out}; {status} says where it stopped)", FAILED)
+        bar.update(task, description="done", completed=total)
+    summary(report, out)
+    return report
+
+
+def control_line(control: dict) -> str:
+    """The negative control in one line: its psnr_objects_db and cross error, and the run's margins over it."""
+    def num(key: str, spec: str) -> str:
+        return "undefined" if control.get(key) is None else format(control[key], spec)
+
+    verdict = "measurably worse" if control["measurably_worse"] else "NOT measurably worse"
+    return (f"psnr_objects_db {num('psnr_objects_db', '.4g')} dB, cross error "
+            f"{num('cross_transfer_rel_error', '.3g')}; the run better by {num('psnr_objects_margin_db', '+.3g')} "
+            f"dB and {num('cross_error_margin', '+.3g')}: {verdict}")
+
+
+def summary(report: dict, out: Path) -> None:
+    """A run's report as a table on stdout, and why each undefined metric is undefined."""
+    table = Table(title=escape(f"light field transfer -> {out}"))
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    row(table, "rig", report["rig"])
+    row(table, "verification", report["verification"])
+    settings = report.get("settings", {}).get("transfer", {})
+    if settings:
+        row(table, "settings", f"{settings['lighting_model']} model, {settings['reconstruction']} reconstruction, "
+                               f"{settings['projection']} projection, {settings['window']} window, "
+                               f"{settings['bounces']} bounces, {report['renderer']} renderer")
+    undefined = report.get("undefined_metrics") or {}
+    for key in METRICS:
+        if report.get(key) is not None:
+            row(table, key, f"{report[key]:.4g}")
+        elif key in undefined:
+            row(table, key, "undefined (see below)")
+    for key, label in (("by_lighting_model", "model"), ("by_reconstruction", "reconstruction"),
+                       ("by_projection", "projection"), ("by_window", "window")):
+        by_choice = report.get(key) or {}
+        for name, m in by_choice.items():
+            if len(by_choice) > 1 and m.get("cross_transfer_rel_error") is not None:
+                row(table, f"cross error, {name} {label}", f"{m['cross_transfer_rel_error']:.4g}")
+    control = report.get("negative_control")
+    if control is not None:
+        row(table, f"negative control: {control['rig_model']}", control_line(control))
+    for b in report["bounces"]:
+        row(table, f"bounce {b['index']} energy real / synthetic", f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
+    row(table, "rig model", report["rig_model"])
+    errors = report.get("calibration_errors") or {}
+    if "lenslet_centre_rms_px" in errors:
+        row(table, "calibration: lenslet centres RMS", f"{errors['lenslet_centre_rms_px']:.3f} px")
+    if "pose_position_rms_mm" in errors and "pose_rotation_deg" in errors:
+        row(table, "calibration: pose error", f"{errors['pose_position_rms_mm']:.2f} mm, "
+                                              f"{errors['pose_rotation_deg']:.3f} deg")
+    row(table, "total time", f"{report['timings_s']['total']:.1f} s")
+    Console().print(table)
+    for key, reason in undefined.items():
+        Console().print(escape(f"{key} is undefined: {reason}"), soft_wrap=True, highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``demo``, ``run`` and ``record`` to ``app``."""
+
+    @command(app)
+    def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
+             no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+             rig: RigArgs = None, max_memory: MaxMemory = None) -> None:
+        """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
+        transfer, check against ground truth (both lighting models, both reconstructions, both projections, both
+        windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
+        from lftransfer.app.pipeline import RunOptions
+
+        scene = load(None, quick)
+        rig_opts = rig_options(scene, truth, rig)
+        options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer),
+                             use_cache=not no_cache, negative_control=True, **rig_opts)
+        check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
+                          bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+        _run(scene, out, options)
+
+    @command(app)
+    def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
+            lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
+            projection: Projection = None, window: Window = None,
+            compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
+                                                              "point), the other reconstruction, the other "
+                                                              "projection and the other window, each a full "
+                                                              "re-run.")] = False,
+            gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
+            renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+            max_memory: MaxMemory = None) -> None:
+        """Run light field transfer on any scene file with a rig (calibrating it first)."""
+        from lftransfer.app.pipeline import RunOptions
+
+        scene = load(scene_file, quick)
+        rig_opts = rig_options(scene, truth, rig)
+        asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
+                     projection=projection, window=window, gt_spp=gt_spp, renderer=renderer)
+        settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
+        options = RunOptions(settings=settings, use_cache=not no_cache, **rig_opts)
+        check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
+                          bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+        _run(scene, out, options)
+
+    @command(app)
+    def record(scene_file: SceneArg,
+               out: Annotated[Path, option("--out", metavar="DIR", help="Session folder: the recording, and the "
+                                                                       "run's outputs in run/.")],
+               bounces: Bounces = choices.DEFAULT_BOUNCES, quick: Quick = False,
+               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+               max_memory: MaxMemory = None) -> None:
+        """Calibrate and run transfer on a rig (sim or hardware:RIG.toml) while storing every request and image
+        it answers (replay it with lft run SCENE.toml --rig replay:SESSION)."""
+        from lftransfer.app.pipeline import RunOptions
+
+        if rig.rig.startswith("replay"):
+            fail("--rig: a recording is recorded already; record from sim or hardware:RIG.toml")
+        if (out / "manifest.json").exists():
+            fail(f"--out {out}: holds a recording already; choose an empty folder")
+        scene = load(scene_file, quick)
+        rig_opts = rig_options(scene, truth, rig)
+        options = RunOptions(settings=Overrides(bounces=bounces, renderer=renderer), record=out, **rig_opts)
+        check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=bounces,
+                          calibrate=calibrates(rig), max_memory=max_memory)
+        _run(scene, out / "run", options)
+        Console().print(escape(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
+                               f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)

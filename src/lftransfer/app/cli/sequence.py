@@ -1,0 +1,174 @@
+"""``lft render`` (a sequence over the scene's animation) and ``lft live`` (the live loop on a page)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from lftransfer import choices
+from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, rig_options,
+                                           row)
+from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, OutDir, Quick, Renderer,
+                                            RigArgs, SceneArg, TruthArgs, Workers, flag, option)
+from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
+from lftransfer.settings import Overrides
+
+__all__ = ["register"]
+
+
+def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
+    """A rendered sequence's summary as a table on stdout, its warnings first."""
+    summary = report["summary"]
+    table = Table(title=escape(f"{mode} sequence -> {out}"))
+    table.add_column("")
+    table.add_column("value", justify="right")
+    row(table, "frames", str(summary["frames"]))
+    if report.get("cluster"):
+        c = report["cluster"]
+        row(table, "cluster", f"{c['workers']} workers on {c['address']} ({c['cpus']:g} CPUs, {c['gpus']:g} GPUs)")
+    row(table, "median frame time", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
+    if "psnr_objects_db_min" in summary:
+        row(table, "psnr over the objects (verified frames)",
+            f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
+    if "cross_transfer_rel_error_min" in summary:
+        row(table, "cross-transfer error (verified frames)",
+            f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}"
+            + (f" (ground truth's own noise on it: up to {summary['cross_gt_noise_rel_max']:.3f})"
+               if summary.get("cross_gt_noise_rel_max") is not None else ""))
+    effect = check.effect if check is not None else None
+    if effect is not None:
+        for name, worst in effect.worst_relative_error().items():
+            trend = effect.trend()[name]
+            row(table, f"effect: {name.replace('_', ' ')} against ground truth",
+                "undefined" if worst is None else f"worst {100 * worst:.0f} % off"
+                + ("" if trend is None else f", same trend in {100 * trend:.0f} % of steps"))
+        row(table, "effect curve", f"{out / 'effect.png'}")
+    row(table, "rig model", report["rig_model"])
+    if "stale_captures" in summary:
+        row(table, "stale captures (hardware rig)", str(summary["stale_captures"]))
+    for note in report["approximations"]:
+        row(table, "approximation", note)
+    row(table, "videos", f"{out / 'composite.mp4'}, {out / 'bounces.mp4'}")
+    for line in report.get("warnings", []):
+        warn(line)
+    Console().print(table)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``live`` and ``render`` to ``app``."""
+
+    @command(app, "live")
+    def live(scene_file: SceneArg,
+             port: Annotated[int, option("--port", min=1, max=65535, metavar="PORT",
+                                         help="Port of the page on localhost.")] = 8080,
+             out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
+                            ] = Path("out/live"),
+             quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+             rig: RigArgs = None) -> None:
+        """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
+        layers, the light field images, the time of every stage and, on demand, the layers of each bounce with
+        their display gains; move and edit the synthetic objects (and the real ones on the simulated rig), change
+        the bounces and the lighting model, pause, step, reset, save."""
+        try:
+            from lftransfer.app.viewer.server import serve
+        except ImportError as exc:
+            fail(f"lft live needs the viewer's packages ({exc.name} is missing): pip install 'lftransfer[viewer]'")
+        from lftransfer.app.viewer.command import open_session
+
+        scene = load(scene_file, quick)
+        rig_opts = rig_options(scene, truth, rig)
+        check_before_work(scene, out_dir=out, calibrate=calibrates(rig))
+        with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
+            session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
+                                   calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
+                                   renderer=renderer, progress=lambda msg: status.update(escape(msg[:70])))
+        console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
+        serve(session, port=port)
+        console.print("lft live: stopped")
+
+    @command(app, "render")
+    def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
+                   frames: Annotated[Optional[int], option(
+                       "--frames", min=1, metavar="N",
+                       help="Frames to render (default: every frame of the scene's [animation]; a still scene: 8 "
+                            "live frames or 1 converged frame).")] = None,
+                   mode: Annotated[str, option(
+                       "--mode", metavar="live|converged",
+                       help="live: the paper's loop, one capture and one render per frame, bounces accumulating "
+                            "over frames | converged: every frame an independent N-bounce transfer.")] = "live",
+                   bounces: Bounces = choices.DEFAULT_BOUNCES,
+                   resume: Annotated[bool, flag("--resume", "Continue after the last finished frame in DIR (same "
+                                                            "settings).")] = False,
+                   verify_every: Annotated[int, option(
+                       "--verify-every", min=0, metavar="K",
+                       help="Path trace the ground truth of every K-th frame and report its PSNR (0: none; "
+                            "simulated rig).")] = 0,
+                   gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
+                   renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+                   cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None) -> None:
+        """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
+        report with per-frame timings (and metrics with --verify-every)."""
+        from lftransfer.app.cluster import ClusterError
+        from lftransfer.app.effects import verify_exchange
+        from lftransfer.app.pipeline import RunOptions
+        from lftransfer.app.rigs import CalibrationFailedError
+        from lftransfer.app.sequence import MODES, SequenceError, SequenceOptions, render_sequence
+        from lftransfer.calibration.rig import CalibrationFileError
+        from lftransfer.rig.base import RigError
+
+        if mode not in MODES:
+            fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
+        scene = load(scene_file, quick)
+        rig_opts = rig_options(scene, truth, rig)
+        options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer),
+                             use_cache=not no_cache, **rig_opts)
+        try:
+            seq = SequenceOptions(mode=mode, frames=frames, resume=resume, verify_every=verify_every,
+                                  cluster=cluster_spec(cluster, workers))
+        except SequenceError as exc:
+            fail(str(exc))
+        if resume and not (out / "report.json").is_file():
+            fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
+        check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
+                          calibrate=calibrates(rig), max_memory=max_memory)
+        status = out / "status.json"
+        with Progress(TextColumn("[bold]{task.description:<40}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total}"), TextColumn("{task.fields[rate]}"),
+                      TimeElapsedColumn(), console=console) as bar:
+            task = bar.add_task("set-up", total=None, rate="")
+            started = [None, 0]
+
+            def step(msg: str) -> None:
+                bar.update(task, description=escape(msg[:40]))
+
+            def progress(record, done: int, total: int) -> None:
+                import time
+
+                if started[0] is None:
+                    started[0], started[1] = time.perf_counter() - record.seconds, done - 1
+                elapsed = time.perf_counter() - started[0]
+                rate = (done - started[1]) / elapsed if elapsed > 0 else 0.0
+                psnr = (record.metrics or {}).get("psnr_objects_db")
+                bar.update(task, total=total, completed=done, rate=f"{rate:.2f} frames/s",
+                           description=escape(f"frame {record.index} (t = {record.time_s:.2f} s)"
+                                              + (f", {psnr:.1f} dB" if psnr is not None else "")))
+
+            try:
+                report = render_sequence(scene, out, options, seq, progress=progress, step=step)
+                check = verify_exchange(scene, out, options, report, step=step)
+            except KeyboardInterrupt:
+                bar.stop()
+                fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
+            except (SequenceError, CalibrationFileError) as exc:
+                bar.stop()
+                fail(str(exc))
+            except (RigError, CalibrationFailedError, ClusterError) as exc:
+                bar.stop()
+                fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
+        _sequence_table(report, out, mode, check)

@@ -1,0 +1,69 @@
+"""``lft study``: scenes x hidden truths x settings -> one table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from lftransfer.app.cli.common import check_before_work, cluster_spec, command
+from lftransfer.app.cli.options import Cluster, MaxMemory, NoCache, OutDir, Workers, flag
+from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail
+
+__all__ = ["register"]
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``study`` to ``app``."""
+
+    @command(app, "study")
+    def study_cmd(study_file: Annotated[Path, typer.Argument(metavar="STUDY.toml", help=escape(
+                      "Study file: [study] (scenes, truth_seeds, rig_model, bounces, quick, gt_spp) and [[setting]] "
+                      "tables (name, render = {...}); see docs/architecture.md, 'Scale-out'."))],
+                  out: OutDir = Path("out/study"),
+                  resume: Annotated[bool, flag("--resume", "Keep the cells a previous run of the same study wrote "
+                                                           "into DIR.")] = False,
+                  no_cache: NoCache = False, cluster: Cluster = None, workers: Workers = None,
+                  max_memory: MaxMemory = None) -> None:
+        """Scenes x hidden truths x settings -> one table: each cell a converged transfer on the simulated rig,
+        measured against its ground truth (study.json, study.md, study.png, study.html)."""
+        from lftransfer.app.cluster import ClusterError
+        from lftransfer.app.study import StudyError, load_study, run_study
+
+        spec = cluster_spec(cluster, workers)
+        if not study_file.is_file():
+            fail(f"{study_file}: no such file")
+        try:
+            study = load_study(study_file)
+        except StudyError as exc:
+            fail(str(exc))
+        c = study.config
+        for scene in study.scenes.values():
+            check_before_work(scene, out_dir=out, cache=not no_cache, max_memory=max_memory, bounces=c.bounces,
+                              calibrate=c.rig_model == "calibrated")
+        total = len(c.scenes) * len(c.truth_seeds) * len(c.setting)
+        with Progress(TextColumn("[bold]{task.description:<50}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(), console=console) as bar:
+            task = bar.add_task("set-up", total=total)
+            try:
+                result = run_study(study, out, cluster=spec, resume=resume, use_cache=not no_cache,
+                                   progress=lambda msg, done, n: bar.update(task, completed=done,
+                                                                            description=escape(msg[:50])))
+            except KeyboardInterrupt:
+                bar.stop()
+                fail(f"interrupted; the finished cells are in {out / 'cells'}; --resume continues", INTERRUPTED)
+            except StudyError as exc:
+                bar.stop()
+                fail(str(exc))
+            except ClusterError as exc:
+                bar.stop()
+                fail(f"{exc} (the finished cells are in {out / 'cells'}; --resume continues)", FAILED)
+        Console().print(escape(f"# {result.title}"))
+        Console().print(escape(result.markdown()), soft_wrap=True)
+        Console().print(escape(f"wrote {out / 'study.html'}, study.json, study.md, study.png ({result.seconds:.0f} s"
+                               + (f" on {result.cluster['workers']} workers" if result.cluster else "") + ")"),
+                        soft_wrap=True)

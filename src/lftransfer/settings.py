@@ -1,0 +1,160 @@
+"""One resolution of the settings a run uses: a scene plus what its caller overrides -> :class:`RunSettings`.
+
+A choice's values and its default live in :mod:`lftransfer.choices`; the scene file may set them (``[render]``,
+``[rig] angular_samples``); a caller (the command line, a study's setting, the live page, the bench) may
+override them (:class:`Overrides`; None: the scene's). :func:`resolve_settings` applies the two in that order,
+and the rule that only the area model has a reconstruction, projection and window
+(:data:`lftransfer.choices.NON_AREA`), once. A run, its progress total, its comparison re-runs, a sequence, the
+live loop, the bench, studies and the cluster's workers all take its result, so a setting reported is the
+setting used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+from lftransfer import choices
+from lftransfer.transfer.bounce import TransferSettings
+
+__all__ = ["COMPARABLE", "Overrides", "RunSettings", "resolve_settings"]
+
+COMPARABLE = ("lighting_model", "reconstruction", "projection", "window")
+"""The choices a run may measure beside its own (``compare``): each alternative is the same run with that one
+setting changed."""
+
+_AREA_ONLY = ("reconstruction", "projection", "window")
+
+
+@dataclass(frozen=True)
+class Overrides:
+    """What a caller asks for beyond the scene file; None (or an empty tuple) leaves the scene's choice.
+
+    Attributes:
+        bounces: N, light field exchanges after the direct frame (0 .. :data:`lftransfer.choices.MAX_BOUNCES`).
+        lighting_model, reconstruction, projection, window, renderer: one value of the choice's ``Literal``
+            (:mod:`lftransfer.choices`).
+        gt_spp: samples per pixel of each ground-truth render (>= 1).
+        compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
+            reconstruction, projection and window only under the area model), e.g.
+            ``{"lighting_model": ("area", "point")}``.
+    """
+
+    bounces: int | None = None
+    lighting_model: choices.LightingModel | None = None
+    reconstruction: choices.Reconstruction | None = None
+    projection: choices.Projection | None = None
+    window: choices.Window | None = None
+    renderer: choices.Renderer | None = None
+    gt_spp: int | None = None
+    compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.bounces is not None and not (isinstance(self.bounces, int) and
+                                             0 <= self.bounces <= choices.MAX_BOUNCES):
+            problems.append(f"bounces: expected an integer from 0 to {choices.MAX_BOUNCES}, got {self.bounces!r}")
+        if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
+            problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
+        kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
+                 "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer}
+        for name, kind in kinds.items():
+            try:
+                choices.check_choice(name, getattr(self, name), kind)
+            except ValueError as exc:
+                problems.append(str(exc))
+        compare = dict(self.compare)
+        for name, alternatives in compare.items():
+            if name not in COMPARABLE:
+                problems.append(f"compare: expected a choice among {', '.join(COMPARABLE)}, got {name!r}")
+                continue
+            for value in alternatives:
+                try:
+                    choices.check_choice(f"compare {name}", value, kinds[name])
+                except ValueError as exc:
+                    problems.append(str(exc))
+        if problems:
+            raise ValueError("; ".join(problems))
+
+    @classmethod
+    def comparing_all(cls, **overrides) -> "Overrides":
+        """Overrides that also measure every other value of every comparable choice (``lft demo``,
+        ``lft run --compare-models``)."""
+        kinds = {"lighting_model": ("area", "point"), "reconstruction": choices.RECONSTRUCTIONS,
+                 "projection": choices.PROJECTIONS, "window": choices.WINDOWS}
+        return cls(**overrides, compare=tuple(kinds.items()))
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """The settings a run uses, resolved once (:func:`resolve_settings`).
+
+    Attributes:
+        transfer: the transfer's settings (bounces, lighting model, reconstruction, projection, window, renderer,
+            angular samples, aperture samples, rays per light field entry and per view pixel).
+        gt_spp: samples per pixel of each ground-truth render.
+        comparisons: the re-runs measured beside the run: (choice, value) pairs, each the run with that one choice
+            changed, in the order of :data:`COMPARABLE`; none that equals the run's own value, and no
+            reconstruction, projection or window unless the area model.
+    """
+
+    transfer: TransferSettings
+    gt_spp: int
+    comparisons: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def bounces(self) -> int:
+        return self.transfer.bounces
+
+    def rerun(self, name: str, value: str) -> TransferSettings:
+        """The transfer settings of the comparison re-run that sets ``name`` to ``value`` (no bounce views)."""
+        changed = replace(self.transfer, **{name: value}, bounce_views=False)
+        if name == "lighting_model" and value != "area":
+            changed = replace(changed, **choices.NON_AREA)
+        return changed
+
+    def to_json(self) -> dict:
+        """The settings as JSON (the run's report and a sequence's key write them)."""
+        return {"transfer": asdict(self.transfer), "gt_spp": self.gt_spp,
+                "comparisons": [list(c) for c in self.comparisons]}
+
+
+def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_changes) -> RunSettings:
+    """The settings a run on ``scene`` uses with ``overrides``.
+
+    In order: :mod:`lftransfer.choices`' defaults (through the scene model's defaults), the scene file's
+    ``[render]`` and ``[rig] angular_samples`` (``render.lf_spp`` rays per light field entry, else
+    ``render.spp``), then ``overrides``; under any lighting model but the area model, reconstruction, projection
+    and window become :data:`lftransfer.choices.NON_AREA`.
+
+    Args:
+        scene: ``SceneConfig`` (or its synthetic part).
+        overrides: what the caller asks for (:class:`Overrides`).
+        transfer_changes: further :class:`~lftransfer.transfer.bounce.TransferSettings` fields that are not
+            choices (``bounce_views``, ``seed``, ``lf_spp``, ...), applied last.
+
+    Returns:
+        :class:`RunSettings`.
+    """
+    render = scene.render
+    values = dict(bounces=choices.DEFAULT_BOUNCES, angular_samples=scene.rig.angular_samples,
+                  lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
+                  reconstruction=render.reconstruction, projection=render.projection, window=render.window,
+                  lf_spp=render.lf_spp or render.spp, view_spp=render.spp, renderer=choices.DEFAULT_RENDERER)
+    for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer"):
+        if getattr(overrides, name) is not None:
+            values[name] = getattr(overrides, name)
+    area = values["lighting_model"] == "area"
+    if not area:
+        values.update(choices.NON_AREA)
+    values.update(transfer_changes)
+    transfer = TransferSettings(**values)
+    comparisons = []
+    asked = dict(overrides.compare)
+    for name in COMPARABLE:
+        if name in _AREA_ONLY and not area:
+            continue
+        for value in asked.get(name, ()):
+            if value != getattr(transfer, name) and (name, value) not in comparisons:
+                comparisons.append((name, value))
+    gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
+    return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons))

@@ -1,0 +1,89 @@
+"""The oracle: everything a run may learn of the simulated rig's hidden truth, and only after the fact.
+
+The pipeline calibrates and transfers through the ``Rig`` interface alone. What it does not know (the world as
+it is, the rig as it was built, where the lights really stand) stays here; the faces (``lftransfer.app``) ask an
+opened rig for its optional :class:`Oracle` to verify a run (the ground truth, the metrics against it, the
+calibration's errors) or to run a baseline (``--rig-model oracle``). An import contract in ``pyproject.toml``
+says that the faces read the truth through this module only (docs/architecture.md, "The simulator").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from lftransfer.rig.model import RigModel, nominal_rig
+
+__all__ = ["Oracle", "open_simulated_rig", "oracle_of_recording"]
+
+
+@dataclass(frozen=True)
+class Oracle:
+    """The hidden truth behind a simulated rig (or a recording made on one).
+
+    Attributes:
+        world: the scene as it really is (real and synthetic objects, lights where they stand, animation).
+        model: the rig model as the rig was built (the rig file's own values where the truth is exact).
+        truth_seed: the seed the truth was drawn from, or None (built exactly as the files say).
+    """
+
+    world: object
+    model: RigModel
+    truth_seed: int | None
+
+    def true_lights(self) -> list:
+        """(3,) per point light of the scene, where it really stands (world frame, m)."""
+        return [lt.position for lt in self.world.lights]
+
+    def world_at(self, scene):
+        """The world as it really is for ``scene`` (the same scene file with other poses or materials, e.g. a
+        live page's edit or a sequence's frame): its lights where the truth puts them."""
+        from lftransfer.sim.truth import hidden_world
+
+        return hidden_world(scene, self.truth_seed)[0]
+
+    def ground_truth(self, *, spp: int, world=None, use_cache: bool = True,
+                     progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
+        """The path-traced ground truth of the world (or of ``world``, e.g. one frame of a sequence), two
+        independent renders of the union, the real and the synthetic objects (:mod:`lftransfer.sim.verify`)."""
+        from lftransfer.sim.verify import render_ground_truth
+
+        return render_ground_truth(self.world if world is None else world, spp=spp, use_cache=use_cache,
+                                   progress=progress, warn=warn)
+
+    def calibration_errors(self, calibration):
+        """A calibration's errors against the rig as built (:class:`lftransfer.sim.verify.CalibrationErrors`)."""
+        from lftransfer.sim.verify import calibration_errors
+
+        return calibration_errors(calibration, self.model, true_lights=self.true_lights())
+
+
+def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = 4):
+    """The simulated rig of a scene and its oracle.
+
+    Args:
+        scene: the whole scene file (the rig takes its real objects as its hidden world).
+        truth_seed: seed of the hidden truth (how the rig as built and the lights differ from the files), or None.
+        capture_spp: rays per LF camera pixel.
+
+    Returns:
+        (``SimRig``, :class:`Oracle`).
+    """
+    from lftransfer.sim.rig import SimRig
+    from lftransfer.sim.truth import hidden_world
+
+    world, truth = hidden_world(scene, truth_seed)
+    rig = SimRig(world, truth=truth, capture_spp=capture_spp, operator_seed=truth_seed)
+    return rig, Oracle(world=world, model=rig.truth, truth_seed=truth_seed)
+
+
+def oracle_of_recording(scene, meta: dict) -> Oracle | None:
+    """The oracle of a recording made on the simulated rig (its manifest names the truth seed), or None for a
+    recording of a physical rig."""
+    from lftransfer.sim.truth import hidden_world
+
+    if meta.get("rig") != "sim" or "truth_seed" not in meta:
+        return None
+    seed = meta["truth_seed"]
+    world, truth = hidden_world(scene, seed)
+    return Oracle(world=world, model=truth if truth is not None else nominal_rig(scene.rig), truth_seed=seed)
