@@ -5,7 +5,8 @@ stands; the scene file's position is a measurement by hand. This step measures i
 
 1. **Poses.** A grey board of known size with the printed chessboard of the other steps (:data:`LIGHT_CHART`)
    is asked for at :data:`LIGHT_BOARDS` poses facing the light (as the scene file places it) and the view camera,
-   clear of the array, its chessboard well inside the view (:func:`light_board_poses`). They are chosen among a
+   clear of the array, its chessboard well inside the view and its squares wide enough in the view's pixels for
+   the corner finder (:data:`MIN_SQUARE_PX`; :func:`light_board_poses`). They are chosen among a
    grid of candidates (centres in front of the array, normals turned up to 50 degrees from the direction to the
    light) greedily, by the error of the light's position that a linearised fit predicts from them: pixel noise
    (:data:`DESIGN_PIXEL_NOISE`) and each board's pose error as its chessboard measures it (corners good to
@@ -42,7 +43,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lftransfer.calibration.pose import CHART, PoseError, chart_pose
+from lftransfer.calibration.pose import CHART, CORNER_WINDOW_PX, PoseError, chart_pose
 from lftransfer.optics.geometry import backproject, plane_axes, project, rectangle_to_world, view_camera
 from lftransfer.rig.base import Rig
 from lftransfer.rig.requests import Board, ViewCapture
@@ -66,6 +67,8 @@ DESIGN_CORNER_NOISE_PX = 0.1              # noise of the chessboard's corners (v
 CLEARANCE_M = 0.015                       # the boards' corners stay this far in front of the array's plane
 LIGHT_MIN_COS = 0.5                       # a board faces the light at least this much (cosine at its centre)
 VIEW_MIN_COS = 0.5                        # ... and the view camera
+MIN_SQUARE_PX = CORNER_WINDOW_PX + 1.0   # a board's chessboard squares are at least this many view pixels across
+                                         # (the narrowest, as seen): the next line clear of the corner window
 GRID_XY = 5                               # candidate centres per axis ...
 GRID_SPAN = 0.6                           # ... over this fraction of the array's half extent
 GRID_DEPTHS_M = (0.06, 0.08, 0.10, 0.12)  # ... at these distances in front of it
@@ -379,40 +382,34 @@ def _predicted_cov(terms: list) -> np.ndarray:
     return total[:3, :3]
 
 
-def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, chart=LIGHT_CHART, *,
-                      light: int = 0) -> list[Board]:
-    """Where to ask for the boards that measure one point light (module docstring, step 1).
+def _chart_square_px(centre: np.ndarray, normal: np.ndarray, chart, view) -> float:
+    """The narrowest of a board's printed chessboard squares in the view camera image, pixels.
 
-    Candidates: centres on a grid in front of the array (:data:`GRID_XY` per axis over :data:`GRID_SPAN` of its
-    half extent, at :data:`GRID_DEPTHS_M`), normals turned from the direction to the scene file's light by
-    :data:`GRID_TURNS_DEG` about two axes. A candidate is kept when the board faces the light (cosine at its
-    centre >= :data:`LIGHT_MIN_COS`, its plane at least 5 cm from the light) and the view camera (cosine >=
-    :data:`VIEW_MIN_COS`), its corners stay :data:`CLEARANCE_M` in front of the array's plane and its chessboard,
-    one square wider each way, lies inside the view with 4 % to spare. ``count`` of them are chosen one by one,
-    each the one that most lowers the predicted error of the light's position (:func:`_predicted_cov`'s trace).
+    Each square of the chart (printed on the centre of a board asked for at ``centre`` facing ``normal``, along
+    the rig's :func:`~lftransfer.optics.geometry.rectangle_to_world` axes) is drawn as a quadrilateral; its width
+    across is its area over its longer side (the smaller of its heights, were it a parallelogram): how far apart
+    two neighbouring chessboard lines run in the image, which the corner finder needs clear of its window
+    (:data:`MIN_SQUARE_PX`). A chart seen obliquely by a coarse view camera may be whole in view and still too
+    fine to find.
+    """
+    cols, rows, square = chart
+    ex, ey, _ = plane_axes(normal)
+    i, j = np.meshgrid(np.arange(cols + 1) - cols / 2, np.arange(rows + 1) - rows / 2)
+    grid = project(view, centre + (i.reshape(-1, 1) * ex + j.reshape(-1, 1) * ey) * square).reshape(rows + 1,
+                                                                                                    cols + 1, 2)
+    a, b, d = grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1]
+    u, v = b - a, d - a                                                      # each square's two sides
+    area = np.abs(u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
+    heights = area / np.maximum(np.maximum(np.linalg.norm(u, axis=-1), np.linalg.norm(v, axis=-1)), 1e-12)
+    return float(heights.min())
 
-    Args:
-        scene: the synthetic part of the scene (its lights, view camera and rig file).
-        count: boards to ask for (>= 2).
-        size: (width, height) of the board, metres.
-        chart: its printed chessboard.
-        light: which of the scene's point lights (0-based).
+
+def _candidate_poses(scene, light: np.ndarray, size, chart) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The candidate board poses of :func:`light_board_poses` that pass its checks, in grid order.
 
     Returns:
-        ``count`` :class:`~lftransfer.rig.requests.Board` requests with ``point_light=True`` (and, in a scene with
-        several lights, ``light`` naming the one to switch on alone).
-
-    Raises:
-        LightError: the scene has no such point light, or fewer than ``count`` poses are seen well and lit.
+        (centre (3,), unit normal (3,), :func:`_chart_square_px`) per candidate kept.
     """
-    if not 0 <= light < len(scene.lights):
-        raise LightError(f"point light: the scene has {len(scene.lights)} point light(s) ([light]); "
-                         f"there is no light {light} (0-based) to measure")
-    if count < 2:
-        raise ValueError(f"count: the light needs at least 2 boards, got {count}")
-    index = light
-    name = _light_name(scene, index)
-    light = np.asarray(scene.lights[index].position, np.float64)
     view = scene.view
     eye = np.asarray(view.origin, np.float64)
     w_img, h_img = view.resolution
@@ -447,11 +444,57 @@ def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, c
                         if not (np.all(pc[:, 0] >= 0.04 * w_img) and np.all(pc[:, 0] <= 0.96 * w_img)
                                 and np.all(pc[:, 1] >= 0.04 * h_img) and np.all(pc[:, 1] <= 0.96 * h_img)):
                             continue
-                        candidates.append((c, n))
+                        square_px = _chart_square_px(c, n, chart, view)
+                        if square_px < MIN_SQUARE_PX:
+                            continue
+                        candidates.append((c, n, square_px))
+    return candidates
+
+
+def light_board_poses(scene, count: int = LIGHT_BOARDS, size=LIGHT_BOARD_SIZE, chart=LIGHT_CHART, *,
+                      light: int = 0) -> list[Board]:
+    """Where to ask for the boards that measure one point light (module docstring, step 1).
+
+    Candidates: centres on a grid in front of the array (:data:`GRID_XY` per axis over :data:`GRID_SPAN` of its
+    half extent, at :data:`GRID_DEPTHS_M`), normals turned from the direction to the scene file's light by
+    :data:`GRID_TURNS_DEG` about two axes. A candidate is kept when the board faces the light (cosine at its
+    centre >= :data:`LIGHT_MIN_COS`, its plane at least 5 cm from the light) and the view camera (cosine >=
+    :data:`VIEW_MIN_COS`), its corners stay :data:`CLEARANCE_M` in front of the array's plane, its chessboard,
+    one square wider each way, lies inside the view with 4 % to spare, and its squares, as the view camera sees
+    them, are at least :data:`MIN_SQUARE_PX` pixels across (:func:`_chart_square_px`): turned far from the camera
+    at a coarse view (``--quick``: a quarter of the pixels) the squares shrink to a few pixels across, where the
+    chessboard's corners are found pixels off or not at all. ``count`` of them are chosen one by one, each the one
+    that most lowers the predicted error of the light's position (:func:`_predicted_cov`'s trace).
+
+    Args:
+        scene: the synthetic part of the scene (its lights, view camera and rig file).
+        count: boards to ask for (>= 2).
+        size: (width, height) of the board, metres.
+        chart: its printed chessboard.
+        light: which of the scene's point lights (0-based).
+
+    Returns:
+        ``count`` :class:`~lftransfer.rig.requests.Board` requests with ``point_light=True`` (and, in a scene with
+        several lights, ``light`` naming the one to switch on alone).
+
+    Raises:
+        LightError: the scene has no such point light, or fewer than ``count`` poses are seen well and lit.
+    """
+    if not 0 <= light < len(scene.lights):
+        raise LightError(f"point light: the scene has {len(scene.lights)} point light(s) ([light]); "
+                         f"there is no light {light} (0-based) to measure")
+    if count < 2:
+        raise ValueError(f"count: the light needs at least 2 boards, got {count}")
+    index = light
+    name = _light_name(scene, index)
+    light = np.asarray(scene.lights[index].position, np.float64)
+    view = scene.view
+    candidates = [(c, n) for c, n, _ in _candidate_poses(scene, light, size, chart)]
     if len(candidates) < count:
         raise LightError(f"{name}: only {len(candidates)} board poses in front of the array face the light at "
-                         f"{tuple(round(float(v), 3) for v in light)} m and the view camera and are seen well by it; {count} are "
-                         "needed (move the light or the view camera)")
+                         f"{tuple(round(float(v), 3) for v in light)} m and the view camera and are seen well by it "
+                         f"(the whole chessboard in view, its squares at least {MIN_SQUARE_PX:g} view pixels across); "
+                         f"{count} are needed (move the light or the view camera, or use a finer view camera)")
     terms = [_design_terms(c, n, size, chart, light, view) for c, n in candidates]
     chosen: list[int] = []
     for _ in range(count):

@@ -32,9 +32,9 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["CHART", "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern",
-           "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose",
-           "corner_landing", "decode_fringes", "fringe_lightfields", "solve_array_pose", "view_camera"]
+__all__ = ["CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose",
+           "BoardPattern", "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose",
+           "chart_pose", "corner_landing", "decode_fringes", "fringe_lightfields", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
@@ -279,6 +279,9 @@ class ArrayPose:
 
 
 CHART = (7, 5, 0.022)     # the chessboard printed on the calibration boards: columns, rows of squares, square metres
+CORNER_WINDOW_PX = 5      # half size of the corners' refinement window (cv2.cornerSubPix), view pixels: a corner is
+                          # refined from the image's gradients within this reach, so the chart's squares must be wider
+                          # than it (the next chessboard line outside the window), or the corners come out pixels off
 
 
 def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[np.ndarray, float]:
@@ -303,7 +306,8 @@ def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[
         ok, corners = cv2.findChessboardCornersSB(grey8, pattern)
     if not ok:
         raise PoseError(f"the printed {cols} x {rows} chessboard was not found in the view camera image")
-    corners = cv2.cornerSubPix(grey8.astype(np.float32), corners.astype(np.float32), (5, 5), (-1, -1),
+    window = (CORNER_WINDOW_PX, CORNER_WINDOW_PX)
+    corners = cv2.cornerSubPix(grey8.astype(np.float32), corners.astype(np.float32), window, (-1, -1),
                                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)).reshape(-1, 2)
     i, j = np.meshgrid(np.arange(pattern[0]), np.arange(pattern[1]))
     obj = np.stack([i.ravel() - (pattern[0] - 1) / 2, j.ravel() - (pattern[1] - 1) / 2, np.zeros(i.size)], 1) * square
