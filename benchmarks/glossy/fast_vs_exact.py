@@ -36,7 +36,7 @@ from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
 from lftransfer.app.sequence import converged_frame, frame_ground_truth
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.scenes import builtin_scene, load_scene
-from lftransfer.sim.verify import downsample, evaluate, metric_factor, psnr
+from lftransfer.sim.metrics import downsample, evaluate, metric_factor, psnr
 from lftransfer.transfer.live import LiveTransfer
 
 

@@ -28,7 +28,8 @@ from dataclasses import replace
 from lftransfer.app.bench.step import transfer_settings
 from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-from lftransfer.sim.verify import evaluate, render_ground_truth
+from lftransfer.sim.ground_truth import render_ground_truth
+from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells, study_scenes
 VARIANTS = ("box", "depth")

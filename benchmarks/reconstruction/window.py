@@ -19,7 +19,8 @@ from dataclasses import replace
 
 from lftransfer.app.bench.step import transfer_settings
 from lftransfer.app.pipeline import RunOptions, knowledge, open_rig
-from lftransfer.sim.verify import evaluate, render_ground_truth
+from lftransfer.sim.ground_truth import render_ground_truth
+from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells, study_scenes
 

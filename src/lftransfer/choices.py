@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
-LightingModel = Literal["point", "area", "prefiltered"]
+LightingModel = Literal["area", "point", "prefiltered"]
 """How the captured light field lights the synthetic scene: ``"area"`` (lenslet apertures sampled), ``"point"``
 (the paper's projective point lights) or ``"prefiltered"`` (:mod:`lftransfer.render.lights`)."""
 
@@ -51,7 +51,14 @@ DEFAULT_RENDERER: Renderer = "auto"
 DEFAULT_RIG_MODEL: RigModel = "calibrated"
 """Runs calibrate by default; a study defaults to it too (its ``rig_model``)."""
 
-NON_AREA = {"reconstruction": "box", "projection": "box", "window": "cut"}
+LENSLET_RECONSTRUCTION: Reconstruction = "box"
+LENSLET_WINDOW: Window = "cut"
+"""What one lenslet physically sends or records: one radiance per direction over its whole aperture, nothing beyond
+its window. A bare :class:`~lftransfer.render.lights.LightFieldLight` (a projector's lenslets on the simulated rig,
+a calibration's flat field) is lit this way; a run's synthetic side reads the captured light field with the run's
+reconstruction and window instead (:data:`DEFAULT_RECONSTRUCTION`, :data:`DEFAULT_WINDOW`)."""
+
+NON_AREA = {"reconstruction": LENSLET_RECONSTRUCTION, "projection": "box", "window": LENSLET_WINDOW}
 """What reconstruction, projection and window become when the lighting model is not the area model: those three
 choices only exist for lenslets treated as the area lights they are."""
 

@@ -79,7 +79,7 @@ def test_03_frame_metrics_see_a_dark_real_object(variant):
     """psnr_real_db, with the real objects' own peak, drops when the real object is black in the composite,
     where the full-frame figure hardly moves (its peak is the brightest thing in view)."""
     from lftransfer.app.sequence import frame_metrics
-    from lftransfer.sim.verify import GroundTruth
+    from lftransfer.sim.ground_truth import GroundTruth
 
     rng = np.random.default_rng(0)
     h, w = 96, 128

@@ -21,7 +21,7 @@ from lftransfer.app.pipeline import quick_scene
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene
-from lftransfer.sim.verify import calibration_errors
+from lftransfer.sim.calibration_errors import calibration_errors
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
 

@@ -16,7 +16,7 @@ from lftransfer.rig.requests import RealScene
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig, true_light_scene
 from lftransfer.scenes import builtin_scene, load_scene
-from lftransfer.sim.verify import calibration_errors
+from lftransfer.sim.calibration_errors import calibration_errors
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ from lftransfer.render.fast.irradiance import IrradianceCache
 from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.scenes.format import ObjectConfig
-from lftransfer.sim.verify import psnr
+from lftransfer.sim.metrics import psnr
 
 ARRAY = LensArray(lattice="hex", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
 

@@ -1,4 +1,4 @@
-"""Lenslet radiometry against analytic irradiance (DESIGN.md section 3)."""
+"""Lenslet radiometry against analytic irradiance (docs/architecture.md, "Radiometry of a lenslet")."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ from lftransfer.render.fast import CachedRenderer
 from lftransfer.render.lights import PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.scenes.format import ObjectConfig, read_texture
-from lftransfer.sim.verify import psnr
+from lftransfer.sim.metrics import psnr
 
 # Image rows top to bottom: the top row lies along the rectangle's local +y edge (the image appears upright seen
 # from the rectangle's front with +y up).

@@ -66,7 +66,7 @@ def test_fig4_loads_with_the_values_written():
 
 def test_fig4_keeps_the_exchange_inside_the_lenslet_window():
     """Weighted by form factor, almost all light that the two objects exchange crosses the plane inside the
-    array and within the lenslets' angular window |u|, |v| <= a (DESIGN.md section 3)."""
+    array and within the lenslets' angular window |u|, |v| <= a (docs/architecture.md, "Radiometry of a lenslet")."""
     import trimesh
 
     from lftransfer.optics import LensArray

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from lftransfer.imageio_utils import strict_json
-from lftransfer.sim.verify import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, Evaluation, GroundTruth, evaluate,
-                                   gt_noise_verdict, negative_control, object_mask)
+from lftransfer.sim.ground_truth import GroundTruth
+from lftransfer.sim.metrics import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, Evaluation, evaluate, gt_noise_verdict,
+                                    negative_control, object_mask)
 
 H, W = 12, 16
 
@@ -145,7 +146,7 @@ def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
     """The cross error of two composites (a live frame and the no-exchange composite) is evaluate's figure for
     the same images, 0 for a transfer that adds exactly the ground truth's cross term; None without one."""
     from lftransfer.composite import composite
-    from lftransfer.sim.verify import cross_transfer_error
+    from lftransfer.sim.metrics import cross_transfer_error
 
     rng = np.random.default_rng(3)
     real, syn = (rng.random((H, W, 3)).astype(np.float32) for _ in range(2))
@@ -173,7 +174,8 @@ def test_08_cross_by_side_splits_where_the_error_is():
     ones has error 0 and energy ratio 1 there, 0.2 and 0.8 here, and no error left after the best scale (a pure
     energy loss); a wrong shape of the same energy keeps its error after scaling. The two halves' squared errors
     add up to the whole cross error's."""
-    from lftransfer.sim.verify import GroundTruth, cross_by_side, object_mask
+    from lftransfer.sim.ground_truth import GroundTruth
+    from lftransfer.sim.metrics import cross_by_side, object_mask
 
     rng = np.random.default_rng(3)
     h, w = 8, 12

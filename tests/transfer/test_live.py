@@ -1,4 +1,5 @@
-"""The live loop: one capture and one render per frame, bounces accumulating over frames (DESIGN.md section 8)."""
+"""The live loop: one capture and one render per frame, bounces accumulating over frames (docs/architecture.md,
+"The live loop")."""
 
 from __future__ import annotations
 

@@ -4,7 +4,8 @@
 ``templates/calibration_report.html`` (autoescaped) lays out and explains what this module computes (numbers, tables
 as lists of rows, matplotlib figures from :mod:`lftransfer.app.figures` as ``data:`` URIs). Its sections follow the
 calibration's steps (:mod:`lftransfer.calibration.rig`): a summary of the calibration file's key numbers and, if
-given, the errors against a simulated rig's hidden truth (:func:`lftransfer.sim.verify.calibration_errors`) with the
+given, the errors against a simulated rig's hidden truth
+(:func:`lftransfer.sim.calibration_errors.calibration_errors`) with the
 project's targets (:mod:`lftransfer.calibration.targets`) marked pass or fail; the lenslet centres (collimated image,
 a full-resolution crop, the lattice fit's residuals as arrows); the lenslet distortion (histograms of k1 and k2, a map
 of k1); the projector mapping (homography); the radiometry (responses, cross-talk, black level, vignetting,
@@ -91,7 +92,8 @@ def write_calibration_report(path, calibration, errors=None) -> Path:
         path: a folder (the file is ``calibration_report.html`` in it) or a file name ending in ``.html``;
             missing folders are created.
         calibration: :class:`lftransfer.calibration.rig.Calibration`.
-        errors: errors against a simulated rig's hidden truth (:class:`lftransfer.sim.verify.CalibrationErrors`,
+        errors: errors against a simulated rig's hidden truth
+        (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`,
             or its ``to_json()``), shown with the project's targets; None to leave that table out.
 
     Returns:

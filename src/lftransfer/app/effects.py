@@ -121,7 +121,7 @@ class ExchangeCheck:
 
     Attributes:
         cross_errors: frame index -> the frame's cross-transfer error
-            (:func:`~lftransfer.sim.verify.cross_transfer_error`; None where the ground truth has no cross term);
+            (:func:`~lftransfer.sim.metrics.cross_transfer_error`; None where the ground truth has no cross term);
             report.json also gets the ground truth's own noise on it (``cross_gt_noise_rel``).
         effect: the scene's effect curve, or None when it has no ``[effect]``.
     """
@@ -159,7 +159,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     """
     from lftransfer.app.sequence import acquire_model, read_depth
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
-    from lftransfer.sim.verify import cross_transfer_error
+    from lftransfer.sim.metrics import cross_transfer_error
 
     effect = scene.effect
     warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0

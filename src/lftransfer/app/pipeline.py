@@ -29,7 +29,7 @@ from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transf
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 
 if TYPE_CHECKING:
-    from lftransfer.sim.verify import NegativeControl
+    from lftransfer.sim.metrics import NegativeControl
 
 __all__ = ["BY_MODEL_KEYS", "CalibrationFailedError", "RigSpec", "RunOptions", "VIEWS_FILE", "calibrate",
            "check_resolution", "count_run_steps", "knowledge", "negative_control_skipped", "open_rig",
@@ -258,7 +258,7 @@ class ControlRun:
     """A negative control that ran.
 
     Attributes:
-        result: its metrics set against the run's (:class:`lftransfer.sim.verify.NegativeControl`).
+        result: its metrics set against the run's (:class:`lftransfer.sim.metrics.NegativeControl`).
         seconds: wall time of the control's transfer and evaluation, s.
     """
 
@@ -300,6 +300,7 @@ class _Run:
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     undefined: dict = field(default_factory=dict)
+    lights_from: str = "the scene file"
 
     def step(self, msg: str) -> None:
         self.done += 1
@@ -340,6 +341,14 @@ class _Run:
             load_calibration(options.calibration, self.scene.synthetic_part())
         known = knowledge(self.opened, self.scene, options.rig_model, progress=self.step, calibration=loaded)
         label = known.rig_model if options.calibration is None else f"calibration file {options.calibration}"
+        self.lights_from = "the oracle (where they really stand)" if options.rig_model == "oracle" and \
+            known.calibration is None else "the scene file"
+        if known.calibration is not None:
+            note = known.calibration.unmeasured_light_note(known.scene, options.calibration or "the calibration")
+            if note is not None:
+                self.warning(note)
+            elif known.scene.lights:
+                self.lights_from = "measured by the calibration"
         if options.calibration is None and known.calibration is not None:
             self.timings["calibration"] = time.perf_counter() - t
         errors = None
@@ -379,7 +388,7 @@ class _Run:
                   "by_projection": {s.projection: {}}, "by_window": {s.window: {}}}
         if not self.verified:
             return None, None, tables, None
-        from lftransfer.sim.verify import evaluate, gt_noise_verdict
+        from lftransfer.sim.metrics import evaluate, gt_noise_verdict
 
         t = time.perf_counter()
         gt = self.opened.oracle.ground_truth(spp=self.settings.gt_spp, use_cache=self.options.use_cache,
@@ -403,7 +412,7 @@ class _Run:
             alt = run_transfer(self.opened.rig, known.model, known.scene, self.settings.rerun(name, value),
                                progress=self.step)
             if gt is not None:
-                from lftransfer.sim.verify import evaluate
+                from lftransfer.sim.metrics import evaluate
 
                 m = evaluate(alt, gt)
                 tables[TABLES[name]][value] = {k: getattr(m, k) for k in BY_MODEL_KEYS}
@@ -412,7 +421,7 @@ class _Run:
 
     def negative_control(self, result, gt) -> ControlRun | None:
         """Stage 5: the run again with the rig file's nominal values on the same rig, set against the run's result
-        on the same ground truth (:func:`lftransfer.sim.verify.negative_control`), where it can tell anything."""
+        on the same ground truth (:func:`lftransfer.sim.metrics.negative_control`), where it can tell anything."""
         if not self.options.negative_control:
             return None
         why = negative_control_skipped(self.options, self.settings.bounces) or \
@@ -420,7 +429,7 @@ class _Run:
         if why is not None:
             self.undefined["negative_control"] = why
             return None
-        from lftransfer.sim.verify import negative_control
+        from lftransfer.sim.metrics import negative_control
 
         t = time.perf_counter()
         alt = run_transfer(self.opened.rig, nominal_rig(self.scene.rig), self.scene.synthetic_part(),
@@ -476,6 +485,7 @@ class _Run:
             "rig": str(options.rig),
             "truth_seed": self.opened.truth_seed,
             "rig_model": label,
+            "synthetic_lights": self.lights_from,
             "calibration_errors": errors.to_json() if errors is not None else None,
             "variant": variant(),
             "scene": str(scene.source) if scene.source else None,

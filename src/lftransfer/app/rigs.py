@@ -100,7 +100,7 @@ def write_calibration(path: Path, calibration, oracle: Oracle | None = None, sou
             calibration read from it.
 
     Returns:
-        The errors (:class:`lftransfer.sim.verify.CalibrationErrors`), or None without an oracle.
+        The errors (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`), or None without an oracle.
     """
     from lftransfer.app.calibration_report import write_calibration_report
 
@@ -192,12 +192,14 @@ class Knowledge:
             it really stands for the oracle; the scene file's position for the nominal model).
         calibration: the calibration the model came from, or None.
         rig_model: how the model was had, for reports (``"calibrated"``, ``"true (oracle)"``, :data:`NOMINAL`).
+        warnings: lines to show and report (a calibration that did not measure the scene's point lights).
     """
 
     model: RigModel
     scene: object
     calibration: object | None
     rig_model: str
+    warnings: tuple[str, ...] = ()
 
 
 def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,

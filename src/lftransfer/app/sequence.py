@@ -1,6 +1,6 @@
 """Sequences: ``lft render`` runs light field transfer over the frames of a scene's animation and writes videos.
 
-Two modes (DESIGN.md sections 4 and 8):
+Two modes (docs/architecture.md, "The bounce loop" and "The live loop"):
 
 - ``live``: the paper's loop, :class:`~lftransfer.transfer.live.LiveTransfer`: one capture and one render per
   frame, each frame's synthetic light field lit by the latest capture, so bounces accumulate over frames;
@@ -134,7 +134,7 @@ def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
         emitter in view sets the first two's peak and hides errors on dimmer objects; the third does not.
         None where undefined.
     """
-    from lftransfer.sim.verify import downsample, metric_factor, object_mask, psnr
+    from lftransfer.sim.metrics import downsample, metric_factor, object_mask, psnr
 
     f = metric_factor(image.shape[1])
     ref = downsample(gt.image, f)
@@ -180,7 +180,9 @@ def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
         raise SequenceError(str(exc)) from None
     if calibration is None and known.calibration is not None:
         write_calibration(kept, known.calibration, opened.oracle)
-    return replace(known, rig_model=label or known.rig_model)
+    note = None if known.calibration is None else \
+        known.calibration.unmeasured_light_note(ps, options.calibration or kept)
+    return replace(known, rig_model=label or known.rig_model, warnings=(note,) if note else ())
 
 
 @dataclass
@@ -191,7 +193,7 @@ class ConvergedFrame:
         index: frame number.
         time_s: scene time, seconds.
         result: its N-bounce transfer (the LF camera's raw image left out: it stays with the worker).
-        ground_truth: its path-traced ground truth (``lftransfer.sim.verify.GroundTruth``), or None.
+        ground_truth: its path-traced ground truth (``lftransfer.sim.ground_truth.GroundTruth``), or None.
         seconds: wall time of the transfer and the ground truth, s.
     """
 
@@ -339,6 +341,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             known = acquire_model(opened, scene, options, out, seq.resume, step)
             model, rig_model, ps = known.model, known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
+                      "warnings": list(known.warnings),
                       "renderer": resolve_renderer(ps, settings.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "projection": settings.projection,
@@ -365,7 +368,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
                 report["summary"]["stale_captures"] = int(stale)
                 if stale:
-                    report["warnings"] = [f"{stale} capture(s) saw frames that still changed after the rig file's "
+                    report["warnings"] += [f"{stale} capture(s) saw frames that still changed after the rig file's "
                                           "settle_s: they were dropped, not averaged, and the captures waited; "
                                           "settle_s is too short (lft calibrate latency)"]
             _write_videos(out, n, report["fps"])

@@ -3,7 +3,7 @@
 A study file names scenes (built-in names or scene files), hidden-truth seeds of the simulated rig, and settings
 (each a name and changes to the scenes' ``[render]`` table, e.g. ``reconstruction = "box"``). Every cell is one
 converged N-bounce transfer of a scene on the simulated rig of a seed with a setting, measured against its
-path-traced ground truth (:func:`lftransfer.sim.verify.evaluate`). Example::
+path-traced ground truth (:func:`lftransfer.sim.metrics.evaluate`). Example::
 
     [study]
     title = "Reconstruction across scenes"
@@ -50,7 +50,7 @@ from lftransfer.validation import read_json, read_toml, validation_message
 __all__ = ["METRICS", "Study", "StudyCell", "StudyConfig", "StudyError", "StudyResult", "StudySetting", "cell_key",
            "load_study", "run_study", "write_study_outputs"]
 
-# metric -> (label, unit, lower is better, short label); the cells' columns (lftransfer.sim.verify.evaluate)
+# metric -> (label, unit, lower is better, short label); the cells' columns (lftransfer.sim.metrics.evaluate)
 METRICS = {
     "cross_transfer_rel_error": ("cross-transfer error", "relative", True, "cross error"),
     "cross_gt_noise_rel": ("ground truth's own noise on it", "relative", True, "its GT noise"),
@@ -316,7 +316,7 @@ class StudyWorker(Worker):
     def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
         """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared)."""
         from lftransfer.settings import Overrides, resolve_settings
-        from lftransfer.sim.verify import evaluate
+        from lftransfer.sim.metrics import evaluate
         from lftransfer.transfer.bounce import run_transfer
 
         setting = next(s for s in self.study.config.setting if s.name == setting_name)

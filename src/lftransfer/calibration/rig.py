@@ -75,12 +75,26 @@ class Calibration:
     lights: list[LightFit] = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
 
+    def measures_lights(self, scene) -> bool:
+        """Whether this calibration measured every point light of ``scene`` (a file from before the light step,
+        or made for a scene with other lights, did not)."""
+        return len(self.lights) == len(scene.lights)
+
     def light_positions(self, scene) -> list[tuple[float, float, float]]:
         """Where the synthetic side's point lights go (world frame, metres), one per light of the scene: the
-        measured positions, else (a file from before the step) the scene file's."""
-        measured = [fit.position for fit in self.lights] if len(self.lights) == len(scene.lights) else \
+        measured positions, else (:meth:`measures_lights` false) the scene file's."""
+        measured = [fit.position for fit in self.lights] if self.measures_lights(scene) else \
             [lt.position for lt in scene.lights]
         return [tuple(float(v) for v in where) for where in measured]
+
+    def unmeasured_light_note(self, scene, source) -> str | None:
+        """One line of warning where the synthetic side's point lights stand where the scene file says because
+        the calibration ``source`` has no (or no matching) light section, else None."""
+        if not scene.lights or self.measures_lights(scene):
+            return None
+        return (f"{source}: no light section for the scene's {len(scene.lights)} point light(s) (it measured "
+                f"{len(self.lights)}): the synthetic side's light stands where the scene file says, not where the "
+                f"real one was measured; calibrate again (lft calibrate) to measure it")
 
     def to_json(self) -> dict:
         """The calibration as plain JSON data (OpenCV conventions for the per-lenslet cameras)."""
@@ -121,8 +135,8 @@ class Calibration:
 def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
     """A device behind the array: its focal-plane homography and one OpenCV camera per lenslet.
 
-    Each lenslet's ``camera_matrix`` is the first-order map from its normalised coordinates x_d (DESIGN.md
-    section 2: ``x_n = -(d_x, d_y) / d_z``) to pixels, at its centre; ``dist_coeffs`` are k1 k2 p1 p2 k3.
+    Each lenslet's ``camera_matrix`` is the first-order map from its normalised coordinates x_d (docs/architecture.md,
+    "The interface": ``x_n = -(d_x, d_y) / d_z``) to pixels, at its centre; ``dist_coeffs`` are k1 k2 p1 p2 k3.
     """
     c = array.centres
     px = apply_homography(dev.homography, c)

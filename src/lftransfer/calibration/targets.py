@@ -1,6 +1,7 @@
 """The accuracy targets of calibration, defined once (docs/calibration.md).
 
-Each target bounds one error that :func:`lftransfer.sim.verify.calibration_errors` measures against a simulated
+Each target bounds one error that :func:`lftransfer.sim.calibration_errors.calibration_errors` measures against a
+simulated
 rig's hidden truth. The calibration report marks each pass or fail, ``lft calibrate seeds`` tabulates the worst
 seed against it, and the tests read the same bounds: nothing else defines them.
 

@@ -1,6 +1,6 @@
 """Precomputed resampling between a device image behind the lens array and a :class:`LightField` grid.
 
-Both directions are a single ``cv2.remap`` with maps built once (DESIGN.md section 2):
+Both directions are a single ``cv2.remap`` with maps built once (docs/architecture.md, "The interface"):
 
 - image -> light field (capture): each grid sample (k, u_j, v_i) reads the device pixel where its ray lands
   (:meth:`LensletDevice.ray_to_pixel`, so the lens distortion is applied);

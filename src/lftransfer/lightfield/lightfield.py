@@ -1,4 +1,5 @@
-"""The light field on the interface: radiance per lenslet on a regular (u, v) grid (DESIGN.md sections 2-3)."""
+"""The light field on the interface: radiance per lenslet on a regular (u, v) grid (docs/architecture.md sections
+2-3)."""
 
 from __future__ import annotations
 

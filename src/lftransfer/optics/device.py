@@ -2,7 +2,7 @@
 
 The device images the lenslets' common focal plane z = -f through a homography. A focal-plane point q behind
 lenslet k has offset o = q - c_k; ideally (no distortion) it belongs to the ray d = normalize(-o_x, -o_y, f),
-i.e. o = -f (u, v) with (u, v) = (d_x / d_z, d_y / d_z) (DESIGN.md section 2).
+i.e. o = -f (u, v) with (u, v) = (d_x / d_z, d_y / d_z) (docs/architecture.md, "The interface").
 
 Lens distortion is OpenCV's radial model, per lenslet, on normalised coordinates in the world orientation:
 x_n = -(u, v), x_d = x_n (1 + k1 r^2 + k2 r^4) with r^2 = |x_n|^2, and o = f x_d.

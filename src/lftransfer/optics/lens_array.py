@@ -1,6 +1,7 @@
 """The lens array in the plane z = 0: lattice geometry, lenslet cells and apertures.
 
-World frame (DESIGN.md section 2): metres, the array plane is z = 0, +y up, the real half-space is z > 0.
+World frame (docs/architecture.md, "The interface"): metres, the array plane is z = 0, +y up, the real half-space
+is z > 0.
 Lenslets are numbered row-major, ``k = r * cols + c``, with row 0 at the top (largest y).
 """
 

@@ -11,6 +11,7 @@ from typing import Literal, Sequence
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.choices import DEFAULT_LIGHTING_MODEL, DEFAULT_SPP, LightingModel
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
 from lftransfer.render.integrator import Light, trace
@@ -69,7 +70,7 @@ def sample_mean(values: np.ndarray, spp: int) -> np.ndarray:
 
 
 def lightfield_rays(array: LensArray, U: int, V: int, *, side: Literal["synthetic", "real"] = "synthetic",
-                    area: bool = True, spp: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                    area: bool = True, spp: int = DEFAULT_SPP, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The primary rays of a light field render: for every lenslet k and grid direction d_ij, ``spp`` rays from
     stratified points of the aperture (:func:`aperture_offsets`; the lenslet centre when not ``area``) along
     -d_ij (``side="synthetic"``: looking into z < 0) or +d_ij (``side="real"``).
@@ -223,8 +224,8 @@ class HalfSpaceRenderer:
 
     def render_lightfield(self, array: LensArray, lights: Sequence[Light], U: int, V: int, *,
                           side: Literal["synthetic", "real"] = "synthetic",
-                          model: Literal["point", "area", "prefiltered"] = "area",
-                          spp: int = 4, seed: int = 0) -> LightField:
+                          model: LightingModel = DEFAULT_LIGHTING_MODEL,
+                          spp: int = DEFAULT_SPP, seed: int = 0) -> LightField:
         """The light field this half-space sends through the array.
 
         For ``side="synthetic"`` entry [k, j, i] is the radiance arriving at lenslet k travelling along +d_ij
@@ -247,7 +248,7 @@ class HalfSpaceRenderer:
         lf.data.reshape(-1)[channels] = means.radiance.ravel()
         return lf
 
-    def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = 4,
+    def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = DEFAULT_SPP,
                     seed: int = 0) -> ViewImage:
         """Render the view camera (``sensor`` from :func:`lftransfer.render.camera.sensor_dict`)."""
         from lftransfer.render.camera import view_rays

@@ -1,4 +1,5 @@
-"""Keyframe interpolation of object transforms (DESIGN.md section 8: objects move by keyframed transforms).
+"""Keyframe interpolation of object transforms (docs/architecture.md, "The live loop": objects move by keyframed
+transforms).
 
 An object's ``translate``, ``rotate_deg`` and ``scale`` are keyed at increasing times; between keys each
 component follows one of two curves:

@@ -24,6 +24,7 @@ from lftransfer.choices import (
     DEFAULT_RECONSTRUCTION,
     DEFAULT_SPP,
     DEFAULT_WINDOW,
+    LightingModel,
     Projection,
     Reconstruction,
     Window,
@@ -210,9 +211,7 @@ class RenderConfig(_Model):
         gt_spp: samples per pixel of the path-traced ground truth.
     """
 
-    # the values of choices.LightingModel, in the order the scene format documents them (and an invalid value's
-    # message lists them in): choices.py lists "point" first
-    lighting_model: Literal["area", "point", "prefiltered"] = DEFAULT_LIGHTING_MODEL
+    lighting_model: LightingModel = DEFAULT_LIGHTING_MODEL
     aperture_samples: PosInt = DEFAULT_APERTURE_SAMPLES
     reconstruction: Reconstruction = DEFAULT_RECONSTRUCTION
     projection: Projection = DEFAULT_PROJECTION

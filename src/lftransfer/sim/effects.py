@@ -30,7 +30,7 @@ from scipy.ndimage import uniform_filter
 from lftransfer.backend import mitsuba
 from lftransfer.render.camera import sensor_dict, view_rays
 from lftransfer.render.shapes import scene_dict
-from lftransfer.sim.verify import downsample, metric_factor
+from lftransfer.sim.metrics import downsample, metric_factor
 
 __all__ = ["MIN_CONTRAST", "EffectMeasure", "ObjectPixels", "measure_effect", "object_distance", "object_pixels"]
 
@@ -90,7 +90,7 @@ def object_pixels(scene, name: str, *, target_width: int = 256) -> ObjectPixels:
     Args:
         scene: a ``SceneConfig`` posed at one time (``scene.at(t)``), real objects included.
         name: the object's name (real or synthetic).
-        target_width: the metrics' width (:func:`lftransfer.sim.verify.metric_factor`).
+        target_width: the metrics' width (:func:`lftransfer.sim.metrics.metric_factor`).
 
     Returns:
         :class:`ObjectPixels`.

@@ -45,15 +45,16 @@ class Oracle:
     def ground_truth(self, *, spp: int, world=None, use_cache: bool = True,
                      progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
         """The path-traced ground truth of the world (or of ``world``, e.g. one frame of a sequence), two
-        independent renders of the union, the real and the synthetic objects (:mod:`lftransfer.sim.verify`)."""
-        from lftransfer.sim.verify import render_ground_truth
+        independent renders of the union, the real and the synthetic objects (:mod:`lftransfer.sim.ground_truth`)."""
+        from lftransfer.sim.ground_truth import render_ground_truth
 
         return render_ground_truth(self.world if world is None else world, spp=spp, use_cache=use_cache,
                                    progress=progress, warn=warn)
 
     def calibration_errors(self, calibration):
-        """A calibration's errors against the rig as built (:class:`lftransfer.sim.verify.CalibrationErrors`)."""
-        from lftransfer.sim.verify import calibration_errors
+        """A calibration's errors against the rig as built
+        (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`)."""
+        from lftransfer.sim.calibration_errors import calibration_errors
 
         return calibration_errors(calibration, self.model, true_lights=self.true_lights())
 

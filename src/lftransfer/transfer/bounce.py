@@ -1,4 +1,4 @@
-"""The bounce loop of light field transfer (DESIGN.md section 4).
+"""The bounce loop of light field transfer (docs/architecture.md, "The bounce loop").
 
 Light transport is linear, so the real scene's response to a projected light field is separated from its
 response to the real point light by differencing two captures, and each bounce can be inspected alone:

@@ -1,4 +1,5 @@
-"""The live loop of light field transfer (DESIGN.md sections 4 and 8): one capture and one render per frame.
+"""The live loop of light field transfer (docs/architecture.md, "The bounce loop" and "The live loop"): one capture
+and one render per frame.
 
 Frame t, with the projector showing the synthetic light field of frame t - 1 (black at the first frame):
 

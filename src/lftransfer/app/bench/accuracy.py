@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from lftransfer.composite import composite
 from lftransfer.render.lights import LightFieldLight
 from lftransfer.render.renderer import HalfSpaceRenderer
-from lftransfer.sim.verify import psnr
+from lftransfer.sim.metrics import psnr
 
 __all__ = ["FastVsExact", "fast_vs_exact"]
 

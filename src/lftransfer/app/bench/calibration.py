@@ -5,7 +5,7 @@ For each seed the simulated rig is built as the rig file says plus deviations dr
 :func:`lftransfer.sim.truth.true_light_scene`, which the last step measures); the pipeline calibrates it from
 images alone
 (:func:`lftransfer.calibration.rig.calibrate_rig`) and the verification code compares the result with the
-hidden truth (:func:`lftransfer.sim.verify.calibration_errors`).
+hidden truth (:func:`lftransfer.sim.calibration_errors.calibration_errors`).
 """
 
 from __future__ import annotations

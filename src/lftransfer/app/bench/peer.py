@@ -1,6 +1,7 @@
 """The benchmark's peer: the same job as our light field renderer, done with Mitsuba's own plugins only.
 
-The synthetic half-space is lit by an incident light field in the paper's point model (DESIGN.md section 3):
+The synthetic half-space is lit by an incident light field in the paper's point model (docs/architecture.md,
+"Radiometry of a lenslet"):
 lenslet k is a projective point light at its centre c_k with intensity I_k(w) = L_k(d) A |d_z|, w the
 direction of travel (w_z < 0), d = -w, (u, v) = (d_x / d_z, d_y / d_z), L_k bilinear in the grid of
 ``lightfield.data[k]``. The peer renders the outgoing light field (entry [k, j, i] = radiance arriving at c_k

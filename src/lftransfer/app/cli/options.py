@@ -20,7 +20,7 @@ from rich.markup import escape
 
 from lftransfer import choices
 
-__all__ = ["Bounces", "Calibration", "Cluster", "ExactRig", "GtSpp", "LightingModel", "MaxMemory", "NoCache",
+__all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache",
            "OutDir", "Projection", "Quick", "Reconstruction", "Renderer", "RigArgs", "SceneArg", "TruthArgs",
            "Window", "Workers", "flag", "metavar", "option", "option_groups"]
 

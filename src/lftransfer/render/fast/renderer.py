@@ -9,6 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.choices import DEFAULT_SPP
 from lftransfer.render.fast.burial import shade_under
 from lftransfer.render.fast.glossy import (DEFAULT_LOBE_SAMPLES, DEFAULT_VIEW_LOBE_SAMPLES, GlossyLobes,
                                            pinhole_objects)
@@ -129,7 +130,7 @@ class CachedRenderer(HalfSpaceRenderer):
         """Whether this renderer's surfaces light each other (:func:`exchanges_light`)."""
         return exchanges_light(self.objects)
 
-    def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = 4,
+    def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = DEFAULT_SPP,
                     seed: int = 0):
         """:meth:`HalfSpaceRenderer.render_view`, its glossy lobes sampled with ``view_lobe_samples`` directions
         per ray."""

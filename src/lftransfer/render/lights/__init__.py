@@ -2,7 +2,8 @@
 
 Each light adds its reflected radiance at a batch of surface points in one call (next-event estimation with
 shadow rays). The light field light is the paper's interface seen from one half-space: every lenslet k is an
-emitter whose radiance depends on direction only (DESIGN.md section 3). Three lighting models:
+emitter whose radiance depends on direction only (docs/architecture.md, "Radiometry of a lenslet"). Three lighting
+models:
 
 - ``"point"``: the paper's approximation. Lenslet k collapses to a projective point light at its centre c_k
   with intensity I_k(w) = L_k(w) A |w_z|; a point x receives I_k cos(theta_x) / r^2.

@@ -10,6 +10,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer import choices
 from lftransfer.choices import LIGHTING_MODELS, RECONSTRUCTIONS, WINDOWS, LightingModel, Reconstruction, Window
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.window import SteepRays, extend_beyond_window, steep_rays
@@ -64,12 +65,12 @@ class LightFieldLight:
         self,
         lightfield: LightField,
         side: Literal["synthetic", "real"],
-        model: LightingModel = "area",
-        aperture_samples: int = 4,
+        model: LightingModel = choices.DEFAULT_LIGHTING_MODEL,
+        aperture_samples: int = choices.DEFAULT_APERTURE_SAMPLES,
         seed: int = 0,
         jitter: bool = True,
-        reconstruction: Reconstruction = "box",
-        window: Window = "cut",
+        reconstruction: Reconstruction = choices.LENSLET_RECONSTRUCTION,
+        window: Window = choices.LENSLET_WINDOW,
         steep: SteepRays | None = None,
     ) -> None:
         if side not in ("synthetic", "real"):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lftransfer.backend import mitsuba
-from lftransfer.choices import RECONSTRUCTIONS, Reconstruction
+from lftransfer.choices import LENSLET_RECONSTRUCTION, RECONSTRUCTIONS, Reconstruction
 from lftransfer.lightfield.window import SteepRays
 from lftransfer.render.lights.jit import jit_array
 
@@ -131,7 +131,7 @@ class PlaneLookup:
 PLANE_CELLS_PER_PITCH = 64
 
 
-def plane_lookup(array, reconstruction: Reconstruction = "box") -> PlaneLookup:
+def plane_lookup(array, reconstruction: Reconstruction = LENSLET_RECONSTRUCTION) -> PlaneLookup:
     """The :class:`PlaneLookup` of a lens array, cached per array and reconstruction.
 
     Each cell is read at its centre: ``"box"``, the lenslet whose aperture contains it

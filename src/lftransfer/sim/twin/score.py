@@ -4,8 +4,8 @@ A run through ``--rig hardware:twin.toml`` does not know the real scene (the har
 the view images its metrics need (``views.npz``, :func:`lftransfer.app.pipeline.write_views`). The twin's manifest
 names the scene and the truth seed, so the same world can be built again here and path traced from the view camera,
 and the run scored with the very metrics ``lft run`` computes on the in-process rig
-(:func:`lftransfer.sim.verify.evaluate`), and its calibration against the true rig
-(:func:`lftransfer.sim.verify.calibration_errors`).
+(:func:`lftransfer.sim.metrics.evaluate`), and its calibration against the true rig
+(:func:`lftransfer.sim.calibration_errors.calibration_errors`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class _Bounce:
 @dataclass(frozen=True)
 class SavedViews:
     """The images of a run that its metrics are computed from, read back from ``views.npz`` (the attributes
-    :func:`lftransfer.sim.verify.evaluate` reads of a transfer result)."""
+    :func:`lftransfer.sim.metrics.evaluate` reads of a transfer result)."""
 
     real_view: np.ndarray
     real_view_direct: np.ndarray
@@ -63,9 +63,10 @@ class TwinScore:
     """A run scored against the twin's truth.
 
     Attributes:
-        metrics: :class:`lftransfer.sim.verify.Evaluation`.
-        ground_truth: the :class:`lftransfer.sim.verify.GroundTruth` rendered.
-        calibration_errors: :class:`lftransfer.sim.verify.CalibrationErrors` of the run's calibration file, or
+        metrics: :class:`lftransfer.sim.metrics.Evaluation`.
+        ground_truth: the :class:`lftransfer.sim.ground_truth.GroundTruth` rendered.
+        calibration_errors: :class:`lftransfer.sim.calibration_errors.CalibrationErrors` of the run's calibration
+        file, or
             None where the run has none.
         noisy: the ground truth's noise verdict on the cross term, or None where it is quiet enough.
     """
@@ -93,7 +94,9 @@ def score_views(views: SavedViews, scene, truth_seed: int | None, *, gt_spp: int
     from lftransfer.calibration.rig import load_calibration
     from lftransfer.rig.model import nominal_rig
     from lftransfer.sim.truth import hidden_world
-    from lftransfer.sim.verify import calibration_errors, evaluate, gt_noise_verdict, render_ground_truth
+    from lftransfer.sim.calibration_errors import calibration_errors
+    from lftransfer.sim.ground_truth import render_ground_truth
+    from lftransfer.sim.metrics import evaluate, gt_noise_verdict
 
     world, truth = hidden_world(scene, truth_seed)
     h, w = views.real_view.shape[:2]

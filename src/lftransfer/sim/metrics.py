@@ -1,147 +1,22 @@
-"""Verification against path-traced ground truth (DESIGN.md section 6). Only this module (and tests) may read
-a simulated rig's hidden truth.
-
-The ground truth is the union scene (real objects + synthetic objects + point light, no lens array) path traced
-from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
-with the same seeds so that their noise cancels in the cross-transfer term. Two independent seeds give the
-ground truth's own noise. Renders are cached under a hash of everything they depend on, each entry with its
-checksum (:mod:`lftransfer.sim.gt_cache`). A metric that a scene leaves undefined (no light, no cross term) is
-None, with the reason in ``undefined``.
+"""Metrics of a run against its ground truth: PSNR over the image and over the objects, the cross-transfer error
+(what the objects add to each other's appearance), the ground truth's own noise on it, and the negative control.
+They read the ground truth only (:class:`lftransfer.sim.ground_truth.GroundTruth`), never the hidden rig. A metric
+that a scene leaves undefined (no light, no cross term) is None, with the reason in ``undefined``.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from lftransfer.composite import composite
-from lftransfer.optics.geometry import apply_homography, rotation_xy, rotation_z
-from lftransfer.render.camera import sensor_dict
-from lftransfer.render.shapes import scene_dict
-from lftransfer.sim.gt_cache import CacheProblem, cache_dir, read_entry, write_entry
+from lftransfer.sim.ground_truth import GroundTruth, single_seed
 
-__all__ = ["CalibrationErrors", "CrossCheck", "CrossSide", "cross_by_side", "GroundTruth", "NegativeControl", "NoiseVerdict", "cache_dir", "calibration_errors",
-           "cross_term_truth", "cross_transfer_error", "downsample", "Evaluation", "evaluate", "gt_noise_verdict", "metric_factor",
-           "negative_control", "object_mask", "psnr", "render_ground_truth", "single_seed"]
-
-GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
-
-
-@dataclass
-class GroundTruth:
-    """Ground-truth view images, each rendered with two independent seeds.
-
-    Attributes:
-        union: (2, H, W, 3) float32, all objects together.
-        real: (2, H, W, 3) float32, real objects alone.
-        synthetic: (2, H, W, 3) float32, synthetic objects alone.
-        alpha_real, alpha_synthetic: (H, W) float32 coverage of each set of objects.
-    """
-
-    union: np.ndarray
-    real: np.ndarray
-    synthetic: np.ndarray
-    alpha_real: np.ndarray
-    alpha_synthetic: np.ndarray
-
-    @property
-    def image(self) -> np.ndarray:
-        """(H, W, 3) the ground truth: the mean of the two union renders."""
-        return self.union.mean(axis=0)
-
-
-def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
-    """SHA-256 (hex) of everything the ground-truth renders depend on."""
-    import mitsuba
-
-    def objects(objs):
-        out = []
-        for o in objs:
-            d = o.model_dump(mode="json")
-            if getattr(o, "file", None):
-                d["file_sha"] = hashlib.sha256(Path(o.file).read_bytes()).hexdigest()
-            out.append(d)
-        return out
-
-    payload = {
-        "real": objects(scene.real), "synthetic": objects(scene.synthetic),
-        # one light hashes as the single table it was before several were possible (cached entries stay valid)
-        "light": _lights_key(scene.lights), "view": scene.view.model_dump(mode="json"),
-        "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
-    }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
-
-
-def _lights_key(lights) -> dict | list | None:
-    dumps = [lt.model_dump(mode="json") for lt in lights]
-    return None if not dumps else dumps[0] if len(dumps) == 1 else dumps
-
-
-STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real and synthetic alphas
-
-
-def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
-                        progress: Callable[[str], None] | None = None,
-                        warn: Callable[[str], None] | None = None) -> GroundTruth:
-    """Path trace the union, real-alone and synthetic-alone scenes from the view camera.
-
-    Args:
-        scene: ``lftransfer.scenes.SceneConfig`` (its ``real`` objects are the hidden truth).
-        spp: samples per pixel of each render.
-        seeds: the two independent seeds.
-        use_cache: read and write the cache (:mod:`lftransfer.sim.gt_cache`); an entry that fails its checks is
-            rendered again and replaced.
-        progress: called before each render.
-        warn: called with one line when a cache entry is bad.
-
-    Returns:
-        GroundTruth.
-    """
-    from lftransfer.backend import mitsuba
-
-    w, h = scene.view.resolution
-    inputs = _inputs_hash(scene, spp, seeds)
-    if use_cache:
-        cached = read_entry(inputs, (h, w, STACK_CHANNELS))
-        if isinstance(cached, np.ndarray):
-            return _unpack(cached)
-        if isinstance(cached, CacheProblem) and warn is not None:
-            warn(cached.message())
-    mi = mitsuba()
-    view = scene.view
-    light = {("point_light" if i == 0 else f"point_light_{i}"):
-             {"type": "point", "position": list(map(float, lt.position)),
-              "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
-             for i, lt in enumerate(scene.lights)}
-    extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
-             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
-             **light}
-    images: dict[str, list[np.ndarray]] = {}
-    for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
-        mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False, optimize=False)
-        images[name] = []
-        for seed in seeds:
-            if progress:
-                progress(f"ground truth: {name}, seed {seed}")
-            images[name].append(np.array(mi.render(mscene, spp=spp, seed=seed), dtype=np.float32))
-    stack = np.concatenate([images[n][i][..., :3] for n in ("union", "real", "synthetic") for i in range(2)]
-                           + [images["real"][0][..., 3:4], images["synthetic"][0][..., 3:4]], axis=-1)
-    if use_cache:
-        write_entry(inputs, stack)
-    return _unpack(stack)
-
-
-def _unpack(stack: np.ndarray) -> GroundTruth:
-    parts = [stack[..., 3 * i:3 * i + 3] for i in range(6)]
-    return GroundTruth(union=np.stack(parts[0:2]), real=np.stack(parts[2:4]), synthetic=np.stack(parts[4:6]),
-                       alpha_real=stack[..., 18], alpha_synthetic=stack[..., 19])
-
+__all__ = ["CrossCheck", "CrossSide", "Evaluation", "IDENTICAL", "NO_CROSS", "NO_LIGHT", "NO_PIXELS",
+           "NegativeControl", "NoiseVerdict", "cross_by_side", "cross_term_truth", "cross_transfer_error",
+           "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control", "object_mask", "psnr"]
 
 def downsample(image: np.ndarray, factor: int) -> np.ndarray:
     """Box-downsample the first two axes by an integer factor (cropping the remainder)."""
@@ -263,7 +138,7 @@ class Evaluation:
         psnr_db, psnr_db_direct_only: PSNR of the composite (N bounces, direct light only), every pixel, dB.
         psnr_objects_db, psnr_objects_db_direct_only: the same over the pixels the objects cover
             (:func:`object_mask`; the peak stays the ground truth's maximum), dB.
-        cross_transfer_rel_error: ||C_lft - C_gt|| / ||C_gt|| over the objects (DESIGN.md section 6).
+        cross_transfer_rel_error: ||C_lft - C_gt|| / ||C_gt|| over the objects (docs/architecture.md, "Verification").
         gt_noise_psnr_db: PSNR of the ground truth's two seeds against each other, dB.
         cross_gt_noise_rel: the ground truth's own noise on the cross term, relative to it.
         cross_term_rel_size: ||C_gt|| / ||union||: how much of the image the exchange is.
@@ -347,7 +222,7 @@ def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], covered: np.nd
 
 
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
-    """Metrics of a transfer result against the ground truth (DESIGN.md section 6).
+    """Metrics of a transfer result against the ground truth (docs/architecture.md, "Verification").
 
     A metric that the scene leaves undefined (a black ground truth, no cross term, identical images) is None
     and ``undefined`` says why; every other value is a finite float.
@@ -498,13 +373,6 @@ class NegativeControl:
                 f"({fmt(self.cross_error_margin_per_gt)}); the metrics cannot tell this rig model from the run's")
 
 
-def single_seed(gt: GroundTruth, i: int) -> GroundTruth:
-    """The ground truth of seed ``i`` (0 or 1) alone, in both slots (its own noise then reads as 0)."""
-    pick = lambda x: np.stack([x[i], x[i]])  # noqa: E731
-    return GroundTruth(union=pick(gt.union), real=pick(gt.real), synthetic=pick(gt.synthetic),
-                       alpha_real=gt.alpha_real, alpha_synthetic=gt.alpha_synthetic)
-
-
 def _margins(run: Evaluation, control: Evaluation) -> tuple[float | None, float | None]:
     """(run's psnr_objects_db - control's, control's cross error - run's); None where either is undefined."""
     def diff(a: float | None, b: float | None) -> float | None:
@@ -535,138 +403,3 @@ def negative_control(result, control, gt: GroundTruth, rig_model: str, *, target
                            psnr_objects_margin_db=psnr_margin, cross_error_margin=cross_margin,
                            psnr_objects_margin_db_per_gt=(per_gt[0][0], per_gt[1][0]),
                            cross_error_margin_per_gt=(per_gt[0][1], per_gt[1][1]), measurably_worse=bool(worse))
-
-
-# ---- calibration against the hidden truth -----------------------------------------------------------------------
-
-def _rig_rotation(model) -> np.ndarray:
-    return rotation_xy(model.tilt) @ rotation_z(model.array.rotation)
-
-
-@dataclass(frozen=True)
-class CalibrationErrors:
-    """A calibration against the simulated rig's hidden truth (:func:`calibration_errors`; verification only). The
-    keys of ``to_json()`` are those of the project's targets (:mod:`lftransfer.calibration.targets`).
-
-    Attributes:
-        lenslet_assignment_agreement: fraction of camera pixels assigned to the right lenslet.
-        ray_direction_rms_deg: each camera pixel's ray in the world, RMS angle, degrees.
-        projector_mapping_rms_px: camera -> projector mapping, RMS, projector px.
-        pose_position_rms_mm, pose_position_max_mm: the lenslet centres in the world, mm.
-        pose_rotation_deg: the array's orientation, degrees.
-        pitch_rel_error: calibrated / true pitch - 1.
-        distortion_k1_rms: per-lenslet k1, RMS.
-        camera_response_error, projector_response_error: responses, max, fraction of full scale.
-        projector_mixing_rel_error: brightness x cross-talk, max, relative.
-        black_level_error: projector black level, max, fraction of its max radiance.
-        exposure_rel_error: LF camera exposure, relative.
-        lenslet_centre_rms_px, lenslet_centre_max_px, lenslets_found: lenslet centres, LF camera px (None: the
-            calibration has no lattice fit, e.g. read from a file).
-        camera_gain_rel_rms: exposure x vignetting per pixel, RMS relative (None without vignetting).
-        light_position_error_mm: the measured point lights against the true ones, the worst light, mm (None: not
-            measured).
-    """
-
-    lenslet_assignment_agreement: float
-    ray_direction_rms_deg: float
-    projector_mapping_rms_px: float
-    pose_position_rms_mm: float
-    pose_position_max_mm: float
-    pose_rotation_deg: float
-    pitch_rel_error: float
-    distortion_k1_rms: float
-    camera_response_error: float
-    projector_response_error: float
-    projector_mixing_rel_error: float
-    black_level_error: float
-    exposure_rel_error: float
-    lenslet_centre_rms_px: float | None = None
-    lenslet_centre_max_px: float | None = None
-    lenslets_found: int | None = None
-    camera_gain_rel_rms: float | None = None
-    light_position_error_mm: float | None = None
-
-    def to_json(self) -> dict:
-        """quantity -> error, the measured ones only (``calibration_errors.json``)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
-
-
-def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int = 200_000) -> CalibrationErrors:
-    """Errors of a calibration against the simulated rig's hidden truth (verification only).
-
-    Args:
-        calibration: :class:`lftransfer.calibration.rig.Calibration`.
-        truth: the true ``RigModel`` (``SimRig.truth``).
-        true_lights: (3,) per point light, where it really stands, world frame, metres (the hidden world's
-            ``lights``: :func:`lftransfer.sim.truth.true_light_scene`), in the scene file's order, or None.
-        max_pixels: camera pixels sampled for the ray and mapping errors.
-
-    Returns:
-        :class:`CalibrationErrors`; ``light_position_error_mm`` (the worst light) where the calibration measured
-        the lights and ``true_lights`` are given.
-    """
-    from lftransfer.calibration.radiometric import response_error
-
-    cal = calibration.model
-    out: dict = {}
-    ta, ca = truth.array, cal.array
-    tcam, ccam = truth.camera, cal.camera
-    if calibration.lattice is not None:
-        lat = calibration.lattice
-        k = lat.indices[:, 0] * ta.cols + lat.indices[:, 1]
-        true_px = tcam.device.ray_to_pixel(ta, k, np.tile([0.0, 0.0, 1.0], (len(k), 1)))
-        err = np.linalg.norm(lat.centres - true_px, axis=1)
-        out["lenslet_centre_rms_px"] = float(np.sqrt(np.mean(err ** 2)))
-        out["lenslet_centre_max_px"] = float(err.max())
-        out["lenslets_found"] = int(len(k))
-    # camera pixels behind lenslets, a sample
-    h, w = tcam.device.height, tcam.device.width
-    rng = np.random.default_rng(0)
-    px = np.stack([rng.uniform(0, w - 1, max_pixels), rng.uniform(0, h - 1, max_pixels)], 1)
-    kt, dt = tcam.device.pixel_to_ray(ta, px)
-    kc, dc = ccam.device.pixel_to_ray(ca, px)
-    both = (kt >= 0) & (kc >= 0)
-    same = both & (kt == kc)
-    out["lenslet_assignment_agreement"] = float(same.sum() / max(both.sum(), 1))
-    rt, rc = _rig_rotation(truth), _rig_rotation(cal)
-    dw_t, dw_c = dt[same] @ rt.T, dc[same] @ rc.T                       # world directions
-    ang = np.degrees(np.arccos(np.clip(np.sum(dw_t * dw_c, axis=1), -1, 1)))
-    out["ray_direction_rms_deg"] = float(np.sqrt(np.mean(ang ** 2)))
-
-    def to_prj(model, p):
-        return apply_homography(model.projector.device.homography @ np.linalg.inv(model.camera.device.homography), p)
-
-    inside = kt >= 0
-    e = np.linalg.norm(to_prj(cal, px[inside]) - to_prj(truth, px[inside]), axis=1)
-    out["projector_mapping_rms_px"] = float(np.sqrt(np.mean(e ** 2)))
-    # global pose: the lenslet centres in the world, and the array's orientation
-    ct, cc = ta.centres3d @ rt.T, ca.centres3d @ rc.T
-    d = np.linalg.norm(ct - cc, axis=1) * 1000
-    out["pose_position_rms_mm"] = float(np.sqrt(np.mean(d ** 2)))
-    out["pose_position_max_mm"] = float(d.max())
-    cosang = (np.trace(rc.T @ rt) - 1) / 2
-    out["pose_rotation_deg"] = float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))
-    out["pitch_rel_error"] = float(ca.pitch / ta.pitch - 1)
-    kd = np.asarray(ccam.device.distortion) - np.asarray(tcam.device.distortion)
-    out["distortion_k1_rms"] = float(np.sqrt(np.mean(kd[:, 0] ** 2)))
-    # radiometry
-    out["camera_response_error"] = response_error(ccam.response, tcam.response)
-    out["projector_response_error"] = response_error(cal.projector.response, truth.projector.response)
-    tp, cp = truth.projector, cal.projector
-
-    mt, mc = tp.max_radiance * tp.cross_talk_matrix, cp.max_radiance * cp.cross_talk_matrix
-    out["projector_mixing_rel_error"] = float(np.abs(mc - mt).max() / np.abs(mt).max())
-    bt = tp.max_radiance * np.asarray(tp.black_level)
-    bc = cp.max_radiance * np.asarray(cp.black_level)
-    out["black_level_error"] = float(np.abs(bc - bt).max() / tp.max_radiance)
-    out["exposure_rel_error"] = float(ccam.exposure / tcam.exposure - 1)
-    if tcam.vignetting is not None and ccam.vignetting is not None:
-        ys, xs = px[inside, 1].astype(int), px[inside, 0].astype(int)
-        st = tcam.exposure * tcam.vignetting[ys, xs]
-        sc = ccam.exposure * ccam.vignetting[ys, xs]
-        out["camera_gain_rel_rms"] = float(np.sqrt(np.mean((sc / st - 1) ** 2)))
-    fits = getattr(calibration, "lights", [])
-    if fits and true_lights is not None and len(true_lights) == len(fits):
-        out["light_position_error_mm"] = max(float(1000 * np.linalg.norm(fit.position - np.asarray(at, float)))
-                                             for fit, at in zip(fits, true_lights))
-    return CalibrationErrors(**out)

@@ -1,0 +1,144 @@
+"""The path-traced ground truth of a simulated world (docs/architecture.md, "Verification").
+
+The ground truth is the union scene (real objects + synthetic objects + point light, no lens array) path traced
+from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
+with the same seeds so that their noise cancels in the cross-transfer term. Two independent seeds give the
+ground truth's own noise. Renders are cached under a hash of everything they depend on, each entry with its
+checksum (:mod:`lftransfer.sim.gt_cache`). It renders the hidden world: the faces reach it through
+:class:`lftransfer.sim.oracle.Oracle`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from lftransfer.render.camera import sensor_dict
+from lftransfer.render.shapes import scene_dict
+from lftransfer.sim.gt_cache import CacheProblem, read_entry, write_entry
+
+__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed"]
+
+GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
+
+
+@dataclass
+class GroundTruth:
+    """Ground-truth view images, each rendered with two independent seeds.
+
+    Attributes:
+        union: (2, H, W, 3) float32, all objects together.
+        real: (2, H, W, 3) float32, real objects alone.
+        synthetic: (2, H, W, 3) float32, synthetic objects alone.
+        alpha_real, alpha_synthetic: (H, W) float32 coverage of each set of objects.
+    """
+
+    union: np.ndarray
+    real: np.ndarray
+    synthetic: np.ndarray
+    alpha_real: np.ndarray
+    alpha_synthetic: np.ndarray
+
+    @property
+    def image(self) -> np.ndarray:
+        """(H, W, 3) the ground truth: the mean of the two union renders."""
+        return self.union.mean(axis=0)
+
+
+def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
+    """SHA-256 (hex) of everything the ground-truth renders depend on."""
+    import mitsuba
+
+    def objects(objs):
+        out = []
+        for o in objs:
+            d = o.model_dump(mode="json")
+            if getattr(o, "file", None):
+                d["file_sha"] = hashlib.sha256(Path(o.file).read_bytes()).hexdigest()
+            out.append(d)
+        return out
+
+    payload = {
+        "real": objects(scene.real), "synthetic": objects(scene.synthetic),
+        # one light hashes as the single table it was before several were possible (cached entries stay valid)
+        "light": _lights_key(scene.lights), "view": scene.view.model_dump(mode="json"),
+        "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _lights_key(lights) -> dict | list | None:
+    dumps = [lt.model_dump(mode="json") for lt in lights]
+    return None if not dumps else dumps[0] if len(dumps) == 1 else dumps
+
+
+STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real and synthetic alphas
+
+
+def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
+                        progress: Callable[[str], None] | None = None,
+                        warn: Callable[[str], None] | None = None) -> GroundTruth:
+    """Path trace the union, real-alone and synthetic-alone scenes from the view camera.
+
+    Args:
+        scene: ``lftransfer.scenes.SceneConfig`` (its ``real`` objects are the hidden truth).
+        spp: samples per pixel of each render.
+        seeds: the two independent seeds.
+        use_cache: read and write the cache (:mod:`lftransfer.sim.gt_cache`); an entry that fails its checks is
+            rendered again and replaced.
+        progress: called before each render.
+        warn: called with one line when a cache entry is bad.
+
+    Returns:
+        GroundTruth.
+    """
+    from lftransfer.backend import mitsuba
+
+    w, h = scene.view.resolution
+    inputs = _inputs_hash(scene, spp, seeds)
+    if use_cache:
+        cached = read_entry(inputs, (h, w, STACK_CHANNELS))
+        if isinstance(cached, np.ndarray):
+            return _unpack(cached)
+        if isinstance(cached, CacheProblem) and warn is not None:
+            warn(cached.message())
+    mi = mitsuba()
+    view = scene.view
+    light = {("point_light" if i == 0 else f"point_light_{i}"):
+             {"type": "point", "position": list(map(float, lt.position)),
+              "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
+             for i, lt in enumerate(scene.lights)}
+    extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
+             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
+             **light}
+    images: dict[str, list[np.ndarray]] = {}
+    for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
+        mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False, optimize=False)
+        images[name] = []
+        for seed in seeds:
+            if progress:
+                progress(f"ground truth: {name}, seed {seed}")
+            images[name].append(np.array(mi.render(mscene, spp=spp, seed=seed), dtype=np.float32))
+    stack = np.concatenate([images[n][i][..., :3] for n in ("union", "real", "synthetic") for i in range(2)]
+                           + [images["real"][0][..., 3:4], images["synthetic"][0][..., 3:4]], axis=-1)
+    if use_cache:
+        write_entry(inputs, stack)
+    return _unpack(stack)
+
+
+def _unpack(stack: np.ndarray) -> GroundTruth:
+    parts = [stack[..., 3 * i:3 * i + 3] for i in range(6)]
+    return GroundTruth(union=np.stack(parts[0:2]), real=np.stack(parts[2:4]), synthetic=np.stack(parts[4:6]),
+                       alpha_real=stack[..., 18], alpha_synthetic=stack[..., 19])
+
+
+def single_seed(gt: GroundTruth, i: int) -> GroundTruth:
+    """The ground truth of seed ``i`` (0 or 1) alone, in both slots (its own noise then reads as 0)."""
+    pick = lambda x: np.stack([x[i], x[i]])  # noqa: E731
+    return GroundTruth(union=pick(gt.union), real=pick(gt.real), synthetic=pick(gt.synthetic),
+                       alpha_real=gt.alpha_real, alpha_synthetic=gt.alpha_synthetic)

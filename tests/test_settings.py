@@ -1,0 +1,140 @@
+"""Settings are resolved once (lftransfer.settings): every default and override path gives the settings a run
+reports and uses, and a run's progress total is the number of steps it takes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from lftransfer import choices
+from lftransfer.app.pipeline import RunOptions, count_run_steps, run_scene
+from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene, with_overrides
+from lftransfer.scenes.models import RenderConfig
+from lftransfer.settings import COMPARABLE, Overrides, RunSettings, resolve_settings
+from lftransfer.transfer.bounce import TransferSettings
+from tests.app.small import nominal_calibration, write_tiny_scene
+
+
+def test_each_default_is_defined_once():
+    """The scene model, the transfer's settings and the choices module agree on every default."""
+    render, transfer = RenderConfig(), TransferSettings()
+    for name in ("lighting_model", "reconstruction", "projection", "window"):
+        default = getattr(choices, f"DEFAULT_{name.upper()}")
+        assert getattr(render, name) == getattr(transfer, name) == default, name
+    assert render.spp == transfer.view_spp == transfer.lf_spp == choices.DEFAULT_SPP
+    assert render.gt_spp == choices.DEFAULT_GT_SPP and render.aperture_samples == transfer.aperture_samples
+    assert transfer.bounces == choices.DEFAULT_BOUNCES and transfer.renderer == choices.DEFAULT_RENDERER
+    assert RunOptions().rig_model == choices.DEFAULT_RIG_MODEL
+    from lftransfer.app.study import StudyConfig
+
+    study = StudyConfig(scenes=["fig4"], setting=[{"name": "a"}])
+    assert study.rig_model == choices.DEFAULT_RIG_MODEL and study.bounces == choices.DEFAULT_BOUNCES
+    assert set(choices.LIGHTING_MODELS) == set(RenderConfig.model_fields["lighting_model"].annotation.__args__)
+
+
+@pytest.mark.parametrize("name", builtin_scenes())
+def test_a_scene_without_overrides_runs_as_its_file_says(name):
+    scene = load_scene(builtin_scene(name))
+    s = resolve_settings(scene)
+    r = scene.render
+    assert (s.transfer.lighting_model, s.transfer.reconstruction, s.transfer.projection, s.transfer.window) == \
+        (r.lighting_model, r.reconstruction, r.projection, r.window)
+    assert s.transfer.angular_samples == scene.rig.angular_samples and s.gt_spp == r.gt_spp
+    assert s.transfer.lf_spp == (r.lf_spp or r.spp) and s.transfer.view_spp == r.spp
+    assert s.comparisons == ()
+
+
+def test_overrides_win_and_only_the_area_model_has_reconstruction_projection_window():
+    scene = load_scene(builtin_scene("fig4"))
+    s = resolve_settings(scene, Overrides(bounces=5, reconstruction="box", gt_spp=7, renderer="exact"))
+    assert (s.bounces, s.transfer.reconstruction, s.gt_spp, s.transfer.renderer) == (5, "box", 7, "exact")
+    assert s.transfer.projection == scene.render.projection                  # not overridden: the scene's
+    point = resolve_settings(scene, Overrides(lighting_model="point", window="edge")).transfer
+    assert (point.reconstruction, point.projection, point.window) == ("box", "box", "cut")
+    assert not point.prefilters
+    # the comparisons: none equal to the run's own value; area-only choices dropped under another model
+    every = resolve_settings(scene, Overrides.comparing_all())
+    assert every.comparisons == (("lighting_model", "point"), ("reconstruction", "box"), ("projection", "box"),
+                                 ("window", "cut"))
+    assert resolve_settings(scene, Overrides.comparing_all(lighting_model="point")).comparisons == \
+        (("lighting_model", "area"),)
+    rerun = every.rerun("lighting_model", "point")
+    assert (rerun.lighting_model, rerun.window, rerun.bounce_views) == ("point", "cut", False)
+    assert every.rerun("window", "cut") == dataclasses.replace(every.transfer, window="cut", bounce_views=False)
+
+
+@pytest.mark.parametrize("bad", [dict(bounces=choices.MAX_BOUNCES + 1), dict(bounces=-1), dict(gt_spp=0),
+                                 dict(window="soft"), dict(renderer="fastest"),
+                                 dict(compare=(("window", ("soft",)),)), dict(compare=(("bounces", (1,)),))])
+def test_bad_overrides_are_refused_with_their_name(bad):
+    with pytest.raises(ValueError, match=next(iter(bad)) if "compare" not in bad else "compare"):
+        Overrides(**bad)
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    return load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24), gt_spp=4))
+
+
+def _run_counting(scene, out, options):
+    seen = []
+    report = run_scene(scene, out, options, progress=lambda msg, done: seen.append(done))
+    return report, seen
+
+
+@pytest.mark.parametrize("case", ["compare_and_control", "calibration_file", "unverified_point"])
+def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it_used(variant, tiny, tmp_path,
+                                                                                      case):
+    """The progress total (count_run_steps) equals the steps the run makes, on runs that take every branch:
+    comparison re-runs (area and point models), the negative control, a calibration file, no verification; and
+    report.json's settings are the resolved ones, which the transfer received."""
+    if case == "compare_and_control":
+        options = RunOptions(settings=Overrides.comparing_all(bounces=1), rig_model="oracle", truth_seed=3,
+                             negative_control=True, use_cache=False, capture_spp=1)
+    elif case == "calibration_file":
+        path = nominal_calibration(tiny).write(tmp_path / "given" / "calibration.json")
+        options = RunOptions(settings=Overrides(bounces=1), calibration=path, truth_seed=3, use_cache=False,
+                             capture_spp=1)
+    else:
+        options = RunOptions(settings=Overrides(bounces=2, lighting_model="point"), rig_model="nominal",
+                             verify=False, capture_spp=1)
+    report, seen = _run_counting(tiny, tmp_path / "out", options)
+    assert seen == list(range(1, len(seen) + 1))
+    assert seen[-1] == count_run_steps(tiny, options)
+    resolved = resolve_settings(tiny, options.settings)
+    assert report["settings"] == json.loads(json.dumps(resolved.to_json()))
+    assert report["lighting_model"] == resolved.transfer.lighting_model
+    if case == "compare_and_control":
+        assert set(report["by_lighting_model"]) == {"area", "point"} and report["negative_control"] is not None
+        assert report["synthetic_lights"].startswith("the oracle")
+    if case == "calibration_file":        # a file without its light section: said, not silently the scene's light
+        assert report["synthetic_lights"] == "the scene file"
+        assert [w for w in report["warnings"] if "no light section" in w and str(path) in w]
+    else:
+        assert not [w for w in report["warnings"] if "no light section" in w]
+
+
+def test_the_command_line_reports_the_settings_it_resolved(variant, tiny, tmp_path):
+    """``lft run --lighting-model point --bounces 1``: report.json's settings are resolve_settings' of the same
+    overrides (the command line adds its defaults: the renderer)."""
+    from lftransfer.app.cli import app
+
+    out = tmp_path / "cli"
+    result = CliRunner().invoke(app, ["run", str(tiny.source), "--lighting-model", "point", "--bounces", "1",
+                                      "--rig-model", "nominal", "--exact-rig", "--out", str(out), "--no-cache"])
+    assert result.exit_code == 0, (result.output, result.exception)
+    report = json.loads((out / "report.json").read_text())
+    expected = resolve_settings(tiny, Overrides(lighting_model="point", bounces=1, renderer=choices.DEFAULT_RENDERER))
+    assert report["settings"] == json.loads(json.dumps(expected.to_json()))
+    assert report["settings"]["transfer"]["window"] == "cut"
+
+
+def test_run_settings_serialise_every_field():
+    s = resolve_settings(with_overrides(load_scene(builtin_scene("fig4")), render={"spp": 8}))
+    data = s.to_json()
+    assert set(data["transfer"]) == {f.name for f in dataclasses.fields(TransferSettings)}
+    assert data["transfer"]["view_spp"] == 8 and isinstance(s, RunSettings)
+    assert set(COMPARABLE) <= set(data["transfer"])
