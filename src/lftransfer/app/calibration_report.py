@@ -31,6 +31,7 @@ from lftransfer.app.figures import CHANNEL_COLOURS, embed
 from lftransfer.app.templating import _num, _vec, environment
 from lftransfer.calibration.targets import TARGETS as CALIBRATION_TARGETS
 from lftransfer.imageio_utils import to_display, write_text
+from lftransfer.optics.geometry import apply_homography
 
 __all__ = ["REPORT_NAME", "SECTIONS", "TARGETS", "render_calibration_report", "write_calibration_report"]
 
@@ -354,8 +355,7 @@ def _distortion_map(cal, k1: np.ndarray, used: np.ndarray) -> dict:
     """The lenslet cells where the LF camera sees them, coloured by k1."""
     array, dev = cal.model.array, cal.model.camera.device
     cells = (array.centres[:, None, :] + array.cell_vertices()[None]).reshape(-1, 2)      # (K * V, 2) metres
-    h = np.concatenate([cells, np.ones((len(cells), 1))], 1) @ np.asarray(dev.homography, np.float64).T
-    cells_px = (h[:, :2] / h[:, 2:]).reshape(len(array.centres), -1, 2)
+    cells_px = apply_homography(dev.homography, cells).reshape(len(array.centres), -1, 2)
     fig = figures.cell_map(cells_px, k1, used, (dev.height, dev.width), label="k1", title="k1 per lenslet")
     return embed(fig, "Lenslet cells where the LF camera sees them, coloured by k1 (grey: too few spots to fit). "
                       "A smooth trend across the array would point at a tilt of the collimator or the array rather "

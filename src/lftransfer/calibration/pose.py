@@ -27,7 +27,8 @@ from scipy.optimize import least_squares
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray, LensletDevice
-from lftransfer.optics.geometry import backproject, plane_axes, project, rotation_xy, rotation_z, view_camera
+from lftransfer.optics.geometry import (backproject, plane_axes, project, rotation_2d, rotation_xy, rotation_z,
+                                        view_camera)
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
@@ -377,8 +378,9 @@ def apply_pose(model: RigModel, pose: ArrayPose) -> RigModel:
     s, th = pose.scale, pose.rotation
     array = LensArray(lattice=a.lattice, rows=a.rows, cols=a.cols, pitch=a.pitch * s, focal_length=a.focal_length * s,
                       aperture=a.aperture, offset=tuple(float(v) for v in pose.offset), rotation=float(th))
-    c, sn = np.cos(th), np.sin(th)
-    sim = np.array([[s * c, -s * sn, pose.offset[0]], [s * sn, s * c, pose.offset[1]], [0.0, 0.0, 1.0]])
+    sim = np.eye(3)
+    sim[:2, :2] = s * rotation_2d(th)
+    sim[:2, 2] = pose.offset
     inv = np.linalg.inv(sim)
 
     def moved(dev: LensletDevice) -> LensletDevice:

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lftransfer.optics.geometry import apply_homography
+
 
 def _bits(n: int) -> int:
     return max(1, int(np.ceil(np.log2(n))))
@@ -91,8 +93,7 @@ class ProjectorCameraFit:
 
     def camera_to_projector(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) camera pixels -> (N, 2) projector pixels."""
-        h = np.concatenate([xy, np.ones((len(xy), 1))], axis=1) @ self.homography.T
-        return h[:, :2] / h[:, 2:3]
+        return apply_homography(self.homography, xy)
 
 
 def fit_projector_camera(column: np.ndarray, row: np.ndarray, valid: np.ndarray,

@@ -20,6 +20,7 @@ import numpy as np
 from lftransfer.lightfield.lightfield import LightField
 from lftransfer.optics.device import LensletDevice
 from lftransfer.optics.lens_array import LensArray
+from lftransfer.optics.geometry import apply_homography
 
 __all__ = ["LensletCodec"]
 
@@ -242,8 +243,7 @@ class LensletCodec:
         px = px.copy()
         finite = np.flatnonzero(np.all(np.isfinite(px), axis=1))
         x, y, kf = px[finite, 0], px[finite, 1], k[finite]
-        centre = np.column_stack([self.array.centres[kf], np.ones(len(kf))]) @ self.device.homography.T
-        cx, cy = centre[:, 0] / centre[:, 2], centre[:, 1] / centre[:, 2]
+        cx, cy = apply_homography(self.device.homography, self.array.centres[kf]).T
         lost = np.arange(len(x))
         for _ in range(_MAX_PULL_STEPS):
             own, _, _, _ = self._footprint(x[lost], y[lost], kf[lost])

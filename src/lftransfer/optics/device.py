@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lftransfer.optics.geometry import apply_homography
 from lftransfer.optics.lens_array import LensArray
 
 __all__ = ["LensletDevice"]
@@ -155,9 +156,7 @@ class LensletDevice:
         px = np.asarray(px, dtype=np.float64)
         if px.ndim != 2 or px.shape[1] != 2:
             raise ValueError(f"px must have shape (N, 2), got {px.shape}")
-        hom = np.concatenate([px, np.ones((len(px), 1))], axis=1) @ self._Hinv.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            q = hom[:, :2] / hom[:, 2:3]
+        q = apply_homography(self._Hinv, px)
         k = array.lenslet_at(q)
         valid = k >= 0
         kv = k[valid]
@@ -191,7 +190,6 @@ class LensletDevice:
         k1, k2 = self.distortion[kv, 0], self.distortion[kv, 1]
         xd = xn * (1.0 + k1 * r2 + k2 * r2 * r2)[:, None]
         q = array.centres[kv] + array.focal_length * xd
-        hom = np.concatenate([q, np.ones((len(q), 1))], axis=1) @ self.homography.T
         out = np.full((len(k), 2), np.nan)
-        out[valid] = hom[:, :2] / hom[:, 2:3]
+        out[valid] = apply_homography(self.homography, q)
         return out

@@ -15,6 +15,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import Delaunay, cKDTree
 
+from lftransfer.optics.geometry import rotation_2d
+
 __all__ = ["LensArray"]
 
 _SQRT3 = math.sqrt(3.0)
@@ -104,8 +106,7 @@ class LensArray:
     # --------------------------------------------------------------- geometry
     @cached_property
     def _rot(self) -> np.ndarray:
-        c, s = math.cos(self.rotation), math.sin(self.rotation)
-        return np.array([[c, -s], [s, c]])
+        return rotation_2d(self.rotation)
 
     @cached_property
     def centres(self) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 
 from lftransfer.lightfield import CameraModel, ProjectorModel, ResponseCurve
 from lftransfer.optics import LensArray, LensletDevice
+from lftransfer.optics.geometry import rotation_xy
 from lftransfer.rig.model import RigModel, nominal_rig
 
 
@@ -65,10 +66,9 @@ def _tilted(device: LensletDevice, tilt_deg: float, rng: np.random.Generator) ->
     w, h = device.width, device.height
     f = 1.2 * max(w, h)                                  # focal length of the device in pixels (about 45 deg)
     ax, ay = np.radians(rng.uniform(-tilt_deg, tilt_deg, 2))
-    rx = np.array([[1, 0, 0], [0, np.cos(ax), -np.sin(ax)], [0, np.sin(ax), np.cos(ax)]])
-    ry = np.array([[np.cos(ay), 0, np.sin(ay)], [0, 1, 0], [-np.sin(ay), 0, np.cos(ay)]])
     k = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
-    warp = k @ rx @ ry @ np.linalg.inv(k)                # image of the tilted view, about the image centre
+    turn = rotation_xy((ax, 0.0)) @ rotation_xy((0.0, ay))          # R_x @ R_y
+    warp = k @ turn @ np.linalg.inv(k)                   # image of the tilted view, about the image centre
     return replace(device, homography=warp @ device.homography)
 
 

@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from lftransfer.optics.geometry import apply_homography
+
 _SQRT3_2 = math.sqrt(3.0) / 2.0
 _ROW_STEP = {"hex": _SQRT3_2, "rect": 1.0}
 
@@ -66,5 +68,4 @@ def _as_grey(image: np.ndarray) -> np.ndarray:
 
 def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Homography ``h`` applied to ``(N, 2)`` points."""
-    q = np.asarray(pts, dtype=np.float64) @ h[:, :2].T + h[:, 2]
-    return q[:, :2] / q[:, 2:3]
+    return apply_homography(h, pts)
