@@ -22,6 +22,7 @@ import numpy as np
 
 from lftransfer.app.cluster import ClusterSpec
 from lftransfer.app.pipeline import RunOptions, quick_scene
+from lftransfer.settings import Overrides
 from lftransfer.app.sequence import SequenceOptions, render_sequence
 from lftransfer.imageio_utils import read_exr
 from lftransfer.scenes import builtin_scene, load_scene
@@ -36,7 +37,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out/cluster_speedup"))
     args = parser.parse_args()
     scene = quick_scene(load_scene(builtin_scene(args.scene)))
-    options = RunOptions(rig_model="oracle", truth_seed=0, use_cache=False, gt_spp=args.gt_spp)
+    options = RunOptions(rig_model="oracle", truth_seed=0, use_cache=False, settings=Overrides(gt_spp=args.gt_spp))
     runs, load = {}, []
     for name, cluster in (("one_process", None), ("local_cluster", ClusterSpec("local", workers=args.workers))):
         seq = SequenceOptions(mode="converged", frames=args.frames, verify_every=1, cluster=cluster)

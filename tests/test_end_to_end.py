@@ -102,7 +102,7 @@ def test_03_record_then_replay_is_bit_identical(variant, tmp_path):
     assert json.loads((tmp_path / "replayed" / "status.json").read_text())["state"] == "complete"
     # two bounces ask for a projection the recording never saw
     with pytest.raises(ReplayError, match="not in the recording|never projected"):
-        run_scene(scene, tmp_path / "more", RunOptions(**{**options.__dict__, "bounces": 2,
+        run_scene(scene, tmp_path / "more", RunOptions(**{**options.__dict__, "settings": Overrides(bounces=2),
                                                           "rig": RigSpec("replay", session)}))
     assert json.loads((tmp_path / "more" / "status.json").read_text())["state"] == "failed"
 

@@ -88,7 +88,7 @@ def main() -> None:
                               calibration=load_calibration(args.calibration, scene.synthetic_part()))
         for frame in args.frames:
             t = frame / scene.animation.fps
-            gt, _ = frame_ground_truth(opened.world, t, args.gt_spp, use_cache=True)
+            gt, _ = frame_ground_truth(opened.oracle, t, args.gt_spp, use_cache=True)
             times, live = {}, {}
             for seed in args.seeds:
                 for renderer in ("fast", "exact"):

@@ -58,7 +58,7 @@ def fig5_shadow(full: bool) -> None:
         opened = open_rig(scene, RunOptions(truth_seed=0))
         known = knowledge(opened, scene, "oracle")
         t = frame / scene.animation.fps
-        world = opened.world.at(t)
+        world = opened.oracle.world.at(t)
         pixels = object_pixels(world, effect.on)
         distance = object_distance(world, effect.on, effect.by)
         gt = render_ground_truth(world, spp=scene.render.gt_spp).image
@@ -89,7 +89,7 @@ def cross_table(full: bool) -> None:
             settings = replace(transfer_settings(scene), bounces=2, reconstruction="linear")
             opened.start_frame(0)
             result = transfer(opened, known, settings, variant)
-            m = evaluate(result, render_ground_truth(opened.world, spp=512 if full else GT_SPP))
+            m = evaluate(result, opened.oracle.ground_truth(spp=512 if full else GT_SPP))
             print(f"| {name} | {variant} | {m.cross_transfer_rel_error:.3f} {by_side_cells(m, 'real')}", flush=True)
 
 

@@ -23,7 +23,6 @@ from dataclasses import replace
 from lftransfer.app.bench.step import transfer_settings
 from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-from lftransfer.sim.ground_truth import render_ground_truth
 from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells
@@ -51,7 +50,7 @@ def main() -> None:
         settings = replace(transfer_settings(scene), bounces=2, reconstruction=reconstruction)
         opened.start_frame(0)
         result = run_transfer(opened.rig, known.model, known.scene, settings)
-        m = evaluate(result, render_ground_truth(opened.world, spp=GT_SPP))
+        m = evaluate(result, opened.oracle.ground_truth(spp=GT_SPP))
         print(f"| {name} | {m.cross_transfer_rel_error:.3f} {by_side_cells(m)}", flush=True)
 
 

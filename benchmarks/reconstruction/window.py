@@ -19,7 +19,6 @@ from dataclasses import replace
 
 from lftransfer.app.bench.step import transfer_settings
 from lftransfer.app.pipeline import RunOptions, knowledge, open_rig
-from lftransfer.sim.ground_truth import render_ground_truth
 from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells, study_scenes
@@ -38,7 +37,7 @@ def main(full: bool) -> None:
             settings = replace(transfer_settings(scene), bounces=2, reconstruction="linear", window=window)
             opened.start_frame(0)
             result = run_transfer(opened.rig, known.model, known.scene, settings)
-            m = evaluate(result, render_ground_truth(opened.world, spp=512 if full else GT_SPP))
+            m = evaluate(result, opened.oracle.ground_truth(spp=512 if full else GT_SPP))
             print(f"| {name} | {window} | {m.cross_transfer_rel_error:.3f} {by_side_cells(m)}", flush=True)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from lftransfer.app.cluster import ClusterSpec
+from lftransfer.settings import Overrides
 from lftransfer.app.pipeline import RigSpec, RunOptions
 from lftransfer.app.sequence import SequenceError, SequenceOptions, render_sequence
 from lftransfer.imageio_utils import read_exr
@@ -65,7 +66,7 @@ def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(var
     if not Path("/proc/self/cmdline").is_file():
         pytest.skip("needs /proc to find a busy worker")
     scene = _moving_scene()
-    options = RunOptions(rig_model="oracle", truth_seed=3, use_cache=False, gt_spp=16)
+    options = RunOptions(rig_model="oracle", truth_seed=3, use_cache=False, settings=Overrides(gt_spp=16))
     one = render_sequence(scene, tmp_path / "one", options, SequenceOptions(mode="converged", frames=4, verify_every=1))
 
     killed = []

@@ -15,6 +15,8 @@ import os
 import re
 from dataclasses import dataclass
 
+from lftransfer.choices import DEFAULT_BOUNCES
+
 __all__ = ["MemoryEstimate", "MemoryLimitError", "available_memory", "check_memory", "estimate_memory",
            "format_bytes", "parse_size"]
 
@@ -53,7 +55,7 @@ class MemoryEstimate:
         return f"{names.get(key, key)} {format_bytes(self.parts[key])}"
 
 
-def estimate_memory(scene, *, bounces: int = 2, calibrate: bool = True) -> MemoryEstimate:
+def estimate_memory(scene, *, bounces: int = DEFAULT_BOUNCES, calibrate: bool = True) -> MemoryEstimate:
     """Estimate the peak memory of a run on ``scene`` (see the module's notes for where the numbers come from).
 
     Args:

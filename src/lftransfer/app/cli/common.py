@@ -153,7 +153,6 @@ def check_before_work(scene, *, out_dir: Optional[Path] = None, out_file: Option
     """Output paths, the ground-truth cache and the memory estimate, before any work (one line, exit code 2)."""
     from lftransfer.app.memory import check_memory, estimate_memory
     from lftransfer.app.paths import check_cache_dir, check_output_dir, check_output_file
-    from lftransfer.choices import DEFAULT_BOUNCES
 
     if out_dir is not None:
         check_output_dir(out_dir, out_option)
@@ -163,7 +162,7 @@ def check_before_work(scene, *, out_dir: Optional[Path] = None, out_file: Option
         from lftransfer.sim.gt_cache import cache_dir
 
         check_cache_dir(cache_dir())
-    check_memory(estimate_memory(scene, bounces=DEFAULT_BOUNCES if bounces is None else bounces, calibrate=calibrate),
+    check_memory(estimate_memory(scene, calibrate=calibrate, **({} if bounces is None else {"bounces": bounces})),
                  parse_memory(max_memory))
 
 
