@@ -4,6 +4,7 @@ line, exit code 2), the rig options turned into run options, the operator prompt
 from __future__ import annotations
 
 import inspect
+import re
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
@@ -49,7 +50,8 @@ def command(app: typer.Typer, name: str | None = None):
     docstring as help with brackets shown as typed."""
     def decorate(fn):
         doc = "\n\n".join(" ".join(p.split()) for p in (inspect.getdoc(fn) or "").split("\n\n"))
-        return app.command(name, cls=Command, help=escape(doc))(option_groups(fn))
+        first = re.split(r"(?<!Fig)(?<!e\.g)(?<!i\.e)\.\s", doc.split("\n\n")[0] + " ", maxsplit=1)[0].rstrip(". ")
+        return app.command(name, cls=Command, help=escape(doc), short_help=escape(first + "."))(option_groups(fn))
     return decorate
 
 
