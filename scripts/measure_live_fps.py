@@ -18,6 +18,8 @@ import threading
 import time
 from pathlib import Path
 
+from lftransfer.choices import DEFAULT_RIG_MODEL, RIG_MODELS
+
 
 async def _watch(url: str, seconds: float, start_translate: list[float]) -> tuple[int, float, dict]:
     import websockets
@@ -48,7 +50,7 @@ async def _watch(url: str, seconds: float, start_translate: list[float]) -> tupl
 def main() -> None:
     import uvicorn
 
-    from lftransfer.app.cli import _load
+    from lftransfer.app.cli.common import load
     from lftransfer.app.viewer.command import open_session
     from lftransfer.app.viewer.server import make_app
 
@@ -57,10 +59,10 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--calibration", type=Path, default=None)
-    parser.add_argument("--rig-model", default="calibrated")
+    parser.add_argument("--rig-model", default=DEFAULT_RIG_MODEL, choices=RIG_MODELS)
     parser.add_argument("--port", type=int, default=8787)
     args = parser.parse_args()
-    scene = _load(args.scene, args.quick)
+    scene = load(args.scene, args.quick)
     session = open_session(scene, rig_model=args.rig_model, calibration=args.calibration, out=Path("/tmp/lft-live-fps"))
     server = uvicorn.Server(uvicorn.Config(make_app(session), host="127.0.0.1", port=args.port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)

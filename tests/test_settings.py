@@ -64,6 +64,10 @@ def test_overrides_win_and_only_the_area_model_has_reconstruction_projection_win
     rerun = every.rerun("lighting_model", "point")
     assert (rerun.lighting_model, rerun.window, rerun.bounce_views) == ("point", "cut", False)
     assert every.rerun("window", "cut") == dataclasses.replace(every.transfer, window="cut", bounce_views=False)
+    # a comparison is the run that asks for that value: the area model back brings the scene's own choices
+    point_first = resolve_settings(scene, Overrides.comparing_all(lighting_model="point"))
+    assert point_first.rerun("lighting_model", "area") == dataclasses.replace(
+        resolve_settings(scene).transfer, bounce_views=False)
 
 
 @pytest.mark.parametrize("bad", [dict(bounces=choices.MAX_BOUNCES + 1), dict(bounces=-1), dict(gt_spp=0),
@@ -79,15 +83,25 @@ def tiny(tmp_path):
     return load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24), gt_spp=4))
 
 
-def _run_counting(scene, out, options):
-    seen = []
+def _run_counting(scene, out, options, monkeypatch):
+    """Run with a progress callback; also keep the settings each transfer of the run received."""
+    import lftransfer.app.pipeline as pipeline
+
+    seen, given = [], []
+    real = pipeline.run_transfer
+
+    def transfer(rig, model, scene_, settings, **kw):
+        given.append(settings)
+        return real(rig, model, scene_, settings, **kw)
+
+    monkeypatch.setattr(pipeline, "run_transfer", transfer)
     report = run_scene(scene, out, options, progress=lambda msg, done: seen.append(done))
-    return report, seen
+    return report, seen, given
 
 
 @pytest.mark.parametrize("case", ["compare_and_control", "calibration_file", "unverified_point"])
 def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it_used(variant, tiny, tmp_path,
-                                                                                      case):
+                                                                                      case, monkeypatch):
     """The progress total (count_run_steps) equals the steps the run makes, on runs that take every branch:
     comparison re-runs (area and point models), the negative control, a calibration file, no verification; and
     report.json's settings are the resolved ones, which the transfer received."""
@@ -101,11 +115,14 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
     else:
         options = RunOptions(settings=Overrides(bounces=2, lighting_model="point"), rig_model="nominal",
                              verify=False, capture_spp=1)
-    report, seen = _run_counting(tiny, tmp_path / "out", options)
+    report, seen, given = _run_counting(tiny, tmp_path / "out", options, monkeypatch)
     assert seen == list(range(1, len(seen) + 1))
     assert seen[-1] == count_run_steps(tiny, options)
     resolved = resolve_settings(tiny, options.settings)
     assert report["settings"] == json.loads(json.dumps(resolved.to_json()))
+    # what the transfers received: the run's settings, then each comparison's, then the control's
+    control = [dataclasses.replace(resolved.transfer, bounce_views=False)] if report["negative_control"] else []
+    assert given == [resolved.transfer, *resolved.reruns, *control]
     assert report["lighting_model"] == resolved.transfer.lighting_model
     if case == "compare_and_control":
         assert set(report["by_lighting_model"]) == {"area", "point"} and report["negative_control"] is not None

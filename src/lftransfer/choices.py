@@ -62,11 +62,16 @@ NON_AREA = {"reconstruction": LENSLET_RECONSTRUCTION, "projection": "box", "wind
 """What reconstruction, projection and window become when the lighting model is not the area model: those three
 choices only exist for lenslets treated as the area lights they are."""
 
+COMPARED_LIGHTING_MODELS: tuple[str, ...] = ("area", "point")
+"""The lighting models a run compares when it compares every choice (``lft demo``, ``lft run --compare-models``):
+the prefiltered model is a speed-up of the point model, not a third answer."""
+
 DEFAULT_BOUNCES = 2
 """N, light field exchanges after the direct frame."""
 MAX_BOUNCES = 20
-"""The most bounces any run, sequence, live loop or study accepts (each adds one exchange; the energy of bounce
-n falls roughly as the product of both sides' albedo and form factor, 1e-2 per bounce on Fig. 4)."""
+"""The most bounces any run, sequence or study accepts. Each adds one exchange; the energy of bounce n falls
+roughly as the product of both sides' albedo and form factor, 1e-2 per bounce on Fig. 4. (The live page runs up
+to :data:`lftransfer.app.viewer.session.MAX_EXCHANGES` exchanges per shown frame.)"""
 
 DEFAULT_ANGULAR_SAMPLES = 48
 DEFAULT_APERTURE_SAMPLES = 4

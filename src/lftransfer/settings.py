@@ -79,7 +79,7 @@ class Overrides:
     def comparing_all(cls, **overrides) -> "Overrides":
         """Overrides that also measure every other value of every comparable choice (``lft demo``,
         ``lft run --compare-models``)."""
-        kinds = {"lighting_model": ("area", "point"), "reconstruction": choices.RECONSTRUCTIONS,
+        kinds = {"lighting_model": choices.COMPARED_LIGHTING_MODELS, "reconstruction": choices.RECONSTRUCTIONS,
                  "projection": choices.PROJECTIONS, "window": choices.WINDOWS}
         return cls(**overrides, compare=tuple(kinds.items()))
 
@@ -95,22 +95,24 @@ class RunSettings:
         comparisons: the re-runs measured beside the run: (choice, value) pairs, each the run with that one choice
             changed, in the order of :data:`COMPARABLE`; none that equals the run's own value, and no
             reconstruction, projection or window unless the area model.
+        reruns: the transfer settings of each comparison, resolved as a run asking for that value would be
+            (:meth:`rerun`).
     """
 
     transfer: TransferSettings
     gt_spp: int
     comparisons: tuple[tuple[str, str], ...] = ()
+    reruns: tuple[TransferSettings, ...] = ()
 
     @property
     def bounces(self) -> int:
         return self.transfer.bounces
 
     def rerun(self, name: str, value: str) -> TransferSettings:
-        """The transfer settings of the comparison re-run that sets ``name`` to ``value`` (no bounce views)."""
-        changed = replace(self.transfer, **{name: value}, bounce_views=False)
-        if name == "lighting_model" and value != "area":
-            changed = replace(changed, **choices.NON_AREA)
-        return changed
+        """The transfer settings of the comparison re-run that sets ``name`` to ``value`` (no bounce views): the
+        settings :func:`resolve_settings` gives with that override (another lighting model brings its own
+        reconstruction, projection and window)."""
+        return self.reruns[self.comparisons.index((name, value))]
 
     def to_json(self) -> dict:
         """The settings as JSON (the run's report and a sequence's key write them)."""
@@ -156,5 +158,8 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
         for value in asked.get(name, ()):
             if value != getattr(transfer, name) and (name, value) not in comparisons:
                 comparisons.append((name, value))
+    reruns = tuple(resolve_settings(scene, replace(overrides, **{name: value}, compare=()),
+                                    **{**transfer_changes, "bounce_views": False}).transfer
+                   for name, value in comparisons)
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
-    return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons))
+    return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns)

@@ -32,6 +32,7 @@ def no_work(monkeypatch):
     monkeypatch.setattr("lftransfer.app.cli.run._run", started)
     monkeypatch.setattr("lftransfer.app.pipeline.open_rig", started)
     monkeypatch.setattr("lftransfer.app.rigs.open_rig", started)
+    monkeypatch.setattr("lftransfer.app.sequence.open_rig", started)
 
 
 @pytest.fixture

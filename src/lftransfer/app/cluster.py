@@ -15,7 +15,7 @@ What this module adds is what light field transfer needs of it:
   writes it at once and an interrupted job resumes without redoing finished work.
 
 Results do not depend on which worker ran a task or in which order: every random number of a frame is drawn from
-the frame's index and the sample indices (:meth:`lftransfer.app.pipeline.OpenedRig.start_frame`), so a sequence
+the frame's index and the sample indices (:meth:`lftransfer.app.rigs.OpenedRig.start_frame`), so a sequence
 rendered on a cluster is bit-identical to the same sequence rendered in one process.
 """
 

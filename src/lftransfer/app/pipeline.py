@@ -25,7 +25,7 @@ from lftransfer.calibration.rig import count_calibration_steps, load_calibration
 from lftransfer.composite import composite
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
-from lftransfer.transfer.bounce import TransferSettings, count_steps, run_transfer
+from lftransfer.transfer.bounce import count_steps, run_transfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 
 if TYPE_CHECKING:
@@ -169,8 +169,20 @@ def _calibrates(options: RunOptions) -> bool:
     return options.calibration is None and options.rig_model == "calibrated"
 
 
-def _verifies(options: RunOptions, truth_seed_known: bool = True) -> bool:
-    return options.verify and (options.rig.kind == "sim" or (options.rig.kind == "replay" and truth_seed_known))
+def _verifies(options: RunOptions) -> bool:
+    """Whether the run will have an oracle to verify against: the simulated rig, or a recording made on it (its
+    manifest names the truth seed; :func:`lftransfer.sim.oracle.oracle_of_recording`)."""
+    if not options.verify:
+        return False
+    if options.rig.kind == "replay":
+        import json
+
+        try:
+            meta = json.loads((Path(options.rig.path) / "manifest.json").read_text(encoding="utf-8")).get("meta") or {}
+        except (OSError, ValueError, AttributeError):
+            return False
+        return meta.get("rig") == "sim" and "truth_seed" in meta
+    return options.rig.kind == "sim"
 
 
 def negative_control_skipped(options: RunOptions, bounces: int) -> str | None:
@@ -300,7 +312,6 @@ class _Run:
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     undefined: dict = field(default_factory=dict)
-    lights_from: str = "the scene file"
 
     def step(self, msg: str) -> None:
         self.done += 1
@@ -339,16 +350,11 @@ class _Run:
         options, t = self.options, time.perf_counter()
         loaded = None if options.calibration is None else \
             load_calibration(options.calibration, self.scene.synthetic_part())
-        known = knowledge(self.opened, self.scene, options.rig_model, progress=self.step, calibration=loaded)
+        known = knowledge(self.opened, self.scene, options.rig_model, progress=self.step, calibration=loaded,
+                          source=options.calibration)
         label = known.rig_model if options.calibration is None else f"calibration file {options.calibration}"
-        self.lights_from = "the oracle (where they really stand)" if options.rig_model == "oracle" and \
-            known.calibration is None else "the scene file"
-        if known.calibration is not None:
-            note = known.calibration.unmeasured_light_note(known.scene, options.calibration or "the calibration")
-            if note is not None:
-                self.warning(note)
-            elif known.scene.lights:
-                self.lights_from = "measured by the calibration"
+        for note in known.warnings:
+            self.warning(note)
         if options.calibration is None and known.calibration is not None:
             self.timings["calibration"] = time.perf_counter() - t
         errors = None
@@ -485,7 +491,7 @@ class _Run:
             "rig": str(options.rig),
             "truth_seed": self.opened.truth_seed,
             "rig_model": label,
-            "synthetic_lights": self.lights_from,
+            "synthetic_lights": known.lights_from,
             "calibration_errors": errors.to_json() if errors is not None else None,
             "variant": variant(),
             "scene": str(scene.source) if scene.source else None,

@@ -193,6 +193,8 @@ class Knowledge:
         calibration: the calibration the model came from, or None.
         rig_model: how the model was had, for reports (``"calibrated"``, ``"true (oracle)"``, :data:`NOMINAL`).
         warnings: lines to show and report (a calibration that did not measure the scene's point lights).
+        lights_from: where the synthetic side's point lights stand, for reports: "measured by the calibration",
+            "the oracle (where they really stand)" or "the scene file".
     """
 
     model: RigModel
@@ -200,9 +202,10 @@ class Knowledge:
     calibration: object | None
     rig_model: str
     warnings: tuple[str, ...] = ()
+    lights_from: str = "the scene file"
 
 
-def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
+def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, source=None,
               progress: Callable[[str], None] | None = None) -> Knowledge:
     """The rig model and synthetic scene a transfer works with (shared by ``lft run`` and ``lft study``).
 
@@ -212,6 +215,7 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
         rig_model: ``"calibrated"`` (calibrate through the rig now, unless ``calibration`` is given),
             ``"nominal"`` or ``"oracle"`` (:data:`lftransfer.choices.RigModel`).
         calibration: a calibration already made or loaded (it wins over ``rig_model``).
+        source: where ``calibration`` was read from, for a warning that names it.
         progress: called with a message per calibration step.
 
     Raises:
@@ -232,9 +236,14 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None,
         model, label = nominal_rig(scene.rig), NOMINAL
     lights_at = calibration.light_positions(ps) if calibration is not None else \
         opened.oracle.true_lights() if rig_model == "oracle" else None
+    note = None if calibration is None else calibration.unmeasured_light_note(ps, source or "the calibration")
+    lights_from = "the scene file" if not ps.lights or note is not None else \
+        "measured by the calibration" if calibration is not None else \
+        "the oracle (where they really stand)" if rig_model == "oracle" else "the scene file"
     if lights_at:
         from lftransfer.scenes import with_overrides
 
         ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
                                         for lt, at in zip(ps.lights, lights_at)])
-    return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label)
+    return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label,
+                     warnings=(note,) if note else (), lights_from=lights_from)

@@ -159,7 +159,7 @@ def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: Tr
 
 def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
                   step: Callable[[str], None]) -> Knowledge:
-    """What a sequence or a live session knows of the rig (:func:`~lftransfer.app.pipeline.knowledge`, as
+    """What a sequence or a live session knows of the rig (:func:`~lftransfer.app.rigs.knowledge`, as
     ``lft run`` has it): the rig model from a calibration file, a calibration run now (written to
     ``out/calibration.json``; a resumed sequence reuses it), the oracle or the nominal model; and the synthetic
     scene with its point lights where the calibration measured them (the oracle: where they really stand).
@@ -175,14 +175,13 @@ def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
     elif options.rig_model == "calibrated" and resume and kept.is_file():
         calibration, label = load_calibration(kept, ps), f"calibrated (resumed from {kept})"
     try:
-        known = knowledge(opened, scene, options.rig_model, calibration=calibration, progress=step)
+        known = knowledge(opened, scene, options.rig_model, calibration=calibration, progress=step,
+                          source=options.calibration or (kept if calibration is not None else None))
     except ValueError as exc:
         raise SequenceError(str(exc)) from None
     if calibration is None and known.calibration is not None:
         write_calibration(kept, known.calibration, opened.oracle)
-    note = None if known.calibration is None else \
-        known.calibration.unmeasured_light_note(ps, options.calibration or kept)
-    return replace(known, rig_model=label or known.rig_model, warnings=(note,) if note else ())
+    return replace(known, rig_model=label or known.rig_model)
 
 
 @dataclass

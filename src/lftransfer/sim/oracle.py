@@ -12,9 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.rig.model import RigModel, nominal_rig
 
-__all__ = ["Oracle", "open_simulated_rig", "oracle_of_recording"]
+__all__ = ["Oracle", "hidden_oracle", "open_simulated_rig", "oracle_of_recording"]
 
 
 @dataclass(frozen=True)
@@ -35,13 +36,6 @@ class Oracle:
         """(3,) per point light of the scene, where it really stands (world frame, m)."""
         return [lt.position for lt in self.world.lights]
 
-    def world_at(self, scene):
-        """The world as it really is for ``scene`` (the same scene file with other poses or materials, e.g. a
-        live page's edit or a sequence's frame): its lights where the truth puts them."""
-        from lftransfer.sim.truth import hidden_world
-
-        return hidden_world(scene, self.truth_seed)[0]
-
     def ground_truth(self, *, spp: int, world=None, use_cache: bool = True,
                      progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
         """The path-traced ground truth of the world (or of ``world``, e.g. one frame of a sequence), two
@@ -59,7 +53,7 @@ class Oracle:
         return calibration_errors(calibration, self.model, true_lights=self.true_lights())
 
 
-def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = 4):
+def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = DEFAULT_CAPTURE_SPP):
     """The simulated rig of a scene and its oracle.
 
     Args:
@@ -78,13 +72,18 @@ def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = 4):
     return rig, Oracle(world=world, model=rig.truth, truth_seed=truth_seed)
 
 
+def hidden_oracle(scene, truth_seed: int | None) -> Oracle:
+    """The oracle of the hidden truth ``truth_seed`` draws for ``scene``, without a rig (a recording made on the
+    simulated rig, the device twin's world)."""
+    from lftransfer.sim.truth import hidden_world
+
+    world, truth = hidden_world(scene, truth_seed)
+    return Oracle(world=world, model=truth if truth is not None else nominal_rig(scene.rig), truth_seed=truth_seed)
+
+
 def oracle_of_recording(scene, meta: dict) -> Oracle | None:
     """The oracle of a recording made on the simulated rig (its manifest names the truth seed), or None for a
     recording of a physical rig."""
-    from lftransfer.sim.truth import hidden_world
-
     if meta.get("rig") != "sim" or "truth_seed" not in meta:
         return None
-    seed = meta["truth_seed"]
-    world, truth = hidden_world(scene, seed)
-    return Oracle(world=world, model=truth if truth is not None else nominal_rig(scene.rig), truth_seed=seed)
+    return hidden_oracle(scene, meta["truth_seed"])

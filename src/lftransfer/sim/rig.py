@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from scipy.spatial.transform import Rotation
 
+from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.optics.geometry import apply_homography, rectangle_to_world
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import LightFieldLight, PointLight
@@ -71,7 +72,7 @@ class SimRig:
         >>> rig.capture_lf().codes.shape                            # (1536, 2048, 3) uint16
     """
 
-    def __init__(self, scene, *, truth: RigModel | None = None, capture_spp: int = 4, view_spp: int = 4,
+    def __init__(self, scene, *, truth: RigModel | None = None, capture_spp: int = DEFAULT_CAPTURE_SPP, view_spp: int = 4,
                  projector_samples: int = 64, aperture_samples: int = 2, seed: int | None = None,
                  operator_seed: int | None = None, operator: OperatorError = OperatorError()) -> None:
         from lftransfer.backend import mitsuba

@@ -56,8 +56,6 @@ WARM_CHANGE = 0.2
 #: Fraction of the projector's full radiance shown by :func:`measure_depth`'s white light field.
 WHITE_FILL = 0.5
 
-PROJECTIONS: tuple[str, ...] = ("box", "depth")
-
 
 def measure_depth(rig, decoder, encoder, max_radiance: float, U: int, V: int, direct: LightField, *,
                   depths: np.ndarray = SWEEP_DEPTHS) -> np.ndarray:
@@ -239,5 +237,5 @@ class DepthPrefilter:
         return x
 
 
-__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "PROJECTIONS", "WARM_CHANGE", "WARM_ITERATIONS",
+__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "WARM_CHANGE", "WARM_ITERATIONS",
            "WHITE_FILL", "measure_depth"]

@@ -13,7 +13,8 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import check_before_work, command, load, rig_options, row, step_bar
 from lftransfer.app.cli.options import (Calibration, LightingModel, MaxMemory, Projection, Quick,
-                                            Reconstruction, Renderer, RigArgs, TruthArgs, flag, metavar, option)
+                                            Reconstruction, Renderer, RigArgs, TruthArgs, choice_check, flag, metavar,
+                                            option)
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.settings import Overrides
 
@@ -36,6 +37,7 @@ def register(app: typer.Typer) -> None:
               calibration: Calibration = None,
               rig_model: Annotated[str, option(
                   "--rig-model", metavar=metavar(choices.RigModel),
+                  callback=choice_check("--rig-model", choices.RigModel),
                   help="The rig model the step uses: calibrated (what a run uses, default: the bench calibrates "
                        "the simulated rig first) | nominal | oracle (neither is what users run; the output says "
                        "so).")] = choices.DEFAULT_RIG_MODEL,
@@ -62,8 +64,6 @@ def register(app: typer.Typer) -> None:
         from lftransfer.app.terminal import say
         from lftransfer.rig.base import RigError
 
-        if rig_model not in choices.RIG_MODELS:
-            fail(f"--rig-model: expected one of {', '.join(choices.RIG_MODELS)}, got {rig_model!r}")
         scene = load(scene_file, quick)
         if live:
             try:
@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
         data["settings"]["quick"] = quick
         data["settings"]["live"] = live
         data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model,
-                                                     truth.truth_seed, lighting_model, reconstruction, renderer,
+                                                     truth, lighting_model, reconstruction, renderer,
                                                      accuracy, peer, live, projection)
         _bench_table(result)
         if json_out is not None:
@@ -116,8 +116,8 @@ def _demo_calibration_hint(scene) -> str:
             f"demo's --truth-seed).")
 
 
-def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_seed, lighting_model,
-                   reconstruction, renderer, accuracy, peer, live=False, projection=None) -> str:  # noqa: PLR0913
+def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth, lighting_model,
+                   reconstruction, renderer, accuracy, peer, live=False, projection=None) -> str:
     """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
     import shlex
 
@@ -133,8 +133,10 @@ def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth_
         parts += ["--calibration", str(calibration)]
     elif rig_model != choices.DEFAULT_RIG_MODEL:
         parts += ["--rig-model", rig_model]
-    if truth_seed != 0:
-        parts += ["--truth-seed", str(truth_seed)]
+    if truth.exact_rig:
+        parts.append("--exact-rig")
+    elif truth.truth_seed != 0:
+        parts += ["--truth-seed", str(truth.truth_seed)]
     for name, value in (("--lighting-model", lighting_model), ("--reconstruction", reconstruction),
                         ("--projection", projection)):
         if value is not None:

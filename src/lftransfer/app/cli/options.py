@@ -22,7 +22,7 @@ from lftransfer import choices
 
 __all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache",
            "OutDir", "Projection", "Quick", "Reconstruction", "Renderer", "RigArgs", "SceneArg", "TruthArgs",
-           "Window", "Workers", "flag", "metavar", "option", "option_groups"]
+           "Window", "Workers", "choice_check", "flag", "metavar", "option", "option_groups"]
 
 
 def metavar(choice) -> str:
@@ -40,7 +40,9 @@ def flag(name: str, help: str) -> typer.models.OptionInfo:  # noqa: A002
     return option(name, metavar="", help=help)
 
 
-def _choice_check(name: str, choice):
+def choice_check(name: str, choice):
+    """A typer callback that refuses a value not among ``choice``'s (one line naming the option)."""
+
     def check(value):
         if value is not None and value not in choices.values(choice):
             raise typer.BadParameter(f"expected one of {', '.join(choices.values(choice))}, got {value!r}",
@@ -77,27 +79,27 @@ GtSpp = Annotated[Optional[int], option("--gt-spp", min=1, metavar="N",
                                         help="Ground-truth samples per pixel (>= 1; default: the scene's "
                                              f"render.gt_spp, {choices.DEFAULT_GT_SPP} unless the scene says).")]
 Renderer = Annotated[str, option("--renderer", metavar=metavar(choices.Renderer),
-                                 callback=_choice_check("--renderer", choices.Renderer),
+                                 callback=choice_check("--renderer", choices.Renderer),
                                  help="Synthetic renderer: auto (the fast path where the scene allows it) | fast | "
                                       "exact (path tracing).")]
 LightingModel = Annotated[Optional[str], option(
     "--lighting-model", metavar=metavar(choices.LightingModel),
-    callback=_choice_check("--lighting-model", choices.LightingModel),
+    callback=choice_check("--lighting-model", choices.LightingModel),
     help=f"How the captured light field lights the synthetic objects (default: the scene's render.lighting_model, "
          f"{choices.DEFAULT_LIGHTING_MODEL} unless the scene says).")]
 Reconstruction = Annotated[Optional[str], option(
     "--reconstruction", metavar=metavar(choices.Reconstruction),
-    callback=_choice_check("--reconstruction", choices.Reconstruction),
+    callback=choice_check("--reconstruction", choices.Reconstruction),
     help=f"Area model: how the captured light field is read between lenslets (default: the scene's, "
          f"{choices.DEFAULT_RECONSTRUCTION} unless the scene says).")]
 Projection = Annotated[Optional[str], option(
     "--projection", metavar=metavar(choices.Projection),
-    callback=_choice_check("--projection", choices.Projection),
+    callback=choice_check("--projection", choices.Projection),
     help=f"Area model: what the projector is sent: the box light field, or the light field prefiltered from the "
          f"real scene's depth measured through the rig (default: the scene's, {choices.DEFAULT_PROJECTION} unless "
          f"the scene says).")]
 Window = Annotated[Optional[str], option(
-    "--window", metavar=metavar(choices.Window), callback=_choice_check("--window", choices.Window),
+    "--window", metavar=metavar(choices.Window), callback=choice_check("--window", choices.Window),
     help=f"Area model: what the synthetic objects receive from beyond the lenslets' window: the captured light "
          f"field read at the window's edge, or nothing (default: the scene's, {choices.DEFAULT_WINDOW} unless the "
          f"scene says).")]
@@ -136,7 +138,7 @@ class RigArgs:
         "Which rig: sim (simulated, default) | hardware:RIG.toml (a physical rig, or the device twin) | "
         "replay:DIR (a recording)."))] = "sim"
     rig_model: Annotated[str, option(
-        "--rig-model", metavar=metavar(choices.RigModel), callback=_choice_check("--rig-model", choices.RigModel),
+        "--rig-model", metavar=metavar(choices.RigModel), callback=choice_check("--rig-model", choices.RigModel),
         help="What the pipeline knows of the rig: calibrated (calibrate through the rig first) | nominal (the rig "
              "file's values) | oracle (the simulated rig's hidden truth: what perfect calibration would reach).")
     ] = choices.DEFAULT_RIG_MODEL

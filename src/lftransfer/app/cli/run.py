@@ -15,7 +15,7 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, rig_options,
                                            row)
-from lftransfer.app.cli.options import (Bounces, GtSpp, LightingModel, MaxMemory, NoCache, OutDir, Projection,
+from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, OutDir, Projection,
                                             Quick, Reconstruction, Renderer, RigArgs, SceneArg, TruthArgs, Window,
                                             flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
@@ -161,13 +161,16 @@ def register(app: typer.Typer) -> None:
     def record(scene_file: SceneArg,
                out: Annotated[Path, option("--out", metavar="DIR", help="Session folder: the recording, and the "
                                                                        "run's outputs in run/.")],
+               rig_spec: Annotated[str, option("--rig", metavar="SPEC", help="Which rig to record: sim | "
+                                                                           "hardware:RIG.toml.")] = "sim",
                bounces: Bounces = choices.DEFAULT_BOUNCES, quick: Quick = False,
-               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-               max_memory: MaxMemory = None) -> None:
+               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+               calibration: Calibration = None, max_memory: MaxMemory = None) -> None:
         """Calibrate and run transfer on a rig (sim or hardware:RIG.toml) while storing every request and image
         it answers (replay it with lft run SCENE.toml --rig replay:SESSION)."""
         from lftransfer.app.pipeline import RunOptions
 
+        rig = RigArgs(rig=rig_spec, rig_model=choices.DEFAULT_RIG_MODEL, calibration=calibration)
         if rig.rig.startswith("replay"):
             fail("--rig: a recording is recorded already; record from sim or hardware:RIG.toml")
         if (out / "manifest.json").exists():

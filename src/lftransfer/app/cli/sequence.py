@@ -87,7 +87,8 @@ def register(app: typer.Typer) -> None:
         with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
             session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
                                    calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
-                                   renderer=renderer, progress=lambda msg: status.update(escape(msg[:70])))
+                                   renderer=renderer, progress=lambda msg: status.update(escape(msg[:70])),
+                                   warn=warn)
         console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
         serve(session, port=port)
         console.print("lft live: stopped")

@@ -12,7 +12,7 @@ __all__ = ["open_session"]
 
 def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL, calibration: Optional[Path] = None,
                  truth_seed: Optional[int] = 0, out: Path = Path("out/live"), renderer: str = DEFAULT_RENDERER,
-                 progress=None):
+                 progress=None, warn=None):
     """A :class:`~lftransfer.app.viewer.session.LiveSession` for a scene on a rig: the rig opened, its model had
     (calibrated, a calibration file, nominal or oracle), the live loop built with the scene's render settings."""
     from lftransfer.app.pipeline import RunOptions
@@ -27,6 +27,8 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
                          settings=Overrides(renderer=renderer))
     opened = open_rig(scene, options)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
+    for note in known.warnings:
+        (warn or (lambda _m: None))(note)
     live = LiveTransfer(opened.rig, known.model, known.scene, options.resolve(scene).transfer)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
-    return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle)
+    return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle, lights=known.scene.lights)

@@ -161,15 +161,18 @@ class LiveSession:
         sim_rig: the simulated rig when there is one (its real objects can be moved), else None.
         oracle: the simulated rig's :class:`~lftransfer.sim.oracle.Oracle` (its hidden world: real objects, true
             light) for the "ground truth" layer, or None.
+        lights: the synthetic side's point lights as the rig model knows them (calibrated, or the oracle's), kept
+            through every edit; None: the scene file's.
 
     Example:
         >>> session = LiveSession(scene, LiveTransfer(rig, model, scene.synthetic_part()), Path("out/live"))
         >>> session.start(on_frame=print); session.submit({"type": "pause"}); session.stop()   # doctest: +SKIP
     """
 
-    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, oracle=None) -> None:
+    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, oracle=None, lights=None) -> None:
         self.scene = scene
         self.oracle = oracle
+        self.lights = None if lights is None else list(lights)
         self._gt: tuple[str, np.ndarray] | None = None          # (state key, image) of the latest ground truth
         self._gt_thread: threading.Thread | None = None
         self.live = live
@@ -329,14 +332,14 @@ class LiveSession:
                 settings: TransferSettings = resolve_settings(
                     self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer),
                     bounces=self.live.settings.bounces, bounce_views=self.live.settings.bounce_views).transfer
-                self.live.set_scene(self.scene.synthetic_part(), settings)
+                self.live.set_scene(self.synthetic(), settings)
             elif kind == "object":
                 side, index, edited = value
                 if side == "synthetic":
                     objs = list(self.scene.synthetic)
                     objs[index] = edited
                     self.scene = with_overrides(self.scene, synthetic=objs)
-                    self.live.set_scene(self.scene.synthetic_part())
+                    self.live.set_scene(self.synthetic())
                 else:
                     objs = [o.model_dump() for o in self.sim_rig.real_objects]
                     objs[index] = edited
@@ -408,7 +411,7 @@ class LiveSession:
 
         try:
             progress("starting")
-            result = run_transfer(self.live.rig, self.live.model, self.scene.synthetic_part(), settings,
+            result = run_transfer(self.live.rig, self.live.model, self.synthetic(), settings,
                                   progress=progress, time_s=t)
             comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
             layers = bounce_layers(result, comp, ceiling=emitter_ceiling(self.scene))
@@ -439,6 +442,11 @@ class LiveSession:
         return ViewerFrame(index=frame.index, time_s=frame.time_s, fps=fps,
                            stages_ms={k: 1000.0 * v for k, v in frame.timings_s.items()}, images=images,
                            clipped_fraction=frame.clipped_fraction)
+
+    def synthetic(self):
+        """The synthetic part of the scene as it stands (edited), its point lights where the rig model has them."""
+        part = self.scene.synthetic_part()
+        return part if self.lights is None else with_overrides(part, lights=self.lights)
 
     def _world_now(self, t: float):
         """The simulated world as it stands now: the real objects (moved by the page), the synthetic ones (edited),

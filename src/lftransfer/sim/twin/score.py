@@ -66,8 +66,7 @@ class TwinScore:
         metrics: :class:`lftransfer.sim.metrics.Evaluation`.
         ground_truth: the :class:`lftransfer.sim.ground_truth.GroundTruth` rendered.
         calibration_errors: :class:`lftransfer.sim.calibration_errors.CalibrationErrors` of the run's calibration
-        file, or
-            None where the run has none.
+            file, or None where the run has none.
         noisy: the ground truth's noise verdict on the cross term, or None where it is quiet enough.
     """
 
@@ -92,24 +91,21 @@ def score_views(views: SavedViews, scene, truth_seed: int | None, *, gt_spp: int
         progress: called before each render.
     """
     from lftransfer.calibration.rig import load_calibration
-    from lftransfer.rig.model import nominal_rig
-    from lftransfer.sim.truth import hidden_world
-    from lftransfer.sim.calibration_errors import calibration_errors
-    from lftransfer.sim.ground_truth import render_ground_truth
     from lftransfer.sim.metrics import evaluate, gt_noise_verdict
+    from lftransfer.sim.oracle import hidden_oracle
 
-    world, truth = hidden_world(scene, truth_seed)
+    oracle = hidden_oracle(scene, truth_seed)
+    world = oracle.world
     h, w = views.real_view.shape[:2]
     if (w, h) != tuple(world.view.resolution):
         raise ValueError(f"the run's views are {w}x{h}, the twin's scene renders {world.view.resolution[0]}x"
                          f"{world.view.resolution[1]} (was the twin served with --quick and the run not, or the "
                          "reverse?)")
-    gt = render_ground_truth(world, spp=gt_spp, use_cache=use_cache, progress=progress)
+    gt = oracle.ground_truth(spp=gt_spp, use_cache=use_cache, progress=progress)
     metrics = evaluate(views, gt)
     errors = None
     if calibration_file is not None and Path(calibration_file).is_file():
         cal = load_calibration(calibration_file, scene.synthetic_part())
-        errors = calibration_errors(cal, truth if truth is not None else nominal_rig(scene.rig),
-                                    true_lights=[lt.position for lt in world.lights])
+        errors = oracle.calibration_errors(cal)
     return TwinScore(metrics=metrics, ground_truth=gt, calibration_errors=errors,
                      noisy=gt_noise_verdict(metrics, gt_spp))
