@@ -46,10 +46,11 @@ def _invoke(args, **kw):
 
 def _one_line_error(result, code: int = 2, progress: bool = False) -> str:
     """The command ended with ``code`` and exactly one line on stderr, ``error: ...``, without a traceback (with
-    ``progress``: after the progress bar's line)."""
+    ``progress``: after the progress bar's line; ``warning: ...`` lines before it, e.g. a calibration file without
+    its light section, are the run's own and not counted)."""
     assert result.exit_code == code, (result.exit_code, result.output, result.exception)
     assert not isinstance(result.exception, WorkStarted), "the work started before the check"
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    lines = [line for line in result.stderr.splitlines() if line.strip() and not line.startswith("warning: ")]
     if progress:
         assert len(lines) == 2 and re.search(r"\d+/\d+ \d+:\d\d:\d\d$", lines[0]), result.stderr
         lines = lines[1:]

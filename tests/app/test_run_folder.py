@@ -54,6 +54,7 @@ def test_02_interrupted_rerun_leaves_no_old_report_and_no_temporaries(tmp_path, 
     result = runner.invoke(app, ["run", str(scene), "--out", str(out), "--calibration", str(calibration),
                                  "--exact-rig"])
     line = _one_line_error(result, code=130, progress=True)
+    assert "no light section" in result.stderr          # the file has none: said, not silently the scene's light
     assert "interrupted" in line and str(out / "status.json") in line
     status = json.loads((out / "status.json").read_text())
     assert status["state"] == "interrupted"
