@@ -10,13 +10,12 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from lftransfer.app.cli.common import (Group, check_before_work, cluster_spec, command, load, operator,
-                                           rig_spec, row, step_bar, sub_app)
+from lftransfer.app.cli.common import (Group, check_before_work, cluster_spec, command, load, operator, progress_bar,
+                                       rig_spec, row, step_bar, sub_app)
 from lftransfer.app.cli.options import Cluster, MaxMemory, Quick, TruthArgs, Workers, option
-from lftransfer.app.terminal import FAILED, console, fail
+from lftransfer.app.terminal import FAILED, fail
 
 __all__ = ["calibrate_app"]
 
@@ -191,8 +190,7 @@ def calibrate_latency_cmd(rig_file: Path = typer.Argument(..., metavar="RIG.toml
 
     if not rig_file.is_file():
         fail(f"{rig_file}: no such file")
-    with Progress(TextColumn("[bold]{task.description:<40}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console) as bar:
+    with progress_bar(40) as bar:
         task = bar.add_task("marker flashes", total=tries)
         try:
             result = calibrate_latency(rig_file, tries, timeout_s=timeout_s, operator=operator(bar),

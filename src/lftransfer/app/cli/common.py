@@ -18,7 +18,7 @@ from typer.core import TyperCommand
 from lftransfer.app.cli.options import RigArgs, TruthArgs, option_groups
 from lftransfer.app.terminal import LftGroup, console, fail
 
-__all__ = ["Command", "Group", "check_before_work", "cluster_spec", "command", "load", "operator", "rig_options",
+__all__ = ["Command", "Group", "check_before_work", "cluster_spec", "command", "load", "operator", "progress_bar", "rig_options",
            "rig_spec", "row", "step_bar", "sub_app"]
 
 
@@ -168,11 +168,17 @@ def check_before_work(scene, *, out_dir: Optional[Path] = None, out_file: Option
                  parse_memory(max_memory))
 
 
+def progress_bar(width: int, *extra: TextColumn) -> Progress:
+    """The ``lft`` progress bar: a description ``width`` characters wide, the bar, done / total, ``extra`` columns,
+    the time elapsed."""
+    return Progress(TextColumn(f"[bold]{{task.description:<{width}}}"), BarColumn(),
+                    TextColumn("{task.completed}/{task.total}"), *extra, TimeElapsedColumn(), console=console)
+
+
 @contextmanager
 def step_bar(total: int):
     """A progress bar that advances by one on every message; yields the callback."""
-    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console) as bar:
+    with progress_bar(58) as bar:
         task = bar.add_task("starting", total=total)
         done = [0]
 

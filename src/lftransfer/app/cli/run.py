@@ -9,16 +9,15 @@ from typing import Annotated
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, rig_options,
-                                           row)
+from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, progress_bar,
+                                       rig_options, row)
 from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, OutDir, Projection,
                                             Quick, Reconstruction, Renderer, RigArgs, SceneArg, TruthArgs, Window,
                                             flag, option)
-from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
+from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides
 
 __all__ = ["register"]
@@ -37,8 +36,7 @@ def _run(scene, out: Path, options) -> dict:
 
     total = count_run_steps(scene, options)
     status = out / "status.json"
-    with Progress(TextColumn("[bold]{task.description:<58}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console, transient=False) as bar:
+    with progress_bar(58) as bar:
         task = bar.add_task("starting", total=total)
 
         def progress(msg: str, done: int) -> None:

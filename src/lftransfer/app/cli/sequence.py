@@ -8,12 +8,12 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import TextColumn
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, rig_options,
-                                           row)
+from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
+                                       rig_options, row)
 from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, OutDir, Quick, Renderer,
                                             RigArgs, SceneArg, TruthArgs, Workers, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
@@ -139,9 +139,7 @@ def register(app: typer.Typer) -> None:
         check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
                           calibrate=calibrates(rig), max_memory=max_memory)
         status = out / "status.json"
-        with Progress(TextColumn("[bold]{task.description:<40}"), BarColumn(),
-                      TextColumn("{task.completed}/{task.total}"), TextColumn("{task.fields[rate]}"),
-                      TimeElapsedColumn(), console=console) as bar:
+        with progress_bar(40, TextColumn("{task.fields[rate]}")) as bar:
             task = bar.add_task("set-up", total=None, rate="")
             started = [None, 0]
 

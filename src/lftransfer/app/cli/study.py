@@ -8,11 +8,10 @@ from typing import Annotated
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from lftransfer.app.cli.common import check_before_work, cluster_spec, command
+from lftransfer.app.cli.common import check_before_work, cluster_spec, command, progress_bar
 from lftransfer.app.cli.options import Cluster, MaxMemory, NoCache, OutDir, Workers, flag
-from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail
+from lftransfer.app.terminal import FAILED, INTERRUPTED, fail
 
 __all__ = ["register"]
 
@@ -46,8 +45,7 @@ def register(app: typer.Typer) -> None:
             check_before_work(scene, out_dir=out, cache=not no_cache, max_memory=max_memory, bounces=c.bounces,
                               calibrate=c.rig_model == "calibrated")
         total = len(c.scenes) * len(c.truth_seeds) * len(c.setting)
-        with Progress(TextColumn("[bold]{task.description:<50}"), BarColumn(),
-                      TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(), console=console) as bar:
+        with progress_bar(50) as bar:
             task = bar.add_task("set-up", total=total)
             try:
                 result = run_study(study, out, cluster=spec, resume=resume, use_cache=not no_cache,
