@@ -36,12 +36,17 @@ RigModel = Literal["calibrated", "nominal", "oracle"]
 """What the pipeline knows of the rig: ``"calibrated"`` (calibrate through the rig first), ``"nominal"`` (the rig
 file's values) or ``"oracle"`` (the simulated rig's hidden truth: a verification baseline)."""
 
+LiveLoop = Literal["decoupled", "sync"]
+"""The live loop: ``"decoupled"`` (captures on their own thread at the devices' rate, frames at the renderer's
+rate with the newest capture) or ``"sync"`` (one capture inside every frame; :mod:`lftransfer.transfer.live`)."""
+
 LIGHTING_MODELS: tuple[str, ...] = get_args(LightingModel)
 RECONSTRUCTIONS: tuple[str, ...] = get_args(Reconstruction)
 PROJECTIONS: tuple[str, ...] = get_args(Projection)
 WINDOWS: tuple[str, ...] = get_args(Window)
 RENDERERS: tuple[str, ...] = get_args(Renderer)
 RIG_MODELS: tuple[str, ...] = get_args(RigModel)
+LIVE_LOOPS: tuple[str, ...] = get_args(LiveLoop)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
@@ -50,6 +55,11 @@ DEFAULT_WINDOW: Window = "edge"
 DEFAULT_RENDERER: Renderer = "auto"
 DEFAULT_RIG_MODEL: RigModel = "calibrated"
 """Runs calibrate by default; a study defaults to it too (its ``rig_model``)."""
+DEFAULT_LIVE_LOOP: LiveLoop = "decoupled"
+"""``lft live`` and ``lft bench --live`` run at the renderer's rate."""
+DEFAULT_SEQUENCE_LOOP: LiveLoop = "sync"
+"""A written sequence (``lft render --mode live``) is synchronous unless asked: its frames then depend on no
+clock, so a rerun writes the same frames."""
 
 LENSLET_RECONSTRUCTION: Reconstruction = "box"
 LENSLET_WINDOW: Window = "cut"

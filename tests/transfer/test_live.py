@@ -114,3 +114,119 @@ def test_03_fig5_the_sun_lights_the_head_through_the_projector(variant):
     sun = max(o.material.radiance[0] for o in scene.synthetic if o.material.type == "emitter")
     assert float(lit.synthetic_view.rgb[..., 0].max()) == pytest.approx(sun, rel=1e-4)
     assert lit.clipped_fraction == 0.0
+
+
+class _SlowRig:
+    """A rig whose LF camera takes ``delay_s`` longer per capture (a slow device), or fails after ``fail_after``
+    captures; everything else is the wrapped rig's."""
+
+    def __init__(self, rig, delay_s: float = 0.0, fail_after: int | None = None) -> None:
+        self.inner, self.delay_s, self.fail_after, self.captures = rig, delay_s, fail_after, 0
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def capture_lf(self, *args, **kwargs):
+        import time
+
+        if self.fail_after is not None and self.captures >= self.fail_after:
+            raise OSError("the LF camera went away")
+        time.sleep(self.delay_s)
+        self.captures += 1
+        return self.inner.capture_lf(*args, **kwargs)
+
+
+def test_04_decoupled_loop_converges_to_the_same_light(quick):
+    """Captures on their own thread, each under the newest light field rendered: after a few captures the real
+    view is the bounce loop's (as the synchronous loop's is, test_01); frames that found no new capture reuse the
+    newest one and say how old it is."""
+    scene, settings = quick
+    opened = open_rig(scene, RunOptions(truth_seed=None))
+    reference = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
+    with LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
+        frames = [live.step(0.0)]
+        while frames[-1].capture_index < 6:
+            frames.append(live.step(0.0))
+        assert live.capture_rate_hz > 0
+    assert all(f.loop == "decoupled" and "capture" not in f.timings_s for f in frames)
+    assert all(set(f.capture_timings_s) == {"encode", "capture", "decode", "capture_view"} for f in frames)
+    assert not frames[0].projected_lf.data.any() and frames[0].light_version == -1
+    ages = np.array([f.capture_age_s for f in frames])
+    assert np.all(ages > 0) and np.all(np.diff([f.capture_index for f in frames]) >= 0)
+    assert _rel(frames[-1].real_view, reference.real_view) < 0.005               # as the synchronous loop's
+    assert _rel(frames[0].real_view, reference.real_view) > 0.01                 # negative control: direct only
+
+
+def test_05_an_edit_shows_in_the_next_frame_whatever_the_capture_rate(quick):
+    """With an LF camera far slower than the renderer, a moved synthetic object is in the very next composite
+    (same capture), and its light reaches the real objects' capture later; the latency says both."""
+    from lftransfer.transfer.latency import motion_latency
+
+    scene, settings = quick
+    opened = open_rig(scene, RunOptions(truth_seed=None))
+    slow = _SlowRig(opened.rig, delay_s=1.0)
+    with LiveTransfer(slow, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
+        before = live.step(0.0)
+        syn = scene.synthetic[0].model_dump()
+        syn["translate"] = [syn["translate"][0], syn["translate"][1] + 0.03, syn["translate"][2]]
+        live.set_scene(with_overrides(scene, synthetic=[syn]).synthetic_part())
+        after = live.step(0.0)
+        assert after.capture_index == before.capture_index                      # no new capture yet
+        assert after.scene_version == before.scene_version + 1 > after.light_version
+        assert _rel(after.synthetic_view.alpha, before.synthetic_view.alpha) > 0.1   # the object moved at once
+        frames = [before, after]
+        while frames[-1].light_version < after.scene_version:
+            frames.append(live.step(0.0))
+            assert len(frames) < 400
+        # while it waited for the captures, the loop did not render frames with nothing new
+        assert not live.has_news(0.0) or live._worker.newest().index != frames[-1].capture_index
+    lat = motion_latency(live.changes, frames, "decoupled")
+    assert lat.changes == 1 and lat.pending_view == lat.pending_light == 0
+    assert lat.view.median < 1000.0 * (after.ready_s - after.started_s) + 1.0     # the frame after the edit
+    # the light waits for a capture that began after the new light field was handed over: at least one capture
+    assert lat.light.median > 1000.0 * slow.delay_s > lat.view.median
+
+
+def test_06_decoupled_worker_failure_and_holding_the_rig(quick):
+    """A capture that fails stops the worker and the next step raises with the device's message; holding the rig
+    keeps new captures back."""
+    import time
+
+    scene, settings = quick
+    opened = open_rig(scene, RunOptions(truth_seed=None))
+    with LiveTransfer(_SlowRig(opened.rig, delay_s=0.2), opened.oracle.model, scene.synthetic_part(), settings,
+                      loop="decoupled") as live:
+        live.step(0.0)
+        with live.holding_rig():
+            count = live._worker.count
+            time.sleep(0.6)
+            assert live._worker.count <= count + 1           # at most the capture in progress finished
+        assert live._worker.wait(after=count + 1, timeout=60).index > count + 1       # captures went on
+    failing = _SlowRig(opened.rig, fail_after=2)
+    with LiveTransfer(failing, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
+        with pytest.raises(RuntimeError, match="LF camera went away"):
+            for _ in range(200):
+                live.step(0.0)
+                time.sleep(0.05)
+
+
+def test_07_motion_latency_on_known_frames():
+    """Latencies from known frame times: the view at the first frame that shows the version, the light at the
+    first whose capture was lit by it; an overtaken change counts from its own time; an unshown one is pending."""
+    from types import SimpleNamespace as F
+
+    from lftransfer.transfer.latency import motion_latency
+
+    frames = [F(started_s=0.0, ready_s=0.1, scene_version=0, light_version=-1),
+              F(started_s=0.1, ready_s=0.2, scene_version=1, light_version=-1),
+              F(started_s=0.2, ready_s=0.3, scene_version=3, light_version=0),
+              F(started_s=0.3, ready_s=0.4, scene_version=3, light_version=1),
+              F(started_s=0.4, ready_s=0.5, scene_version=3, light_version=3)]
+    changes = [(1, 0.05), (2, 0.15), (3, 0.18), (4, 0.45)]
+    lat = motion_latency(changes, frames, "decoupled")
+    assert lat.changes == 4 and lat.pending_view == 1 and lat.pending_light == 1
+    # view: 0.2 - 0.05, 0.3 - 0.15, 0.3 - 0.18; light: 0.4 - 0.05, 0.5 - 0.15, 0.5 - 0.18
+    assert lat.view.count == 3 and lat.view.max == pytest.approx(150.0)
+    assert lat.view.median == pytest.approx(150.0)
+    assert lat.light.median == pytest.approx(350.0) and lat.light.max == pytest.approx(350.0)
+    assert motion_latency([], frames, "sync").view is None

@@ -1,5 +1,5 @@
-"""The live loop of light field transfer (docs/architecture.md, "The bounce loop" and "The live loop"): one capture
-and one render per frame.
+"""The live loop of light field transfer (docs/architecture.md, "The bounce loop" and "The live loop"): captures
+and renders, either one of each per frame (``loop="sync"``) or each at its own rate (``loop="decoupled"``).
 
 Frame t, with the projector showing the synthetic light field of frame t - 1 (black at the first frame):
 
@@ -17,11 +17,22 @@ Each frame carries one more exchange than the one before, so for a still scene t
 all-bounce fixed point of the bounce loop (:mod:`lftransfer.transfer.bounce`); when something moves the light
 follows within a few frames. :meth:`LiveTransfer.step` is the one step function that ``lft render --mode live``,
 ``lft live`` and ``lft bench`` call.
+
+Synchronous (``"sync"``): steps 2 and 3 run inside the step (:func:`~lftransfer.transfer.capture.capture_once`),
+so a frame takes a capture plus a render, and a frame is always lit by the previous frame's light field. Decoupled
+(``"decoupled"``): a :class:`~lftransfer.transfer.capture.CaptureWorker` captures on its own thread at the devices'
+rate, each capture under the newest light field the render loop handed it; each step renders with the newest
+capture there is (steps 1, 4 and 5), so a frame takes a render only, and an edit of the synthetic scene shows in
+the next frame whatever the capture rate. Its light reflects the edit once a capture under a light field rendered
+after it is decoded (the frame's ``light_version``); each frame says how old its capture was.
 """
 
 from __future__ import annotations
 
+import time
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
+from typing import Iterator
 
 import numpy as np
 
@@ -33,14 +44,20 @@ from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings
+from lftransfer import choices
+from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
 from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["LiveFrame", "LiveTransfer", "LIVE_STAGES"]
+__all__ = ["CAPTURE_STAGES", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
 
-LIVE_STAGES = ("pose", "measure_depth", "encode", "capture", "decode", "capture_view", "incident_light",
-               "render_lightfield", "prefilter", "render_view", "composite")
+CAPTURE_STAGES = ("encode", "capture", "decode", "capture_view")
+RENDER_STAGES = ("pose", "measure_depth", "wait_capture", "incident_light", "render_lightfield", "prefilter",
+                 "render_view", "composite")
+LIVE_STAGES = ("pose", "measure_depth", "wait_capture", *CAPTURE_STAGES, "incident_light", "render_lightfield",
+               "prefilter", "render_view", "composite")
+FIRST_CAPTURE_TIMEOUT_S = 600.0     # a decoupled loop waits this long for its first capture
 
 
 @dataclass
@@ -50,17 +67,28 @@ class LiveFrame:
     Attributes:
         index: frame number (0 = the first frame after a start or a reset).
         time_s: the scene time the frame shows, seconds.
-        projected_lf: Ls_{t-1}, what the projector showed while this frame was captured (K, V, U, 3) radiance.
-        captured_lf: R_t, the decoded capture (real point light plus the response to the projection).
-        synthetic_lf: Ls_t, what the synthetic scene sends back (the projector shows it next frame).
+        projected_lf: the light field the projector showed while this frame's capture was taken (K, V, U, 3)
+            radiance (Ls of the previous frame in the synchronous loop; black at the first frame).
+        captured_lf: R, the decoded capture (real point light plus the response to the projection).
+        synthetic_lf: Ls_t, what the synthetic scene sends back (the projector shows it from the next capture on).
         real_view: (H, W, 3) float32 view camera radiance under the projection.
         synthetic_view: S_t, the synthetic render with its coverage.
         composite: (H, W, 3) float32, S_t over the real view.
         projected_image: the projector image shown (device integers).
         captured_raw: the LF camera image (device integers).
-        clipped_fraction: fraction of lit samples of Ls_{t-1} above the projector's range (clipped).
+        clipped_fraction: fraction of lit samples of the projection above the projector's range (clipped).
         moved: whether a synthetic object moved since the previous frame.
-        timings_s: seconds per stage (:data:`LIVE_STAGES`), and "total".
+        timings_s: seconds per stage of this frame (:data:`LIVE_STAGES`; a decoupled frame has no capture
+            stages, its capture's are in ``capture_timings_s``), and "total".
+        loop: "sync" or "decoupled".
+        scene_version: the synthetic scene's version this frame shows (each pose change or edit adds one).
+        light_version: the version of the synthetic scene whose light field lit this frame's capture (-1: the
+            black start): a change shows in the real objects' light from the first frame where it is reached.
+        capture_index: the capture this frame used.
+        capture_age_s: seconds from that capture's moment (the projection shown) to this frame's composite.
+        capture_time_s: the scene time the real scene was posed at for that capture, seconds.
+        capture_timings_s: that capture's own stages (:data:`CAPTURE_STAGES`).
+        started_s, ready_s: ``time.perf_counter()`` when the step began and when the composite was ready.
     """
 
     index: int
@@ -76,6 +104,15 @@ class LiveFrame:
     clipped_fraction: float
     moved: bool
     timings_s: dict[str, float] = field(default_factory=dict)
+    loop: str = "sync"
+    scene_version: int = 0
+    light_version: int = -1
+    capture_index: int = 0
+    capture_age_s: float = 0.0
+    capture_time_s: float = 0.0
+    capture_timings_s: dict[str, float] = field(default_factory=dict)
+    started_s: float = 0.0
+    ready_s: float = 0.0
 
 
 class LiveTransfer:
@@ -91,6 +128,8 @@ class LiveTransfer:
         time_s: the scene time the synthetic side is first posed at.
         depth: (K, V, U) the real scene's depth measured earlier (a resumed sequence's, :attr:`depth`), metres, used
             by the projection prefilter instead of measuring it at the first step; None: measured there.
+        loop: "sync" (a capture inside every step) or "decoupled" (captures on their own thread; module
+            docstring). A decoupled loop holds a thread: :meth:`close` it (or use it in a ``with``).
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP
@@ -99,20 +138,32 @@ class LiveTransfer:
 
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
                  *, projected: LightField | None = None, time_s: float = 0.0,
-                 depth: np.ndarray | None = None) -> None:
+                 depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync") -> None:
+        choices.check_choice("loop", loop, choices.LiveLoop)
         self.rig = rig
         self.model = model
         self.settings = settings
+        self.loop = loop
         self.side = SyntheticSide(model, scene, settings, time_s=time_s)
         U = V = settings.angular_samples
-        self._black_lf = LightField.zeros(model.array, U, V)
-        if projected is not None and projected.data.shape != self._black_lf.data.shape:
+        self._black = Projection(LightField.zeros(model.array, U, V), version=-1, black=True)
+        if projected is not None and projected.data.shape != self._black.lf.data.shape:
             raise ValueError(f"projected light field has shape {projected.data.shape}, the loop needs "
-                             f"{self._black_lf.data.shape}")
-        self.projected = projected if projected is not None else self._black_lf
+                             f"{self._black.lf.data.shape}")
+        self.projection = self._black if projected is None else Projection(projected, version=0)
         self.index = 0
+        self.version = 0                         # the synthetic scene's version (pose changes and edits)
+        self.changes: list[tuple[int, float]] = []   # (version, perf_counter) of each change
+        self._captures = 0
+        self._used: tuple[int, int, float] | None = None   # (capture index, version, time) of the last frame
+        self._worker: CaptureWorker | None = None
         if depth is not None and settings.prefilters:
             self.side.set_depth(depth)
+
+    @property
+    def projected(self) -> LightField:
+        """The synthetic light field the projector shows next (black at the start)."""
+        return self.projection.lf
 
     @property
     def depth(self) -> np.ndarray | None:
@@ -120,65 +171,128 @@ class LiveTransfer:
         measured or when the settings do not prefilter."""
         return None if self.side.prefilter is None else self.side.prefilter.depth
 
-    def set_scene(self, scene: SyntheticScene, settings: TransferSettings | None = None) -> None:
+    @property
+    def capture_rate_hz(self) -> float | None:
+        """Captures per second of a decoupled loop's worker (None in the synchronous loop)."""
+        return None if self._worker is None else self._worker.rate_hz
+
+    def _changed(self, at: float | None = None) -> None:
+        self.version += 1
+        self.changes.append((self.version, time.perf_counter() if at is None else at))
+
+    def set_scene(self, scene: SyntheticScene, settings: TransferSettings | None = None, *,
+                  changed_at: float | None = None) -> None:
         """Change the synthetic scene (an interactive edit) and optionally the settings (lighting model,
-        reconstruction, samples; the angular samples stay); the accumulated light carries on."""
+        reconstruction, samples; the angular samples stay); the accumulated light carries on.
+
+        Args:
+            changed_at: ``time.perf_counter()`` when the change was asked for (for the latency; None: now).
+        """
         if settings is not None and settings.angular_samples != self.settings.angular_samples:
             raise ValueError("the angular samples of a running live loop cannot change; start a new one")
         self.side.set_scene(scene, settings)
         self.settings = self.side.settings
+        self._changed(changed_at)
 
     def reset(self) -> None:
         """Start again from a black projector (the accumulated bounces are dropped)."""
-        self.projected = self._black_lf
+        self.projection = self._black
         self.index = 0
+        if self._worker is not None:
+            self._worker.show(self._black)
+
+    @contextmanager
+    def holding_rig(self) -> Iterator[Rig]:
+        """The rig to the caller alone (a decoupled loop's captures wait meanwhile)."""
+        with (self._worker.holding() if self._worker is not None else nullcontext(self.rig)) as rig:
+            yield rig
+
+    def has_news(self, time_s: float) -> bool:
+        """Whether a step at ``time_s`` would show anything the last frame did not: always in the synchronous loop
+        (every step captures); in the decoupled loop, a new capture, a new scene time or an edit."""
+        if self.loop == "sync" or self._used is None or self._worker is None:
+            return True
+        newest = self._worker.newest()
+        index, version, t = self._used
+        return (newest is not None and newest.index != index) or version != self.version or \
+            (float(time_s) != t and self.side.scene.moving)
+
+    def close(self) -> None:
+        """Stop a decoupled loop's capture worker (after the capture in progress)."""
+        if self._worker is not None:
+            self._worker.stop()
+            self._worker = None
+
+    def __enter__(self) -> "LiveTransfer":
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.close()
 
     def _measure_depth(self) -> None:
         """The real scene's depth for the projection prefilter (``projection == "depth"``): two extra frames,
         projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`). Measured once, at the
         first step: the real objects are taken to stand still (a sequence whose real objects move projects the
         box light field and says so)."""
-        rig, side = self.rig, self.side
-        rig.project(rig.info.black())
-        direct = side.decoder(rig.capture_lf().codes)
-        U = self.settings.angular_samples
-        side.set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U, direct))
+        side = self.side
+        with self.holding_rig() as rig:
+            rig.project(rig.info.black())
+            direct = side.decoder(rig.capture_lf().codes)
+            U = self.settings.angular_samples
+            side.set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
+                                         direct))
+
+    def _capture(self, time_s: float, timer: StageTimer) -> Capture:
+        side = self.side
+        if self.loop == "sync":
+            cap = capture_once(self.rig, side.encoder, side.decoder, self.projection, index=self._captures,
+                               real_time_s=time_s, max_radiance=self.model.projector.max_radiance,
+                               pose_real=False, timer=timer)
+            self._captures += 1
+            return cap
+        if self._worker is None:
+            self._worker = CaptureWorker(self.rig, side.encoder, side.decoder, self.projection,
+                                         max_radiance=self.model.projector.max_radiance,
+                                         real_time=lambda: self.side.time_s)
+            self._worker.start()
+        with timer("wait_capture"):
+            cap = self._worker.newest() or self._worker.wait(timeout=FIRST_CAPTURE_TIMEOUT_S)
+        return cap
 
     def step(self, time_s: float) -> LiveFrame:
         """Run one frame at scene time ``time_s`` (seconds); see the module docstring."""
-        import time
-
         t0 = time.perf_counter()
         timer = StageTimer()
-        rig, side, s = self.rig, self.side, self.settings
+        side, s = self.side, self.settings
         with timer("pose"):
             moved = side.pose(time_s)
-        rig.setup(RealScene(time_s=time_s))
+        if moved:
+            self._changed(t0)
+        if self.loop == "sync":
+            self.rig.setup(RealScene(time_s=time_s))
         if side.prefilter is None and s.prefilters:
             with timer("measure_depth"):
                 self._measure_depth()
-        projected = self.projected
-        with timer("encode"):
-            pattern = side.encoder(projected) if projected is not self._black_lf else rig.info.black()
-        lit = projected.data[projected.data > 0]
-        clipped = float(np.mean(lit > self.model.projector.max_radiance)) if lit.size else 0.0
-        rig.project(pattern)
-        with timer("capture"):
-            raw = rig.capture_lf().codes
-        with timer("decode"):
-            captured = side.decoder(raw)
-        with timer("capture_view"):
-            real_view = rig.capture_view().radiance
+        cap = self._capture(time_s, timer)
         # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
         with timer("incident_light"):
-            lights = [*side.direct_lights, side.incident_light(captured, s.seed)]
+            lights = [*side.direct_lights, side.incident_light(cap.captured_lf, s.seed)]
         synthetic_lf, view = side.render(lights, s.seed, timer)
         with timer("composite"):
-            comp = composite(view.rgb, view.alpha, real_view)
-        self.projected = synthetic_lf
-        frame = LiveFrame(index=self.index, time_s=float(time_s), projected_lf=projected, captured_lf=captured,
-                          synthetic_lf=synthetic_lf, real_view=real_view, synthetic_view=view, composite=comp,
-                          projected_image=pattern, captured_raw=raw, clipped_fraction=clipped, moved=moved,
-                          timings_s={**timer.totals, "total": time.perf_counter() - t0})
+            comp = composite(view.rgb, view.alpha, cap.real_view)
+        self.projection = Projection(synthetic_lf, self.version)
+        if self._worker is not None:
+            self._worker.show(self.projection)
+        ready = time.perf_counter()
+        frame = LiveFrame(index=self.index, time_s=float(time_s), projected_lf=cap.projection.lf,
+                          captured_lf=cap.captured_lf, synthetic_lf=synthetic_lf, real_view=cap.real_view,
+                          synthetic_view=view, composite=comp, projected_image=cap.projected_image,
+                          captured_raw=cap.captured_raw, clipped_fraction=cap.clipped_fraction, moved=moved,
+                          timings_s={**timer.totals, "total": ready - t0}, loop=self.loop,
+                          scene_version=self.version, light_version=cap.projection.version,
+                          capture_index=cap.index, capture_age_s=ready - cap.started_s,
+                          capture_time_s=cap.real_time_s, capture_timings_s=dict(cap.timings_s),
+                          started_s=t0, ready_s=ready)
+        self._used = (cap.index, self.version, float(time_s))
         self.index += 1
         return frame
