@@ -32,7 +32,9 @@ def _tiny_scene():
 def session(variant, tmp_path_factory):
     from lftransfer.app.viewer.command import open_session
 
-    return open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path_factory.mktemp("live"))
+    session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path_factory.mktemp("live"))
+    yield session
+    session.live.close()
 
 
 def test_01_edits_are_checked_before_the_loop_sees_them(session):
@@ -100,7 +102,8 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
     thread.start()
     options = webdriver.ChromeOptions()
     options.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"):
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1400,1000"):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=Service(DRIVER), options=options)
@@ -121,6 +124,14 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
 
         first = frame_src(60)
         assert _pixels(first).max() > 40                                   # not black
+        # the image fills the space beside the controls (1400 x 1000 window), kept to its aspect
+        size = driver.execute_script("const f = document.getElementById('frame'); "
+                                     "return [f.clientWidth, f.clientHeight, window.innerWidth];")
+        assert size[0] > 0.6 * (size[2] - 400) and size[1] > 400, size
+        end = time.time() + 10
+        while time.time() < end and "capture" not in driver.find_element(By.ID, "rates").text:
+            time.sleep(0.05)
+        assert "decoupled: capture" in driver.find_element(By.ID, "rates").text
         before = _pixels(frame_src(10, first))
         slider = driver.find_element(By.CSS_SELECTOR, 'fieldset.object[data-side="synthetic"] input.pose[data-key="translate"][data-axis="1"]')
         driver.execute_script("arguments[0].value = Number(arguments[0].value) + 0.04;"
@@ -159,6 +170,14 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
         assert driver.find_element(By.ID, "bounce_layers").is_enabled()
         latest = frame_src(1.0)
         frame_src(10, latest)                                              # the live loop goes on afterwards
+        driver.find_element(By.ID, "compare_btn").click()                    # A/B against the ground truth
+        end = time.time() + 120
+        while time.time() < end and "PSNR" not in driver.find_element(By.ID, "compare_status").text:
+            time.sleep(0.1)
+        assert "over the objects" in driver.find_element(By.ID, "compare_status").text
+        a_src = driver.find_element(By.ID, "ab_a").get_attribute("src")
+        driver.find_element(By.ID, "ab_diff").click()
+        assert driver.find_element(By.ID, "ab_a").get_attribute("src") not in ("", a_src)   # the difference
         driver.switch_to.new_window("tab")
         driver.get(f"http://127.0.0.1:{port}/")
         frame_src(30)
@@ -189,8 +208,8 @@ def test_04_ground_truth_beside_the_composite(session):
 
 
 def _started(session):
-    """Start a session's loop; returns the list its callbacks fill, in order: ("frame", ViewerFrame) and
-    ("bounces", ViewerBounces)."""
+    """Start a session's loop; returns the list its callbacks fill, in order: ("frame", ViewerFrame),
+    ("bounces", ViewerBounces) and ("message", dict)."""
     events: list = []
     lock = threading.Lock()
 
@@ -200,7 +219,7 @@ def _started(session):
                 events.append((kind, item))
         return callback
 
-    session.start(add("frame"), add("error"), add("bounces"))
+    session.start(add("frame"), add("error"), add("bounces"), add("message"))
     return events
 
 
@@ -329,3 +348,51 @@ def test_07_a_lost_page_ends_its_socket_quietly(session):
     assert lost not in app.state.clients.layers
     with pytest.raises(RuntimeError, match="not connected"):
         asyncio.run(handler(_LostPage(closes=False)))
+
+
+def test_08_decoupled_session_compare_and_record(variant, tmp_path):
+    """The page's session runs the decoupled loop: frames say the capture rate and age, an edit's latency is
+    counted; "compare" renders the ground truth of the frame shown while frames go on, with the PSNR, the
+    reference's own noise and a difference image that is not black (negative control: the composite is not the
+    ground truth); "record" writes the frames shown to an MP4 with as many frames."""
+    from lftransfer.app.viewer.command import open_session
+
+    session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path)
+    assert session.live.loop == "decoupled"
+    events = _started(session)
+    frames = lambda: [x for k, x in events if k == "frame"]          # noqa: E731
+    messages = lambda: [x for k, x in events if k == "message"]      # noqa: E731
+    try:
+        _wait(lambda: len(frames()) >= 3, 60, "three frames")
+        last = frames()[-1]
+        assert last.loop == "decoupled" and last.capture_hz > 0 and last.capture_age_s > 0
+        assert set(last.capture_ms) == {"encode", "capture", "decode", "capture_view"}
+        session.submit({"type": "object", "side": "synthetic", "index": 0, "translate": [0.01, 0.0, -0.08]})
+        _wait(lambda: (frames()[-1].latency_ms["light"] or {}).get("count", 0) >= 1, 60, "the edit's light")
+        lat = frames()[-1].latency_ms
+        assert 0 < lat["view"]["median"] <= lat["light"]["median"]
+
+        assert session.submit({"type": "compare"}) == {"type": "ack", "edit": "compare"}
+        _wait(lambda: any(m.get("type") == "compare" and "psnr_db" in m for m in messages()), 120, "the comparison")
+        done = next(m for m in messages() if m.get("type") == "compare" and "psnr_db" in m)
+        assert done["error"] is None and 10 < done["psnr_objects_db"] < 80 and done["noise_psnr_db"] > 10
+        assert _pixels(done["difference"]).max() > 0 and _pixels(done["ground_truth"]).max() > 40
+        assert any(m.get("state") == "running" for m in messages() if m.get("type") == "compare")
+
+        session.submit({"type": "record", "on": True})
+        _wait(lambda: any(m.get("type") == "recording" for m in messages()), 30, "the recording's start")
+        count = len(frames())
+        _wait(lambda: len(frames()) >= count + 6, 60, "frames while recording")
+        session.submit({"type": "record", "on": False})
+        _wait(lambda: any(m.get("type") == "recorded" for m in messages()), 60, "the recording")
+        rec = next(m for m in messages() if m.get("type") == "recorded")
+        assert rec["error"] is None and rec["frames"] >= 6 and rec["dropped"] == 0
+        import imageio.v2 as iio2
+
+        reader = iio2.get_reader(rec["path"], format="FFMPEG")
+        assert sum(1 for _ in reader) == rec["frames"]
+        reader.close()
+        with pytest.raises(Exception, match="on: expected true or false"):
+            session.submit({"type": "record", "on": "yes"})
+    finally:
+        session.stop()

@@ -30,6 +30,7 @@ after it is decoded (the frame's ``light_version``); each frame says how old its
 from __future__ import annotations
 
 import time
+from collections import deque
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from typing import Iterator
@@ -58,6 +59,7 @@ RENDER_STAGES = ("pose", "measure_depth", "wait_capture", "incident_light", "ren
 LIVE_STAGES = ("pose", "measure_depth", "wait_capture", *CAPTURE_STAGES, "incident_light", "render_lightfield",
                "prefilter", "render_view", "composite")
 FIRST_CAPTURE_TIMEOUT_S = 600.0     # a decoupled loop waits this long for its first capture
+MAX_CHANGES = 4096                  # changes of the synthetic scene kept for the latency
 
 
 @dataclass
@@ -153,7 +155,8 @@ class LiveTransfer:
         self.projection = self._black if projected is None else Projection(projected, version=0)
         self.index = 0
         self.version = 0                         # the synthetic scene's version (pose changes and edits)
-        self.changes: list[tuple[int, float]] = []   # (version, perf_counter) of each change
+        # (version, perf_counter) of the latest changes (a long session keeps the newest MAX_CHANGES)
+        self.changes: deque[tuple[int, float]] = deque(maxlen=MAX_CHANGES)
         self._captures = 0
         self._used: tuple[int, int, float] | None = None   # (capture index, version, time) of the last frame
         self._worker: CaptureWorker | None = None

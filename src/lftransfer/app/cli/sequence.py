@@ -69,12 +69,17 @@ def register(app: typer.Typer) -> None:
                                          help="Port of the page on localhost.")] = 8080,
              out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
                             ] = Path("out/live"),
-             quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-             rig: RigArgs = None) -> None:
+             quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER,
+             sync: Annotated[bool, flag("--sync", "One capture inside every frame (for measurement); default: "
+                                                  "captures on their own thread at the devices' rate, frames at the "
+                                                  "renderer's rate with the newest capture.")] = False,
+             truth: TruthArgs = None, rig: RigArgs = None) -> None:
         """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
-        layers, the light field images, the time of every stage and, on demand, the layers of each bounce with
-        their display gains; move and edit the synthetic objects (and the real ones on the simulated rig), change
-        the bounces and the lighting model, pause, step, reset, save."""
+        layers, the light field images, the time of every stage, the capture rate, each frame's capture age and
+        the motion-to-composite latency, and, on demand, the layers of each bounce with their display gains, an
+        A/B comparison with the ground truth (simulated rig) and a recording to MP4; move and edit the synthetic
+        objects (and the real ones on the simulated rig), change the bounces and the lighting model, pause, step,
+        reset, save."""
         try:
             from lftransfer.app.viewer.server import serve
         except ImportError as exc:
@@ -87,7 +92,8 @@ def register(app: typer.Typer) -> None:
         with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
             session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
                                    calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
-                                   renderer=renderer, progress=lambda msg: status.update(escape(msg[:70])),
+                                   renderer=renderer, loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
+                                   progress=lambda msg: status.update(escape(msg[:70])),
                                    warn=warn)
         console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
         serve(session, port=port)

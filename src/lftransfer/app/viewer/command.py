@@ -5,16 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-from lftransfer.choices import DEFAULT_RENDERER, DEFAULT_RIG_MODEL
+from lftransfer.choices import DEFAULT_LIVE_LOOP, DEFAULT_RENDERER, DEFAULT_RIG_MODEL
 
 __all__ = ["open_session"]
 
 
 def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL, calibration: Optional[Path] = None,
                  truth_seed: Optional[int] = 0, out: Path = Path("out/live"), renderer: str = DEFAULT_RENDERER,
-                 progress=None, warn=None):
+                 loop: str = DEFAULT_LIVE_LOOP, progress=None, warn=None):
     """A :class:`~lftransfer.app.viewer.session.LiveSession` for a scene on a rig: the rig opened, its model had
-    (calibrated, a calibration file, nominal or oracle), the live loop built with the scene's render settings."""
+    (calibrated, a calibration file, nominal or oracle), the live loop built with the scene's render settings,
+    decoupled (captures at the devices' rate) or synchronous (``loop``)."""
     from lftransfer.app.pipeline import RunOptions
     from lftransfer.app.rigs import RigSpec, open_rig
     from lftransfer.app.sequence import acquire_model
@@ -29,6 +30,6 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:
         (warn or (lambda _m: None))(note)
-    live = LiveTransfer(opened.rig, known.model, known.scene, options.resolve(scene).transfer)
+    live = LiveTransfer(opened.rig, known.model, known.scene, options.resolve(scene).transfer, loop=loop)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
     return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle, lights=known.scene.lights)

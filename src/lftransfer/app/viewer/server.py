@@ -7,7 +7,9 @@
   frame of the layer it shows, acknowledgements and error messages. Any number of pages may watch; a page that
   goes away is dropped, the loop goes on. The bounce layers one page asks for (``{"type": "bounces"}``) go to
   every page connected (messages of type "bounces": running with its step, then done with the layers, or
-  failed with the reason), so all watching tabs show them and know the live loop waits meanwhile.
+  failed with the reason), so all watching tabs show them and know the live loop waits meanwhile; so do the
+  ground-truth comparison (``{"type": "compare"}``: messages of type "compare") and the recording
+  (``{"type": "record", "on": true|false}``: "recording", then "recorded" with the file).
 
 The live loop runs on its own thread (:class:`LiveSession`); frames reach the event loop through
 ``asyncio.run_coroutine_threadsafe``, so rendering never blocks a page.
@@ -80,7 +82,10 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
         def on_bounces(bounces: ViewerBounces) -> None:
             asyncio.run_coroutine_threadsafe(clients.broadcast(bounces.message()), loop)
 
-        session.start(on_frame, on_error, on_bounces)
+        def on_message(message: dict) -> None:
+            asyncio.run_coroutine_threadsafe(clients.broadcast(message), loop)
+
+        session.start(on_frame, on_error, on_bounces, on_message)
         try:
             yield
         finally:
@@ -95,7 +100,8 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
     @app.get("/health")
     async def health() -> dict:
         last = session.last_bounces
-        return {"frames": clients.frames, "paused": session.paused, "error": session.error,
+        return {"frames": clients.frames, "paused": session.paused, "error": session.error, "loop": session.live.loop,
+                "capture_hz": session.live.capture_rate_hz, "recording": session.recorder.recording,
                 "bounces": None if last is None else {"state": last.state, "bounces": last.bounces,
                                                       "elapsed_s": last.elapsed_s, "error": last.error}}
 
@@ -114,7 +120,7 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
                     ack = session.submit(payload)
                     if payload.get("type") == "layer":
                         clients.layers[ws] = payload["layer"]
-                    if payload.get("type") in ("object", "lighting_model", "exchanges", "pause", "resume"):
+                    if payload.get("type") in ("object", "lighting_model", "exchanges", "pause", "resume", "record"):
                         await clients.broadcast({"type": "edited", "edit": payload})
                     await clients.send(ws, ack)
                 except (EditError, json.JSONDecodeError) as exc:

@@ -21,13 +21,16 @@ import math
 import queue
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from collections import deque
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
 import cv2
 import numpy as np
 
+from lftransfer.app.viewer.compare import GroundTruthCompare
+from lftransfer.app.viewer.recorder import Recorder
 from lftransfer.app.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
 from lftransfer.composite import composite
@@ -35,6 +38,7 @@ from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.scenes import SceneError, with_overrides
 from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
+from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
 
 __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
@@ -43,7 +47,9 @@ log = logging.getLogger(__name__)
 
 LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "ground truth")
 GT_SPP = 64                # samples per pixel of the viewer's ground truth (a preview, not a measurement)
-MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces")
+MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces"; synchronous loop)
+LATENCY_FRAMES = 240       # the latency the page shows is over the changes the last this many frames showed
+IDLE_S = 0.005             # a decoupled loop with nothing new to show looks again after this long
 _POSE_LIMIT_M = 0.5        # |translate| components the page may ask for, metres
 
 
@@ -62,6 +68,14 @@ class ViewerFrame:
         stages_ms: milliseconds per stage of the last frame (:data:`LIVE_STAGES`) and "total".
         images: layer name -> JPEG bytes (the layers some page asked for).
         clipped_fraction: fraction of lit projected samples above the projector's range.
+        loop: "decoupled" or "sync".
+        capture_hz: captures per second of the decoupled loop's capture worker (None: synchronous).
+        capture_age_s: seconds from the frame's capture to its composite.
+        capture_index: the capture the frame used.
+        capture_ms: that capture's own stages (encode, capture, decode, capture_view), milliseconds.
+        latency_ms: motion-to-composite latency over the recent changes (:func:`motion_latency`): "view" and
+            "light", each {"median", "p95", "max", "count"} or None.
+        recording: whether the frames are being recorded.
     """
 
     index: int
@@ -70,13 +84,24 @@ class ViewerFrame:
     stages_ms: dict[str, float]
     images: dict[str, bytes]
     clipped_fraction: float
+    loop: str = "sync"
+    capture_hz: float | None = None
+    capture_age_s: float = 0.0
+    capture_index: int = 0
+    capture_ms: dict[str, float] = field(default_factory=dict)
+    latency_ms: dict = field(default_factory=dict)
+    recording: bool = False
 
     def message(self, layer: str) -> dict:
         """The JSON message for a page that shows ``layer``."""
         image = self.images.get(layer) or self.images.get("composite", b"")
         return {"type": "frame", "index": self.index, "time_s": round(self.time_s, 3), "fps": round(self.fps, 3),
                 "stages_ms": {k: round(v, 1) for k, v in self.stages_ms.items()}, "layer": layer,
-                "clipped_fraction": self.clipped_fraction,
+                "clipped_fraction": self.clipped_fraction, "loop": self.loop,
+                "capture_hz": None if self.capture_hz is None else round(self.capture_hz, 3),
+                "capture_age_s": round(self.capture_age_s, 3), "capture_index": self.capture_index,
+                "capture_ms": {k: round(v, 1) for k, v in self.capture_ms.items()},
+                "latency_ms": self.latency_ms, "recording": self.recording,
                 "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
 
 
@@ -188,10 +213,13 @@ class LiveSession:
         self._stop = threading.Event()
         self._step_once = threading.Event()
         self._thread: threading.Thread | None = None
-        self._times: list[float] = []
         self._clock = 0.0
         self._bounces_queued = threading.Event()     # a bounce-layer request waits or runs (one at a time)
         self.last_bounces: ViewerBounces | None = None
+        self._recent: deque = deque(maxlen=LATENCY_FRAMES)    # (started, ready, versions) of the latest frames
+        self.recorder = Recorder()
+        self.compare = GroundTruthCompare(oracle, lambda image, scale: _jpeg(to_display(image, scale), 92)) \
+            if oracle is not None else None
 
     # -- what the page may ask for ------------------------------------------------------------------------------
     def describe(self) -> dict:
@@ -208,7 +236,8 @@ class LiveSession:
         return {"type": "scene", "objects": objects, "layers": list(LAYERS), "lighting_models": list(LIGHTING_MODELS),
                 "lighting_model": self.live.settings.lighting_model, "exchanges": self.exchanges,
                 "max_exchanges": MAX_EXCHANGES, "paused": self.paused, "stages": list(LIVE_STAGES),
-                "moving": self.scene.moving}
+                "moving": self.scene.moving, "loop": self.live.loop, "compare": self.compare is not None,
+                "recording": self.recorder.recording}
 
     def submit(self, payload: dict) -> dict | None:
         """Check an edit from a page and queue it for the loop; returns an acknowledgement for the page.
@@ -225,6 +254,17 @@ class LiveSession:
         kind = payload["type"]
         if kind in ("pause", "resume", "step", "reset", "save"):
             self._pending.edits.put((kind, None))
+        elif kind == "compare":
+            if self.compare is None:
+                raise EditError("compare: the ground truth exists on the simulated rig only")
+            if self.compare.busy:
+                return {"type": "ack", "edit": kind, "queued": False}
+            self._pending.edits.put((kind, None))
+        elif kind == "record":
+            on = payload.get("on")
+            if not isinstance(on, bool):
+                raise EditError(f"on: expected true or false, got {on!r}")
+            self._pending.edits.put((kind, on))
         elif kind == "exchanges":
             self._pending.edits.put((kind, int(_number(payload, "exchanges", 1, MAX_EXCHANGES))))
         elif kind == "bounces":
@@ -245,7 +285,7 @@ class LiveSession:
                 raise EditError(f"layer: expected one of {', '.join(LAYERS)}, got {layer!r}")
             self.layers.add(layer)
         elif kind == "object":
-            self._pending.edits.put((kind, self._object_edit(payload)))
+            self._pending.edits.put((kind, (*self._object_edit(payload), time.perf_counter())))
         else:
             raise EditError(f"unknown edit type {kind!r}")
         return {"type": "ack", "edit": kind}
@@ -290,7 +330,8 @@ class LiveSession:
 
     # -- the loop -----------------------------------------------------------------------------------------------
     def start(self, on_frame: Callable[[ViewerFrame], None], on_error: Callable[[str], None] | None = None,
-              on_bounces: Callable[[ViewerBounces], None] | None = None) -> None:
+              on_bounces: Callable[[ViewerBounces], None] | None = None,
+              on_message: Callable[[dict], None] | None = None) -> None:
         """Run the loop on its own thread until :meth:`stop`.
 
         Args:
@@ -298,17 +339,23 @@ class LiveSession:
             on_error: called with the message of a frame that failed (the loop goes on).
             on_bounces: called with the bounce layers asked for (:meth:`bounce_layers`): when the bounce loop
                 starts, at each of its steps, and when it is done or failed.
+            on_message: called with any other message for every page (a comparison with the ground truth, a
+                finished recording), from whichever thread made it.
         """
         self._on_frame, self._on_error = on_frame, on_error or (lambda _m: None)
         self._on_bounces = on_bounces or (lambda _b: None)
+        self._on_message = on_message or (lambda _m: None)
         self._thread = threading.Thread(target=self._run, name="lft-live-loop", daemon=True)
         self._thread.start()
 
     def stop(self, timeout: float = 60.0) -> None:
-        """Stop the loop after the frame in progress."""
+        """Stop the loop after the frame in progress (and its capture worker; a recording is finished)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout)
+        if self.recorder.recording:
+            self._on_message(self.recorder.stop().message())
+        self.live.close()
 
     def _apply(self) -> None:
         while True:
@@ -325,25 +372,30 @@ class LiveSession:
             elif kind == "reset":
                 self.live.reset()
                 self._clock = 0.0
-                self._times.clear()
+                self._recent.clear()
             elif kind == "exchanges":
                 self.exchanges = value
+            elif kind == "compare":
+                self._request_compare()
+            elif kind == "record":
+                self._record(value)
             elif kind == "lighting_model":
                 settings: TransferSettings = resolve_settings(
                     self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer),
                     bounces=self.live.settings.bounces, bounce_views=self.live.settings.bounce_views).transfer
                 self.live.set_scene(self.synthetic(), settings)
             elif kind == "object":
-                side, index, edited = value
+                side, index, edited, asked_at = value
                 if side == "synthetic":
                     objs = list(self.scene.synthetic)
                     objs[index] = edited
                     self.scene = with_overrides(self.scene, synthetic=objs)
-                    self.live.set_scene(self.synthetic())
+                    self.live.set_scene(self.synthetic(), changed_at=asked_at)
                 else:
                     objs = [o.model_dump() for o in self.sim_rig.real_objects]
                     objs[index] = edited
-                    self.sim_rig.place_real(objs)
+                    with self.live.holding_rig():       # not while a capture renders the real scene
+                        self.sim_rig.place_real(objs)
             elif kind == "save":
                 self.save()
             elif kind == "bounces":
@@ -361,14 +413,17 @@ class LiveSession:
                 if self.paused and not self._step_once.is_set():
                     time.sleep(0.02)
                     continue
-                self._step_once.clear()
-                t0 = time.perf_counter()
                 t = self._time_next()
-                for _ in range(self.exchanges):
+                if not self._step_once.is_set() and not self.live.has_news(t):
+                    time.sleep(IDLE_S)           # decoupled: nothing new until the next capture or edit
+                    continue
+                self._step_once.clear()
+                # each synchronous step is one exchange; a decoupled step renders the newest capture once
+                for _ in range(self.exchanges if self.live.loop == "sync" else 1):
                     frame = self.live.step(t)
                 self._clock += 1
                 self.last = frame
-                self._times.append(time.perf_counter() - t0)
+                self._recent.append(frame_times(frame))
                 self._on_frame(self._viewer_frame(frame))
             except Exception as exc:  # noqa: BLE001 - the loop keeps running; the page shows why a frame failed
                 self.error = f"{type(exc).__name__}: {exc}"
@@ -411,8 +466,8 @@ class LiveSession:
 
         try:
             progress("starting")
-            result = run_transfer(self.live.rig, self.live.model, self.synthetic(), settings,
-                                  progress=progress, time_s=t)
+            with self.live.holding_rig() as rig:         # a decoupled loop's captures wait meanwhile
+                result = run_transfer(rig, self.live.model, self.synthetic(), settings, progress=progress, time_s=t)
             comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
             layers = bounce_layers(result, comp, ceiling=emitter_ceiling(self.scene))
             base = layers[0].scale                        # the direct images' display scale
@@ -437,11 +492,41 @@ class LiveSession:
         images = {}
         for layer in self.layers:
             images[layer] = _jpeg(self._layer(frame, layer))
-        recent = self._times[-8:]
-        fps = len(recent) / sum(recent) if recent and sum(recent) > 0 else 0.0
+        if self.recorder.recording:
+            self.recorder.add(self._layer(frame, "composite"))
+        fps = _rate([r.ready_s for r in self._recent])
+        latency = motion_latency(list(self.live.changes), list(self._recent), self.live.loop)
         return ViewerFrame(index=frame.index, time_s=frame.time_s, fps=fps,
                            stages_ms={k: 1000.0 * v for k, v in frame.timings_s.items()}, images=images,
-                           clipped_fraction=frame.clipped_fraction)
+                           clipped_fraction=frame.clipped_fraction, loop=frame.loop,
+                           capture_hz=self.live.capture_rate_hz, capture_age_s=frame.capture_age_s,
+                           capture_index=frame.capture_index,
+                           capture_ms={k: 1000.0 * v for k, v in frame.capture_timings_s.items()},
+                           latency_ms={"view": latency.view and asdict(latency.view),
+                                       "light": latency.light and asdict(latency.light)},
+                           recording=self.recorder.recording)
+
+    def _request_compare(self) -> None:
+        """Start the ground truth of the frame on the screen (:class:`GroundTruthCompare`); the page hears when
+        it is ready."""
+        frame = self.last
+        if frame is None:
+            self._on_message({"type": "compare", "error": "no frame to compare yet"})
+            return
+        started = self.compare.request(frame.index, frame.time_s, frame.composite, self._world_now(frame.time_s),
+                                       self.scale or 1.0, lambda c: self._on_message(c.message()))
+        self._on_message({"type": "compare", "state": "running" if started else "busy",
+                          "frame_index": frame.index, "time_s": round(frame.time_s, 3)})
+
+    def _record(self, on: bool) -> None:
+        """Start or stop recording the shown composites to ``out/record-STAMP.mp4``."""
+        if on and not self.recorder.recording:
+            path = self.out / f"record-{time.strftime('%Y%m%d-%H%M%S')}.mp4"
+            fps = max(1, round(_rate([r.ready_s for r in self._recent])))
+            self.recorder.start(path, fps)
+            self._on_message({"type": "recording", "path": str(path), "fps": fps})
+        elif not on and self.recorder.recording:
+            self._on_message(self.recorder.stop().message())
 
     def synthetic(self):
         """The synthetic part of the scene as it stands (edited), its point lights where the rig model has them."""
@@ -501,6 +586,26 @@ class LiveSession:
             files += [write_exr(self.out / f"frame-{stamp}.exr", frame.composite),
                       write_png(self.out / f"frame-{stamp}.png", to_display(frame.composite, self.scale or 1.0))]
         return files
+
+
+@dataclass(frozen=True)
+class _FrameTimes:
+    """What the latency needs of a frame (the frame itself holds images)."""
+
+    started_s: float
+    ready_s: float
+    scene_version: int
+    light_version: int
+
+
+def _rate(ready: list[float], last: int = 8) -> float:
+    """Frames shown per second over the last ``last`` intervals between frames' ready times (0 before two)."""
+    ready = ready[-(last + 1):]
+    return (len(ready) - 1) / (ready[-1] - ready[0]) if len(ready) > 1 and ready[-1] > ready[0] else 0.0
+
+
+def frame_times(frame: LiveFrame) -> _FrameTimes:
+    return _FrameTimes(frame.started_s, frame.ready_s, frame.scene_version, frame.light_version)
 
 
 def scene_toml(scene) -> str:
