@@ -166,3 +166,25 @@ def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_fiel
     assert converged.projection == "depth" and "in every frame" in note[0]
     plain, note = _projection(moving, SequenceOptions(), resolve_settings(moving, Overrides(projection="box")).transfer)
     assert plain.projection == "box" and note == []
+
+
+def test_08_decoupled_live_sequence(variant, tmp_path):
+    """``--loop decoupled``: every frame is rendered with the newest capture, and its record says which capture
+    that was, how far behind in scene time and how old; the frames see the moving cube as the synchronous ones
+    do (the synthetic side never waits for a capture). A converged sequence refuses the option."""
+    scene = _moving_scene()
+    options = RunOptions(rig_model="oracle", truth_seed=None)
+    report = render_sequence(scene, tmp_path / "dec", options, SequenceOptions(loop="decoupled", frames=6,
+                                                                               verify_every=2))
+    assert report["loop"] == "decoupled"
+    captures = [f["capture"] for f in report["frames"]]
+    assert all(c["behind_s"] >= 0 and c["age_s"] > 0 for c in captures)
+    assert np.all(np.diff([c["index"] for c in captures]) >= 0)
+    assert all(f["metrics"]["psnr_objects_db"] > 20 for f in report["frames"] if f["metrics"])
+    assert report["summary"]["captures_used"] >= 1 and "capture_behind_s_median" in report["summary"]
+    sync = render_sequence(scene, tmp_path / "sync", options, SequenceOptions(frames=2))
+    assert sync["loop"] == "sync" and all(f["capture"]["behind_s"] == 0 for f in sync["frames"])
+    with pytest.raises(SequenceError, match="--loop decoupled needs --mode live"):
+        SequenceOptions(mode="converged", loop="decoupled")
+    with pytest.raises(ValueError, match="loop"):
+        SequenceOptions(loop="fast")

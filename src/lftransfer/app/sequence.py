@@ -26,6 +26,7 @@ from typing import Callable, Iterable, Literal
 
 import numpy as np
 
+from lftransfer import choices
 from lftransfer.app.cluster import ClusterSpec, LocalPool, Worker
 from lftransfer.app.pipeline import RunOptions
 from lftransfer.app.rigs import Knowledge, OpenedRig, knowledge, open_rig, write_calibration
@@ -61,6 +62,9 @@ class SequenceOptions:
 
     Attributes:
         mode: ``"live"`` or ``"converged"`` (module docstring).
+        loop: live mode: ``"sync"`` (a capture inside every frame) or ``"decoupled"`` (captures on their own
+            thread at the devices' rate, each frame rendered with the newest; frames then depend on the machine's
+            timing, and each frame's record says which capture lit it and how far behind it was).
         frames: how many frames (None: every frame of the scene's ``[animation]``; a still scene gets
             :data:`STILL_LIVE_FRAMES` live frames or one converged frame).
         resume: continue after the last finished frame of the folder's sequence.
@@ -71,6 +75,7 @@ class SequenceOptions:
     """
 
     mode: Literal["live", "converged"] = "live"
+    loop: choices.LiveLoop = choices.DEFAULT_SEQUENCE_LOOP
     frames: int | None = None
     resume: bool = False
     verify_every: int = 0
@@ -79,6 +84,9 @@ class SequenceOptions:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise SequenceError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        choices.check_choice("loop", self.loop, choices.LiveLoop)
+        if self.loop != "sync" and self.mode != "live":
+            raise SequenceError("--loop decoupled needs --mode live: a converged frame runs the bounce loop")
         if self.cluster is not None and self.mode != "converged":
             raise SequenceError("--cluster needs --mode converged: the live loop is sequential (each frame is lit "
                                 "by the one before), only independent frames can be spread over workers")
@@ -99,6 +107,10 @@ class FrameRecord:
         timings_s: seconds per stage of the transfer.
         clipped_fraction: fraction of lit light field samples above the projector's range.
         metrics: :func:`frame_metrics` against the frame's ground truth, or None.
+        capture: live mode: the capture that lit the frame: its ``index``, ``time_s`` (the scene time the real
+            scene was posed at), ``behind_s`` (the frame's scene time minus it), ``age_s`` (seconds from the
+            capture to the composite), ``light_version`` and ``scene_version`` (:class:`LiveFrame`); None
+            otherwise.
     """
 
     index: int
@@ -107,6 +119,7 @@ class FrameRecord:
     timings_s: dict[str, float]
     clipped_fraction: float
     metrics: dict[str, float | None] | None = None
+    capture: dict | None = None
 
     def to_json(self) -> dict:
         return {**asdict(self), "timings_s": {k: round(v, 4) for k, v in self.timings_s.items()}}
@@ -151,6 +164,7 @@ def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
 def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: TransferSettings, n: int) -> dict:
     """What must match for ``--resume`` to continue a folder's sequence."""
     return {"scene": str(scene.source) if scene.source else None, "mode": seq.mode, "frames": n,
+            **({"loop": seq.loop} if seq.loop != "sync" else {}),
             "rig": str(options.rig), "truth_seed": options.truth_seed, "rig_model": options.rig_model,
             "calibration": str(options.calibration) if options.calibration else None,
             "settings": {k: v for k, v in asdict(settings).items() if k != "bounce_views"},
@@ -339,7 +353,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             opened = open_rig(scene, options)
             known = acquire_model(opened, scene, options, out, seq.resume, step)
             model, rig_model, ps = known.model, known.rig_model, known.scene
-            report = {"key": key, "mode": seq.mode, "rig_model": rig_model, "variant": _variant(),
+            report = {"key": key, "mode": seq.mode, "loop": seq.loop if seq.mode == "live" else None,
+                      "rig_model": rig_model, "variant": _variant(),
                       "warnings": list(known.warnings),
                       "renderer": resolve_renderer(ps, settings.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
@@ -350,7 +365,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             gt_spp = resolved.gt_spp
             if seq.mode == "live":
                 _live_frames(writer, opened, model, ps, settings, times, done, out, scene,
-                             lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache)
+                             lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache, seq.loop)
             else:
                 finished = {f["index"] for f in done}
                 todo = [(i, float(times[i]), gt_spp if verify and i % seq.verify_every == 0 else None,
@@ -428,7 +443,7 @@ class _FrameWriter:
                        f.seconds + time.perf_counter() - t0)
 
     def frame(self, index: int, time_s: float, comp: np.ndarray, panel: np.ndarray, timings: dict, clipped: float,
-              gt, seconds: float) -> None:
+              gt, seconds: float, capture: dict | None = None) -> None:
         """Write one frame and its record."""
         frames = self.out / "frames"
         write_exr(frames / f"{index:04d}.exr", comp)
@@ -439,7 +454,8 @@ class _FrameWriter:
                 write_png(frames / f"{i:04d}.png", to_display(held, self.scale))
             self.held.clear()
         record = FrameRecord(index=index, time_s=time_s, seconds=seconds, timings_s=dict(timings),
-                             clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None)
+                             clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None,
+                             capture=capture)
         self.report["frames"].append(record.to_json())
         self.report["frames"].sort(key=lambda r: r["index"])
         write_json(self.report_path, self.report)
@@ -449,8 +465,13 @@ class _FrameWriter:
 
 def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: TransferSettings, times: np.ndarray,
                  done: list[dict], out: Path, scene, verified: Callable[[int], bool], gt_spp: int,
-                 use_cache: bool) -> None:
-    """The live loop over the frames after ``done``, each written as it is finished."""
+                 use_cache: bool, loop: str = choices.DEFAULT_SEQUENCE_LOOP) -> None:
+    """The live loop over the frames after ``done``, each written as it is finished.
+
+    Decoupled (``loop``): the frames are rendered one after another as fast as the renderer goes, the captures
+    running beside them; while a frame's ground truth is rendered and its files written, no new capture begins
+    (the one in progress finishes), so that this work, which a live loop does not do, gives the captures no
+    head start it would not have."""
     state, depth_file = out / STATE_FILE, out / DEPTH_FILE
     n = len(times)
     projected = None
@@ -460,23 +481,34 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
     elif done:
         raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
     depth = read_depth(out) if done else None
-    live = LiveTransfer(opened.rig, model, ps, settings, projected=projected,
-                        time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth)
-    live.index = len(done)
-    for i in range(len(done), n):
-        t0 = time.perf_counter()
-        t = float(times[i])
-        gt = frame_ground_truth(opened.oracle, t, gt_spp, use_cache)[0] if verified(i) else None
-        frame = live.step(t)
-        if writer.scale is None:
-            writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)
-        panel = live_panel(frame, gt.image if gt is not None else None, writer.scale,
-                           camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
-        _write_state(state, data=live.projected.data)
-        if live.depth is not None and not depth_file.is_file():
-            _write_state(depth_file, depth=live.depth)
-        writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
-                     time.perf_counter() - t0)
+    with LiveTransfer(opened.rig, model, ps, settings, projected=projected,
+                      time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop) as live:
+        live.index = len(done)
+        for i in range(len(done), n):
+            t0 = time.perf_counter()
+            t = float(times[i])
+            gt = frame_ground_truth(opened.oracle, t, gt_spp, use_cache)[0] \
+                if verified(i) and loop == "sync" else None
+            frame = live.step(t)
+            with live.captures_paused():
+                if verified(i) and loop != "sync":
+                    gt = frame_ground_truth(opened.oracle, t, gt_spp, use_cache)[0]
+                if writer.scale is None:
+                    writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)
+                panel = live_panel(frame, gt.image if gt is not None else None, writer.scale,
+                                   camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
+                _write_state(state, data=live.projected.data)
+                if live.depth is not None and not depth_file.is_file():
+                    _write_state(depth_file, depth=live.depth)
+                writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
+                             time.perf_counter() - t0, capture=capture_record(frame))
+
+
+def capture_record(frame) -> dict:
+    """What a sequence's report keeps of the capture that lit a live frame (:class:`FrameRecord`)."""
+    return {"index": frame.capture_index, "time_s": round(frame.capture_time_s, 4),
+            "behind_s": round(frame.time_s - frame.capture_time_s, 4), "age_s": round(frame.capture_age_s, 4),
+            "light_version": frame.light_version, "scene_version": frame.scene_version}
 
 
 def _variant() -> str:
@@ -496,6 +528,12 @@ def _summary(frames: list[dict]) -> dict:
     verified = [f["metrics"] for f in frames if f.get("metrics")]
     out = {"frames": len(frames), "median_frame_s": float(np.median(seconds)) if seconds else None,
            "transfer_fps": float(1.0 / np.median(seconds)) if seconds and np.median(seconds) > 0 else None}
+    captured = [f["capture"] for f in frames if f.get("capture")]
+    if captured:
+        out["captures_used"] = len({c["index"] for c in captured})
+        out["capture_behind_s_median"] = float(np.median([c["behind_s"] for c in captured]))
+        out["capture_behind_s_max"] = float(max(c["behind_s"] for c in captured))
+        out["capture_age_s_median"] = float(np.median([c["age_s"] for c in captured]))
     for key in ("psnr_db", "psnr_objects_db", "psnr_real_db"):
         values = [m[key] for m in verified if m.get(key) is not None]
         if values:

@@ -225,6 +225,15 @@ class CaptureWorker:
         finally:
             self._held.clear()
 
+    @contextmanager
+    def paused(self) -> Iterator[None]:
+        """No new capture begins meanwhile (the one in progress finishes); unlike :meth:`holding`, nothing waits."""
+        self._held.set()
+        try:
+            yield
+        finally:
+            self._held.clear()
+
     # -- the thread -------------------------------------------------------------------------------------------------
     def start(self) -> None:
         if self._thread is not None:

@@ -210,6 +210,13 @@ class LiveTransfer:
         with (self._worker.holding() if self._worker is not None else nullcontext(self.rig)) as rig:
             yield rig
 
+    @contextmanager
+    def captures_paused(self) -> Iterator[None]:
+        """A decoupled loop begins no new capture meanwhile (work between frames that is not the live loop's, such
+        as writing a sequence's files); nothing waits. The synchronous loop has nothing to pause."""
+        with (self._worker.paused() if self._worker is not None else nullcontext()):
+            yield
+
     def has_news(self, time_s: float) -> bool:
         """Whether a step at ``time_s`` would show anything the last frame did not: always in the synchronous loop
         (every step captures); in the decoupled loop, a new capture, a new scene time or an edit."""

@@ -15,7 +15,8 @@ from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
                                        rig_options, row)
 from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, OutDir, Quick, Renderer,
-                                            RigArgs, SceneArg, TruthArgs, Workers, flag, option)
+                                            RigArgs, SceneArg, TruthArgs, Workers, choice_check, flag, metavar,
+                                            option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
 from lftransfer.settings import Overrides
 
@@ -33,6 +34,12 @@ def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
         c = report["cluster"]
         row(table, "cluster", f"{c['workers']} workers on {c['address']} ({c['cpus']:g} CPUs, {c['gpus']:g} GPUs)")
     row(table, "median frame time", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
+    if report.get("loop"):
+        row(table, "loop", report["loop"])
+    if "capture_behind_s_median" in summary:
+        row(table, "captures behind the frames (scene time)",
+            f"median {summary['capture_behind_s_median']:.3g} s, at most {summary['capture_behind_s_max']:.3g} s "
+            f"({summary['captures_used']} captures for {summary['frames']} frames)")
     if "psnr_objects_db_min" in summary:
         row(table, "psnr over the objects (verified frames)",
             f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
@@ -109,6 +116,12 @@ def register(app: typer.Typer) -> None:
                        "--mode", metavar="live|converged",
                        help="live: the paper's loop, one capture and one render per frame, bounces accumulating "
                             "over frames | converged: every frame an independent N-bounce transfer.")] = "live",
+                   loop: Annotated[str, option(
+                       "--loop", metavar=metavar(choices.LiveLoop), callback=choice_check("--loop", choices.LiveLoop),
+                       help="Live mode: sync: one capture inside every frame (the same frames on every run) | "
+                            "decoupled: captures on their own thread at the rig's rate, every frame rendered with "
+                            "the newest (the report says how far behind each frame's capture was).")
+                   ] = choices.DEFAULT_SEQUENCE_LOOP,
                    bounces: Bounces = choices.DEFAULT_BOUNCES,
                    resume: Annotated[bool, flag("--resume", "Continue after the last finished frame in DIR (same "
                                                             "settings).")] = False,
@@ -136,7 +149,7 @@ def register(app: typer.Typer) -> None:
         options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer),
                              use_cache=not no_cache, **rig_opts)
         try:
-            seq = SequenceOptions(mode=mode, frames=frames, resume=resume, verify_every=verify_every,
+            seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
                                   cluster=cluster_spec(cluster, workers))
         except SequenceError as exc:
             fail(str(exc))
