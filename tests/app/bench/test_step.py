@@ -170,9 +170,22 @@ def test_live_moves_a_synthetic_object_every_frame(quick_fig4):
     cube0, cube_mid = moving.at(0.0).synthetic[0], moving.at(moving.animation.duration_s / 2).synthetic[0]
     assert cube_mid.translate[1] - cube0.translate[1] == pytest.approx(LIVE_SLIDE_M)
     assert with_moving_object(moving, 4) is moving                           # its own motion is kept
-    options = BenchOptions(iterations=3, rig_model="oracle", peer=False, exact_aperture_samples=8)
+    options = BenchOptions(iterations=3, rig_model="oracle", peer=False, exact_aperture_samples=8, decoupled=True)
     result = run_bench(moving, options)
     assert result.frames_moved == 3
+    # latency: every timed frame moved the cube; synchronously its view shows in the same step and its light one
+    # step later; decoupled, the view in the next frame and the light after a capture
+    sync = result.latency_ms["sync"]
+    assert sync["view"]["count"] >= 2 and sync["view"]["median"] < sync["light"]["median"]
+    step_ms = result.step_total_ms
+    assert sync["view"]["median"] == pytest.approx(step_ms, rel=0.5)
+    d = result.decoupled
+    assert d.frames >= 10 and d.captures >= 3 and d.render_fps > 0 and d.capture_hz > 0
+    dec = result.latency_ms["decoupled"]
+    assert dec["view"]["median"] < dec["light"]["median"]
+    assert "capture" not in d.stages_ms and set(d.capture_stages_ms) == {"encode", "capture", "decode",
+                                                                        "capture_view"}
+    assert json.loads(json.dumps(result.to_json(), default=strict_json))["decoupled"]["frames"] == d.frames
     assert result.pipeline_fps == pytest.approx(1000 / result.pipeline_iteration_ms, rel=1e-2)
     assert 0 < result.step_fps <= result.pipeline_fps
     f = result.fast_vs_exact

@@ -35,12 +35,16 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from lftransfer.app.bench.accuracy import FastVsExact, fast_vs_exact
+from lftransfer.app.bench.decoupled import DecoupledRun, run_decoupled
 from lftransfer.app.bench.floor import FloorTiming, RayRecorder, ray_floor
 from lftransfer.app.bench.peer import PeerComparison, peer_comparison
 from lftransfer import choices
 from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LiveTransfer
 
 __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "Spread",
@@ -73,6 +77,8 @@ class BenchOptions:
         exact_aperture_samples: aperture points per lenslet of that exact reference (area model).
         peer: also time Mitsuba's path tracer on the light field job (:mod:`~lftransfer.app.bench.peer`).
         peer_max_spp: the largest peer sample count tried.
+        decoupled: also run the decoupled loop as ``lft live`` does (:mod:`~lftransfer.app.bench.decoupled`):
+            frames delivered per second with the simulator capturing beside them, capture rate and age, latency.
     """
 
     iterations: int = 10
@@ -85,6 +91,7 @@ class BenchOptions:
     exact_aperture_samples: int = 32
     peer: bool = True
     peer_max_spp: int = 4096
+    decoupled: bool = False
 
     def __post_init__(self) -> None:
         if self.iterations < 1:
@@ -138,6 +145,10 @@ class BenchResult:
         cache_vertices: vertices of the fast path's irradiance cache, or None (exact path).
         peak_rss_mb: the process's peak resident memory, MB.
         calibration_s: seconds the bench spent calibrating the rig (0 when it did not).
+        latency_ms: motion-to-composite latency (:func:`lftransfer.transfer.latency.motion_latency`): "sync" over
+            the timed frames (each capture inside its frame, so on the simulated rig the simulator's capture is in
+            it) and "decoupled" (the decoupled run's, or None); each None where nothing moved.
+        decoupled: the decoupled loop's run (:class:`~lftransfer.app.bench.decoupled.DecoupledRun`), or None.
     """
 
     pipeline_iteration_ms: float
@@ -160,6 +171,8 @@ class BenchResult:
     peak_rss_mb: float
     calibration_s: float = 0.0
     notes: list[str] = field(default_factory=list)
+    latency_ms: dict = field(default_factory=dict)
+    decoupled: DecoupledRun | None = None
 
     def to_json(self) -> dict:
         """JSON-ready dict (nested dataclasses as dicts)."""
@@ -210,7 +223,7 @@ def count_bench_steps(scene, options: BenchOptions) -> int:
 
     calibrates = options.calibration is None and options.rig_model == "calibrated"
     return (2 + (count_calibration_steps(scene) if calibrates else 0) + options.warmup + options.iterations + 1
-            + int(options.accuracy) + 3 * int(options.peer))
+            + int(options.accuracy) + 3 * int(options.peer) + int(options.decoupled))
 
 
 def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[object, str, float]:
@@ -307,6 +320,11 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         floor = ray_floor(live.side.renderer.objects, batches, repeats=options.iterations,
                           renderer_scene=live.side.renderer.scene)
         last = frames[-1]
+        sync_latency = motion_latency(list(live.changes), frames, "sync")
+        decoupled = None
+        if options.decoupled:
+            decoupled = run_decoupled(opened.rig, model, scene.synthetic_part(), settings, np.asarray(times),
+                                      frames=max(options.iterations, 10), progress=say)
         accuracy = None
         if options.accuracy:
             say("accuracy: the exact path on the last frame (dense aperture sampling)")
@@ -338,6 +356,12 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     if options.peer:
         notes.append("peer: the light field render alone in the point model (Mitsuba has no area emitter), "
                      "not the live step")
+    if sync_latency.view is not None:
+        notes.append("latency_ms.sync: each capture runs inside its frame, so on the simulated rig the simulator's "
+                     "capture is in the latency (a physical rig's exposure would be instead)")
+    if decoupled is not None:
+        notes.append("decoupled: the simulator's captures share the cores with the render loop, so its frame rate "
+                     "is lower than the pipeline's alone (what lft live on the simulated rig shows)")
     extra = [k for k in pipeline if k not in PIPELINE_STAGES]
     if extra:
         notes.append(f"stages counted in the pipeline besides the usual ones: {', '.join(extra)}")
@@ -362,4 +386,13 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         calibration_s=round(calibration_s, 1),
         notes=notes,
+        latency_ms={"sync": _latency(sync_latency),
+                    "decoupled": _latency(decoupled.latency) if decoupled is not None else None},
+        decoupled=decoupled,
     )
+
+
+def _latency(latency) -> dict | None:
+    """{"view": ..., "light": ...} of a latency (object or its JSON), None where nothing moved."""
+    data = latency if isinstance(latency, dict) else latency.to_json()
+    return None if data["view"] is None and data["light"] is None else {"view": data["view"], "light": data["light"]}

@@ -53,7 +53,10 @@ def register(app: typer.Typer) -> None:
               live: Annotated[bool, flag("--live", (
                   "Time the step with a synthetic object moving (a still scene's first synthetic object slides 2 cm "
                   "and turns 20 degrees and back over the frames; an animated scene moves as its keyframes "
-                  "say)."))] = False,
+                  "say), and then run the decoupled loop as lft live does: frames per second with the capture "
+                  "beside them, capture rate and age, motion-to-composite latency."))] = False,
+              sync: Annotated[bool, flag("--sync", "With --live: time the synchronous loop only (no decoupled "
+                                                   "run).")] = False,
               max_memory: MaxMemory = None) -> None:
         """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and
         the scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the
@@ -77,7 +80,8 @@ def register(app: typer.Typer) -> None:
         settings = Overrides(lighting_model=lighting_model, reconstruction=reconstruction, projection=projection,
                              renderer=renderer)
         options = BenchOptions(iterations=iterations, settings=settings, truth_seed=rig_opts["truth_seed"],
-                               rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer)
+                               rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer,
+                               decoupled=live and not sync)
         if calibrates:
             say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
                 "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."
@@ -94,7 +98,7 @@ def register(app: typer.Typer) -> None:
         data["settings"]["live"] = live
         data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model,
                                                      truth, lighting_model, reconstruction, renderer,
-                                                     accuracy, peer, live, projection)
+                                                     accuracy, peer, live, projection, sync)
         _bench_table(result)
         if json_out is not None:
             write_json(json_out, data)
@@ -117,7 +121,7 @@ def _demo_calibration_hint(scene) -> str:
 
 
 def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth, lighting_model,
-                   reconstruction, renderer, accuracy, peer, live=False, projection=None) -> str:
+                   reconstruction, renderer, accuracy, peer, live=False, projection=None, sync=False) -> str:
     """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
     import shlex
 
@@ -128,6 +132,8 @@ def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth,
         parts.append("--quick")
     if live:
         parts.append("--live")
+    if live and sync:
+        parts.append("--sync")
     parts += ["--iterations", str(iterations)]
     if calibration is not None:
         parts += ["--calibration", str(calibration)]
@@ -185,6 +191,21 @@ def _bench_table(result) -> None:
     row(table, "frames per second: pipeline / whole step", f"{result.pipeline_fps:.2f} / {result.step_fps:.3f} "
                                                             f"(the step includes the simulator's capture)")
     row(table, "frames in which a synthetic object moved", f"{result.frames_moved} of {s['iterations']}")
+
+    def latency(x) -> str:
+        return "-" if x is None else f"{x['median']:.0f} ms (95 %: {x['p95']:.0f} ms)"
+
+    for loop, lat in (result.latency_ms or {}).items():
+        if lat is not None:
+            row(table, f"motion to composite / to its light ({loop})",
+                 f"{latency(lat['view'])} / {latency(lat['light'])}")
+    d = result.decoupled
+    if d is not None:
+        row(table, "decoupled: frames per second (captures beside them)",
+             f"{d.render_fps:.2f} ({d.frames} frames in {d.seconds:.1f} s, {d.frame_ms:.0f} ms per frame)")
+        row(table, "decoupled: capture rate, capture age",
+             f"{d.capture_hz:.3g} /s ({d.captures} captures), median {d.capture_age_s['median']:.2f} s, "
+             f"at most {d.capture_age_s['max']:.2f} s")
     if result.fast_vs_exact is not None:
         v, o = result.fast_vs_exact.psnr_db, result.fast_vs_exact.psnr_objects_db
         row(table, "fast vs exact composite PSNR: all / objects", "n/a (exact path)" if v is None else

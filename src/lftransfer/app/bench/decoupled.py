@@ -1,0 +1,114 @@
+"""The decoupled live loop timed as ``lft live`` runs it (``lft bench --live``): captures on their own thread at
+the simulated rig's rate, frames rendered as fast as the renderer goes with the newest capture, a synthetic object
+moving every frame.
+
+On the simulated rig the captures are the simulator's renders, so the capture thread and the render loop share
+the machine's cores: the frame rate measured here is lower than a physical rig's computer would give, whose
+cameras expose on their own. It is what ``lft live`` on the simulated rig shows. What it measures beside the rates
+is the latency a person feels (:mod:`lftransfer.transfer.latency`): from each move to the first composite that
+shows it, and to the first whose real objects' light reflects it.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import asdict, dataclass
+from typing import Callable
+
+import numpy as np
+
+from lftransfer.transfer.latency import motion_latency
+from lftransfer.transfer.live import LiveTransfer
+
+__all__ = ["DecoupledRun", "run_decoupled"]
+
+WARMUP_FRAMES = 2          # frames not counted (the first measures the depth and waits for the first capture)
+MAX_SECONDS = 900.0        # the run stops after this long even when it has fewer captures than asked
+
+
+@dataclass(frozen=True)
+class DecoupledRun:
+    """The decoupled loop over a run of frames.
+
+    Attributes:
+        frames: frames counted (after :data:`WARMUP_FRAMES`).
+        seconds: wall-clock over them.
+        render_fps: frames delivered per second (frames / seconds): the page's rate.
+        frame_ms: median milliseconds per frame (the step: render with the newest capture, composite).
+        captures: captures the counted frames used.
+        capture_hz: captures per second of the capture thread at the end.
+        capture_age_s: median and largest seconds from a frame's capture to its composite.
+        capture_behind_s: median and largest scene time between a frame and the real scene its capture saw.
+        latency: motion-to-composite latency (:class:`~lftransfer.transfer.latency.MotionLatency` as JSON).
+        stages_ms: median milliseconds per render-side stage.
+        capture_stages_ms: median milliseconds per capture-side stage (encode, capture, decode, capture_view).
+    """
+
+    frames: int
+    seconds: float
+    render_fps: float
+    frame_ms: float
+    captures: int
+    capture_hz: float
+    capture_age_s: dict
+    capture_behind_s: dict
+    latency: dict
+    stages_ms: dict
+    capture_stages_ms: dict
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def _med_max(values) -> dict:
+    values = list(values)
+    return {"median": round(float(statistics.median(values)), 4), "max": round(float(max(values)), 4)}
+
+
+def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int, min_captures: int = 3,
+                  progress: Callable[[str], None] | None = None) -> DecoupledRun:
+    """Run the decoupled loop over the scene times ``times`` (cycled) for at least ``frames`` counted frames and
+    until the counted frames used ``min_captures`` captures (or :data:`MAX_SECONDS` passed).
+
+    Args:
+        rig: the simulated rig (only this loop uses it meanwhile).
+        model: the rig model.
+        scene: the synthetic part of the scene (its animation moves the object).
+        settings: the transfer settings.
+        times: (F,) scene times of the frames, seconds.
+        frames: frames to count (>= 2).
+        min_captures: distinct captures the counted frames must have used.
+        progress: called with one message as it starts.
+    """
+    (progress or (lambda _m: None))(f"decoupled loop: {frames} frames and {min_captures} captures at least")
+    done = []
+    with LiveTransfer(rig, model, scene, settings, loop="decoupled") as live:
+        start = time.perf_counter()
+        i = 0
+        while True:
+            frame = live.step(float(times[i % len(times)]))
+            i += 1
+            if i > WARMUP_FRAMES:
+                done.append(frame)
+            captures = len({f.capture_index for f in done})
+            if len(done) >= frames and captures >= min_captures:
+                break
+            if time.perf_counter() - start > MAX_SECONDS and len(done) >= 2:
+                break
+        capture_hz = live.capture_rate_hz or 0.0
+        latency = motion_latency(list(live.changes), done, "decoupled")
+    seconds = done[-1].ready_s - done[0].started_s
+    render = sorted({k for f in done for k in f.timings_s if k != "total"})
+    captured = sorted({k for f in done for k in f.capture_timings_s})
+    return DecoupledRun(
+        frames=len(done), seconds=round(seconds, 3), render_fps=round(len(done) / seconds, 3),
+        frame_ms=round(1000 * statistics.median(f.timings_s["total"] for f in done), 2),
+        captures=len({f.capture_index for f in done}), capture_hz=round(capture_hz, 4),
+        capture_age_s=_med_max(f.capture_age_s for f in done),
+        # (a frame of a new cycle of the times is ahead of a capture from the last cycle's end: left out)
+        capture_behind_s=_med_max([f.time_s - f.capture_time_s for f in done if f.time_s >= f.capture_time_s] or [0]),
+        latency=latency.to_json(),
+        stages_ms={k: round(1000 * statistics.median(f.timings_s.get(k, 0.0) for f in done), 2) for k in render},
+        capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
+                           for k in captured})
