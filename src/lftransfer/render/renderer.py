@@ -6,6 +6,7 @@ The same class renders the synthetic scene for the pipeline and, inside the simu
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Literal, Sequence
 
 import numpy as np
@@ -57,16 +58,28 @@ class ViewImage:
     depth: np.ndarray
 
 
+@lru_cache(maxsize=16)
+def _sum_weights(spp: int, width: int) -> np.ndarray:
+    """(spp * width, width) float32 of ones: a row of ``spp`` samples of ``width`` values each, times it, is their
+    sum."""
+    w = np.tile(np.eye(width, dtype=np.float32), (spp, 1))
+    w.flags.writeable = False
+    return w
+
+
 def sample_mean(values: np.ndarray, spp: int) -> np.ndarray:
     """The mean of every ``spp`` consecutive rows: (N * spp, ...) -> (N, ...) float32 (samples of one pixel or
-    light field entry, stored sample-fastest). The ``spp`` slices are summed: numpy's mean over a short middle
-    axis is about three times slower (it was half of a full-resolution view render)."""
-    groups = np.asarray(values, np.float32).reshape(-1, spp, *np.shape(values)[1:])
-    total = groups[:, 0].copy()
-    for s in range(1, spp):
-        total += groups[:, s]
+    light field entry, stored sample-fastest).
+
+    The sums are one matrix product (N, spp * C) @ (spp * C, C) of ones, then scaled by 1 / spp: summing the
+    ``spp`` strided slices took 8 ms for a full-resolution light field's 935,040 rays of 3 channels, the product
+    1.1 ms, and numpy's mean over the short middle axis 28 ms (it was half of a full-resolution view render)."""
+    values = np.asarray(values, np.float32)
+    tail = values.shape[1:]
+    width = int(np.prod(tail)) if tail else 1
+    total = values.reshape(-1, spp * width) @ _sum_weights(spp, width)
     total *= np.float32(1.0 / spp)
-    return total
+    return total.reshape(-1, *tail)
 
 
 def lightfield_rays(array: LensArray, U: int, V: int, *, side: Literal["synthetic", "real"] = "synthetic",
