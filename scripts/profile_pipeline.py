@@ -3,15 +3,17 @@
 Runs ``LiveTransfer.step`` on the simulated rig for two warm-up frames (the depth measured, the kernels compiled,
 the culling tiles built), then repeats the pipeline's stages on the last frame's capture, without the simulator:
 encode the synthetic light field, decode the LF camera image, make the captured light field a light, render the
-light field and the view, prefilter, composite. Prints the median time per stage and, with ``--py-spy FILE``,
-is meant to run under py-spy (``py-spy record --format raw -o FILE -- python scripts/profile_pipeline.py ...``);
-``--top FILE`` summarises such a raw profile: the functions with the most samples of their own (self) and in
-total (inclusive), as docs/performance.md lists them.
+light field and the view, prefilter, composite. It writes the median time per stage (a run of its own, not
+sampled) and, with ``--py-spy``, runs itself again under py-spy (``py-spy record --native --format raw``) and
+adds the profile's top entries over the repeated stages only (the warm-up and the simulator left out): the
+functions with the most samples of their own (self) and in total (inclusive), as docs/performance.md lists them.
+
+``--src DIR`` profiles the lftransfer found in another checkout (``git worktree add DIR COMMIT``): the profile
+before a change, by the same script.
 
 Usage:
-    python scripts/profile_pipeline.py [--quick] [--calibration FILE] [--repeats 20] [--json OUT]
-    py-spy record --native --format raw -o prof.txt -- python scripts/profile_pipeline.py --calibration FILE
-    python scripts/profile_pipeline.py --top prof.txt
+    python scripts/profile_pipeline.py [--quick] [--calibration FILE] [--repeats 20] [--py-spy] [--src DIR]
+        [--json OUT]
 """
 
 from __future__ import annotations
@@ -48,19 +50,26 @@ def pipeline_stages(live, frame, repeats: int) -> dict[str, list[float]]:
     return runs
 
 
-def top(raw: Path, n: int = 15) -> dict:
-    """The functions with the most samples in a py-spy raw (collapsed stacks) profile: self and inclusive."""
+def _frame(text: str) -> str:
+    """``function (file)`` of a py-spy frame ``function (file:line)`` (the line left out, so that a function's
+    samples add up)."""
+    name, _, where = text.strip().partition(" (")
+    return f"{name} ({where.rstrip(')').split(':')[0]})" if where else name
+
+
+def top(raw: Path, n: int = 15, within: str = "pipeline_stages") -> dict:
+    """The functions with the most samples in a py-spy raw (collapsed stacks) profile, over the stacks that pass
+    through ``within``: self and inclusive, per cent of those samples."""
     own: Counter = Counter()
     inclusive: Counter = Counter()
     total = 0
     for line in raw.read_text().splitlines():
         stack, _, count = line.rpartition(" ")
-        if not stack:
+        if not stack or within not in stack:
             continue
         c = int(count)
         total += c
-        frames = [f.split(" (")[0].strip() + (" (" + f.split(" (")[1].split(":")[0] + ")" if " (" in f else "")
-                  for f in stack.split(";")]
+        frames = [_frame(f) for f in stack.split(";")]
         own[frames[-1]] += c
         for f in set(frames):
             inclusive[f] += c
@@ -75,11 +84,17 @@ def main() -> None:
     parser.add_argument("--calibration", type=Path, default=None, help="calibration file (default: oracle model)")
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--top", type=Path, default=None, help="summarise this py-spy raw profile and stop")
+    parser.add_argument("--py-spy", action="store_true", help="also profile a second run under py-spy")
+    parser.add_argument("--src", type=Path, default=None, help="a checkout whose src/lftransfer to profile")
     args = parser.parse_args()
-    if args.top is not None:
-        print(json.dumps(top(args.top), indent=1))
-        return
+    source = None
+    if args.src is not None:
+        import subprocess
+        import sys
+
+        sys.path.insert(0, str((args.src / "src").resolve()))
+        source = {"checkout": str(args.src), "commit": subprocess.run(
+            ["git", "-C", str(args.src), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()}
 
     from lftransfer.app.bench.step import transfer_settings
     from lftransfer.app.cli.common import load
@@ -101,11 +116,38 @@ def main() -> None:
     runs = pipeline_stages(live, frame, args.repeats)
     result = {"resolution": {"lf_camera": list(scene.rig.lf_camera), "projector": list(scene.rig.projector),
                              "view": list(scene.view.resolution)},
-              "warmup_s": round(warm, 1), "repeats": args.repeats,
+              "warmup_s": round(warm, 1), "repeats": args.repeats, "source": source,
               "stages_ms": {k: round(1000 * statistics.median(v), 2) for k, v in runs.items()}}
-    print(json.dumps(result, indent=1))
+    live.close()
+    opened.rig.close()
+    if args.py_spy:
+        result["py_spy"] = _py_spy(args)
+    text = json.dumps(result, indent=1)
+    print(text)
     if args.json:
-        args.json.write_text(json.dumps(result, indent=1))
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text + "\n")
+
+
+def _py_spy(args) -> dict:
+    """This script's stages again under py-spy (100 samples per second, native frames): the top entries."""
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    spy = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
+    with tempfile.TemporaryDirectory() as tmp:
+        raw = Path(tmp) / "profile.txt"
+        cmd = [spy, "record", "--native", "--format", "raw", "--rate", "100", "-o", str(raw), "--",
+               sys.executable, __file__, "--repeats", str(args.repeats)]
+        cmd += ["--quick"] if args.quick else []
+        cmd += ["--calibration", str(args.calibration)] if args.calibration else []
+        cmd += ["--src", str(args.src)] if args.src else []
+        subprocess.run(cmd, check=True, capture_output=True)
+        return {"command": " ".join(["py-spy", *cmd[1:4], "--rate", "100", "--", "python",
+                                     "scripts/profile_pipeline.py", *cmd[cmd.index("--repeats"):]]),
+                **top(raw)}
 
 
 if __name__ == "__main__":

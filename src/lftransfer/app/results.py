@@ -28,6 +28,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from lftransfer.app.results_format import db, fixed, num, table
+from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
+
 __all__ = ["Run", "RUNS", "ResultsError", "StoredRun", "load_run", "load_store", "render_results", "main"]
 
 NOT_STORED = "not stored yet: run `make runs`"
@@ -114,6 +117,27 @@ RUNS: tuple[Run, ...] = (
     _seq("fig1b", "Fig. 1b at the paper's resolution", "fig1b", quick=False, calibrate=None,
          calibration="out/runs/demo/calibration.json", render=("--verify-every", "12", "--gt-spp", "128"),
          needs=("demo",)),
+    _seq("fig5_quick_decoupled", "Fig. 5 at quarter resolution, the decoupled loop: the cost of stale captures",
+         "fig5", quick=True, calibrate=None, calibration="out/runs/fig5_quick_cal/calibration.json",
+         render=("--verify-every", "4", "--loop", "decoupled"), needs=("fig5_quick",)),
+    Run("live_fps_quick", "live_fps", "`lft live` as a page sees it, quarter resolution: decoupled against --sync",
+        (("python", "scripts/measure_live_fps.py", "--quick", "--seconds", "60", "--json",
+          "out/runs/live_fps_quick.json"),), (("", "out/runs/live_fps_quick.json"),), quick=True),
+    Run("live_fps", "live_fps", "`lft live` as a page sees it, the paper's resolution: decoupled against --sync",
+        (("python", "scripts/measure_live_fps.py", "--seconds", "90", "--calibration",
+          "out/runs/demo/calibration.json", "--json", "out/runs/live_fps.json"),), (("", "out/runs/live_fps.json"),),
+        needs=("demo",)),
+    Run("soak_live_quick", "soak", "A 10-minute soak of `lft live` (decoupled, quarter resolution, an edit a second)",
+        (("python", "scripts/soak_live.py", "--quick", "--minutes", "10", "--json", "out/runs/soak_live_quick.json"),),
+        (("", "out/runs/soak_live_quick.json"),), quick=True),
+    Run("profile", "profile", "The pipeline profiled at the paper's resolution (py-spy), without the simulator",
+        (("python", "scripts/profile_pipeline.py", "--py-spy", "--calibration", "out/runs/demo/calibration.json",
+          "--json", "out/runs/profile.json"),), (("", "out/runs/profile.json"),), needs=("demo",)),
+    Run("profile_before", "profile", "The same profile before issue 30's changes to the stages (commit 1a07f36)",
+        (("git", "worktree", "add", "-f", "--detach", "out/runs/src_1a07f36", "1a07f36"),
+         ("python", "scripts/profile_pipeline.py", "--py-spy", "--src", "out/runs/src_1a07f36", "--calibration",
+          "out/runs/demo/calibration.json", "--json", "out/runs/profile_before.json")),
+        (("", "out/runs/profile_before.json"),), needs=("demo",)),
     Run("calibration_seeds", "calibration_seeds",
         "Calibration accuracy over five hidden truths (`lft calibrate seeds`)",
         (("lft", "calibrate", "seeds", "--seeds", "1,2,3,4,5", "--out", "out/runs/calibration_seeds"),),
@@ -156,7 +180,7 @@ class StoredRun:
 
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
-KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare")
+KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -196,47 +220,6 @@ def load_store(folder: str | Path) -> dict[str, StoredRun]:
     if not folder.is_dir():
         raise ResultsError(f"{folder}: no such folder (the store of runs, docs/runs/)")
     return {p.stem: load_run(p) for p in sorted(folder.glob("*.json"))}
-
-
-# ---------------------------------------------------------------------------------------------- formatting
-
-def num(v, digits: int = 3) -> str:
-    """A number to ``digits`` significant digits (no exponent between 1e-4 and 1e6); '-' for None / NaN."""
-    if v is None:
-        return "-"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, int):
-        return str(v)
-    if not isinstance(v, float):
-        return str(v)
-    if not math.isfinite(v):
-        return "-" if math.isnan(v) else str(v)
-    if v == 0:
-        return "0"
-    if 0.999 <= abs(v) < 1:                    # an agreement of 0.99997 is not 1.000
-        return f"{v:.{digits + 3}f}"
-    mag = math.floor(math.log10(abs(v)))
-    if -4 <= mag < 6:
-        return f"{v:.{max(digits - 1 - mag, 0)}f}"
-    return f"{v:.{digits - 1}e}"
-
-
-def fixed(v, decimals: int, unit: str = "") -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "-"
-    return f"{v:.{decimals}f}{unit}"
-
-
-def db(v) -> str:
-    return fixed(v, 2, " dB")
-
-
-def table(header: list[str], rows: list[list[str]]) -> list[str]:
-    cell = lambda s: str(s).replace("|", "\\|").replace("\n", " ")  # noqa: E731
-    out = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in rows]
-    return out + [""]
 
 
 def provenance_lines(run: Run | None, stored: StoredRun) -> list[str]:
@@ -371,6 +354,10 @@ def _spread(v) -> str:
     return fixed(v, 1)
 
 
+def _latency(x) -> str:
+    return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"
+
+
 def bench_tables(s: StoredRun) -> list[str]:
     d = s.data
     for key in ("pipeline_iteration_ms", "pipeline_fps", "step_fps", "stages_ms", "floor_ms",
@@ -411,6 +398,18 @@ def bench_tables(s: StoredRun) -> list[str]:
     rows.append(["`floor_ms` (the step's rays cast once)",
                  fixed(d["floor_ms"], 1) + (f" ({' + '.join(f'{r:,}' for r in rays)} rays)" if rays else "")])
     rows.append(["`iteration_over_floor`", num(d["iteration_over_floor"])])
+    for loop, lat in (d.get("latency_ms") or {}).items():
+        if isinstance(lat, dict):
+            rows.append([f"motion to composite / to its light, ms, median (95 %) ({loop} loop)",
+                         f"{_latency(lat.get('view'))} / {_latency(lat.get('light'))}"])
+    dec = d.get("decoupled")
+    if isinstance(dec, dict):
+        rows.append(["decoupled loop: frames per second with the captures beside them (`decoupled.render_fps`)",
+                     f"{num(dec.get('render_fps'))} ({dec.get('frames')} frames, {fixed(dec.get('frame_ms'), 0)} ms "
+                     f"per frame)"])
+        age = dec.get("capture_age_s") or {}
+        rows.append(["decoupled loop: captures per second, capture age (median, largest)",
+                     f"{num(dec.get('capture_hz'))}; {fixed(age.get('median'), 2)} s, {fixed(age.get('max'), 2)} s"])
     fve = d.get("fast_vs_exact")
     rows.append(["`fast_vs_exact`: PSNR all pixels / the synthetic objects'",
                  f"{db(fve.get('psnr_db'))} / {db(fve.get('psnr_objects_db'))}" if isinstance(fve, dict)
@@ -443,8 +442,10 @@ def sequence_tables(s: StoredRun) -> list[str]:
     out: list[str] = []
     keys = [k for k in ("frames", "median_frame_s", "transfer_fps", "psnr_objects_db_min", "psnr_objects_db_max",
                         "cross_transfer_rel_error_min", "cross_transfer_rel_error_max", "cross_gt_noise_rel_max",
-                        "stale_captures") if k in summary]
-    settings = ", ".join(f"{k} {report[k]}" for k in ("mode", "rig_model", "renderer", "projection", "variant")
+                        "stale_captures", "captures_used", "capture_behind_s_median", "capture_behind_s_max",
+                        "capture_age_s_median") if k in summary]
+    settings = ", ".join(f"{k} {report[k]}" for k in ("mode", "loop", "rig_model", "renderer", "projection",
+                                                      "variant")
                          if report.get(k) is not None)
     if settings:
         out += [f"Settings: {settings}.", ""]
@@ -541,11 +542,15 @@ def twin_tables(s: StoredRun) -> list[str]:
 
 
 TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_tables,
-          "calibration_seeds": calibration_seeds_tables, "twin_compare": twin_tables}
+          "calibration_seeds": calibration_seeds_tables, "twin_compare": twin_tables,
+          "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
-          ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig6_quick", "fig1b_quick", "fig5", "fig6", "fig1b")),
+          ("The live page: `lft live`", ("live_fps_quick", "live_fps", "soak_live_quick", "profile_before",
+                                          "profile")),
+          ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig1b_quick",
+                                            "fig5", "fig6", "fig1b")),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))
 

@@ -76,6 +76,8 @@ class ViewerFrame:
         latency_ms: motion-to-composite latency over the recent changes (:func:`motion_latency`): "view" and
             "light", each {"median", "p95", "max", "count"} or None.
         recording: whether the frames are being recorded.
+        edits: edits of the synthetic objects applied before this frame was rendered (a page that sent its n-th
+            edit sees it from the first frame with ``edits >= n``: edit-to-pixel latency).
     """
 
     index: int
@@ -91,6 +93,7 @@ class ViewerFrame:
     capture_ms: dict[str, float] = field(default_factory=dict)
     latency_ms: dict = field(default_factory=dict)
     recording: bool = False
+    edits: int = 0
 
     def message(self, layer: str) -> dict:
         """The JSON message for a page that shows ``layer``."""
@@ -101,7 +104,7 @@ class ViewerFrame:
                 "capture_hz": None if self.capture_hz is None else round(self.capture_hz, 3),
                 "capture_age_s": round(self.capture_age_s, 3), "capture_index": self.capture_index,
                 "capture_ms": {k: round(v, 1) for k, v in self.capture_ms.items()},
-                "latency_ms": self.latency_ms, "recording": self.recording,
+                "latency_ms": self.latency_ms, "recording": self.recording, "edits": self.edits,
                 "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
 
 
@@ -216,6 +219,7 @@ class LiveSession:
         self._clock = 0.0
         self._bounces_queued = threading.Event()     # a bounce-layer request waits or runs (one at a time)
         self.last_bounces: ViewerBounces | None = None
+        self.edits = 0                                # synthetic object edits applied
         self._recent: deque = deque(maxlen=LATENCY_FRAMES)    # (started, ready, versions) of the latest frames
         self.recorder = Recorder()
         self.compare = GroundTruthCompare(oracle, lambda image, scale: _jpeg(to_display(image, scale), 92)) \
@@ -391,6 +395,7 @@ class LiveSession:
                     objs[index] = edited
                     self.scene = with_overrides(self.scene, synthetic=objs)
                     self.live.set_scene(self.synthetic(), changed_at=asked_at)
+                    self.edits += 1
                 else:
                     objs = [o.model_dump() for o in self.sim_rig.real_objects]
                     objs[index] = edited
@@ -504,7 +509,7 @@ class LiveSession:
                            capture_ms={k: 1000.0 * v for k, v in frame.capture_timings_s.items()},
                            latency_ms={"view": latency.view and asdict(latency.view),
                                        "light": latency.light and asdict(latency.light)},
-                           recording=self.recorder.recording)
+                           recording=self.recorder.recording, edits=self.edits)
 
     def _request_compare(self) -> None:
         """Start the ground truth of the frame on the screen (:class:`GroundTruthCompare`); the page hears when
