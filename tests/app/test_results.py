@@ -141,3 +141,41 @@ def test_05_every_kind_renders(tmp_path):
                  "machine: x86_64, vm", "wall time not recorded", "uncommitted"):
         assert text in md, text
     assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 4
+
+
+def test_08_live_page_tables(tmp_path):
+    """The live page's runs: frames per second and latency per loop, the soak's memory and stalls, the profile's
+    stages and top entries, each value as the run wrote it; a soak without its memory samples is one error."""
+    store = tmp_path / "runs"
+    loop = lambda fps, lat: {"frames_per_second": fps, "edit_to_pixel_ms": {"median": lat, "p95": 2 * lat},  # noqa
+                             "latency_ms": {"view": {"median": lat, "p95": lat}, "light": {"median": 9 * lat,
+                                                                                          "p95": 9 * lat}},
+                             "capture_hz": 1.25, "longest_gap_s": 0.75, "edits_sent": 12, "edit_every_s": 0.1,
+                             "last_frame_stages_ms": {"render_view": 42.5}, "last_capture_ms": {"capture": 987.6}}
+    write(store, "live_fps_quick", "live_fps", {"view": [256, 192], "lf_camera": [512, 384], "rig_model": "oracle",
+                                                "loops": {"decoupled": loop(4.321, 123.0), "sync": loop(1.234, 456.0)}})
+    write(store, "soak_live_quick", "soak", {"minutes": 10, "loop": "decoupled", "rss_mb": [[0, 400.0], [60, 410.0],
+                                                                                          [600, 411.5]],
+                                             "rss_growth_after_first_minute": 0.00366, "rss_growth_limit": 0.05,
+                                             "memory_flat": True, "frames": 1500, "frames_per_second": 2.5,
+                                             "longest_gap_s": 0.9, "stall_limit_s": 1.0, "no_stall": True,
+                                             "edit_to_pixel_ms": {"median": 300.0, "p95": 600.0},
+                                             "edit_to_pixel_max_ms": 777.0, "edits_sent": 600, "edits_unseen": 0})
+    write(store, "profile", "profile", {"stages_ms": {"encode": 12.34, "prefilter": 25.5}, "repeats": 20,
+                                        "resolution": {"view": [1024, 768]},
+                                        "py_spy": {"samples": 999, "command": "py-spy record",
+                                                   "self": [["csr_matvecs (scipy)", 10.1]],
+                                                   "inclusive": [["DepthPrefilter.apply (projection.py)", 17.4]]}})
+    md = render_results(load_store(store))
+    fps = md.split("quarter resolution: decoupled against --sync")[1].split("\n### ")[0]
+    for text in ("| decoupled | sync |", "4.32", "1.23", "123 (246)", "456 (912)", "1107 (1107)", "987.6", "42.5"):
+        assert text in fps, text
+    soak = md.split("### A 10-minute soak")[1].split("\n### ")[0]
+    for text in ("410 / 412 / 412", "0.37 %", "5.0 %", "1500, 2.50", "0.900 (1.00)", "777", "600, 0"):
+        assert text in soak, text
+    profile = md.split("### The pipeline profiled")[1].split("\n### ")[0]
+    for text in ("`encode` | 12.3", "999 samples", "`csr_matvecs (scipy)` 10.1", "`DepthPrefilter.apply"):
+        assert text in profile, text
+    write(store, "soak_live_quick", "soak", {"minutes": 10})
+    with pytest.raises(ResultsError, match="soak_live_quick.json: missing field 'data.rss_mb'"):
+        render_results(load_store(store))
