@@ -394,5 +394,14 @@ def test_08_decoupled_session_compare_and_record(variant, tmp_path):
         reader.close()
         with pytest.raises(Exception, match="on: expected true or false"):
             session.submit({"type": "record", "on": "yes"})
+
+        session.submit({"type": "pause"})                       # a paused page rests the rig as well
+        _wait(lambda: session.paused, 30, "the pause")
+        time.sleep(1.0)                                          # the capture in progress finishes
+        count = session.live._worker.count
+        time.sleep(1.5)
+        assert session.live._worker.count == count
+        session.submit({"type": "resume"})
+        _wait(lambda: session.live._worker.count > count, 30, "captures after resuming")
     finally:
         session.stop()

@@ -225,6 +225,10 @@ class CaptureWorker:
         finally:
             self._held.clear()
 
+    def hold(self, held: bool) -> None:
+        """No new capture begins while held (the one in progress finishes)."""
+        (self._held.set if held else self._held.clear)()
+
     @contextmanager
     def paused(self) -> Iterator[None]:
         """No new capture begins meanwhile (the one in progress finishes); unlike :meth:`holding`, nothing waits."""

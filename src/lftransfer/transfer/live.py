@@ -37,6 +37,7 @@ from typing import Iterator
 
 import numpy as np
 
+from lftransfer import choices
 from lftransfer.composite import composite
 from lftransfer.lightfield import LightField
 from lftransfer.render.renderer import ViewImage
@@ -45,7 +46,6 @@ from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings
-from lftransfer import choices
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
 from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
@@ -216,6 +216,12 @@ class LiveTransfer:
         as writing a sequence's files); nothing waits. The synchronous loop has nothing to pause."""
         with (self._worker.paused() if self._worker is not None else nullcontext()):
             yield
+
+    def hold_captures(self, held: bool) -> None:
+        """Begin no new capture until called again with False (a paused page: the rig rests); the synchronous loop
+        captures only inside a step anyway."""
+        if self._worker is not None:
+            self._worker.hold(held)
 
     def has_news(self, time_s: float) -> bool:
         """Whether a step at ``time_s`` would show anything the last frame did not: always in the synchronous loop

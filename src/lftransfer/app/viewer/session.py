@@ -415,6 +415,8 @@ class LiveSession:
         while not self._stop.is_set():
             try:
                 self._apply()
+                # a paused page rests the rig too (a decoupled loop would go on capturing); a step captures anew
+                self.live.hold_captures(self.paused and not self._step_once.is_set())
                 if self.paused and not self._step_once.is_set():
                     time.sleep(0.02)
                     continue
