@@ -145,8 +145,8 @@ def _py_spy(args) -> dict:
         cmd += ["--calibration", str(args.calibration)] if args.calibration else []
         cmd += ["--src", str(args.src)] if args.src else []
         subprocess.run(cmd, check=True, capture_output=True)
-        return {"command": " ".join(["py-spy", *cmd[1:4], "--rate", "100", "--", "python",
-                                     "scripts/profile_pipeline.py", *cmd[cmd.index("--repeats"):]]),
+        return {"command": " ".join(["py-spy", *cmd[1:7], "--", "python", "scripts/profile_pipeline.py",
+                                     *cmd[cmd.index("--repeats"):]]),
                 **top(raw)}
 
 

@@ -45,7 +45,7 @@ def main() -> None:
     after_minute = [mb for t, mb in rss if t >= 60.0]
     growth = (after_minute[-1] - after_minute[0]) / after_minute[0] if len(after_minute) > 1 else None
     result = {"scene": str(scene.source), "quick": args.quick, "minutes": args.minutes, "loop": "decoupled",
-              "rig_model": args.rig_model, "view": list(scene.view.resolution),
+              "rig_model": args.rig_model, "view": list(scene.view.resolution), "lf_camera": list(scene.rig.lf_camera),
               "machine": {"cpus": os.cpu_count(), "load_average": [round(x, 2) for x in os.getloadavg()]},
               "rss_growth_after_first_minute": None if growth is None else round(growth, 4),
               "rss_growth_limit": GROWTH_LIMIT, "stall_limit_s": STALL_S,

@@ -14,9 +14,10 @@ def _ms(x) -> str:
 
 
 def _setting(d: dict) -> list[str]:
-    view, lf = d.get("view") or ["?", "?"], d.get("lf_camera") or ["?", "?"]
+    view, lf = d.get("view") or ["?", "?"], d.get("lf_camera")
     load = (d.get("machine") or {}).get("load_average")
-    return [f"View {view[0]} x {view[1]}, LF camera {lf[0]} x {lf[1]}; rig model {d.get('rig_model')}"
+    return [f"View {view[0]} x {view[1]}" + (f", LF camera {lf[0]} x {lf[1]}" if d.get("lf_camera") else "")
+            + f"; rig model {d.get('rig_model')}"
             + (f" ({d['calibration']})" if d.get("calibration") else "")
             + (f"; load average at the end {' / '.join(num(x, 2) for x in load)}" if load else "") + ".", ""]
 
@@ -77,8 +78,8 @@ def profile_tables(s) -> list[str]:
     out += table(["stage", "ms (median)"], [[f"`{k}`", fixed(v, 1)] for k, v in stages.items()])
     spy = d.get("py_spy")
     if isinstance(spy, dict):
-        out += [f"py-spy over those stages ({spy.get('samples')} samples; `{spy.get('command')}`): the functions "
-                "with the most samples, per cent.", ""]
+        out += [f"py-spy over those stages ({spy.get('samples')} samples; the script again under `py-spy record "
+                "--native --format raw --rate 100`): the functions with the most samples, per cent.", ""]
         own, inclusive = spy.get("self") or [], spy.get("inclusive") or []
         n = max(len(own), len(inclusive))
         cell = lambda xs, i: f"`{xs[i][0]}` {num(xs[i][1])}" if i < len(xs) else ""   # noqa: E731
