@@ -19,11 +19,13 @@ import json
 import os
 import threading
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from lftransfer.choices import DEFAULT_RIG_MODEL, LIVE_LOOPS, RIG_MODELS
+from lftransfer.transfer.latency import LatencySpread
 
 EDIT_EVERY_S = 0.1       # a slider being dragged: an edit every this many seconds
 RSS_EVERY_S = 5.0        # resident memory sampled this often
@@ -99,13 +101,12 @@ async def _watch(url: str, seconds: float, start_translate: list[float], edit_ev
                 latencies.append(received[hit[0]] - at)
         window = received[received <= received[0] + seconds] if len(received) else received
         gaps = np.diff(received) if len(received) > 1 else np.zeros(0)
-        ms = lambda xs: {"median": round(1000 * float(np.median(xs)), 1),                      # noqa: E731
-                         "p95": round(1000 * float(np.percentile(xs, 95)), 1), "count": len(xs)} if len(xs) else None
+        spread = LatencySpread.of(np.array(latencies))
         span = float(window[-1] - window[0]) if len(window) > 1 else 0.0
         return {"frames": int(len(window)), "seconds": round(span, 2),
                 "frames_per_second": round((len(window) - 1) / span, 3) if span > 0 else 0.0,
-                "edit_to_pixel_ms": ms(latencies), "edit_to_pixel_max_ms": round(1000 * max(latencies), 1)
-                if latencies else None, "edits_sent": len(sent_at), "edits_unseen": len(sent_at) - len(latencies),
+                "edit_to_pixel_ms": None if spread is None else asdict(spread),
+                "edit_to_pixel_max_ms": None if spread is None else spread.max, "edits_sent": len(sent_at), "edits_unseen": len(sent_at) - len(latencies),
                 "edit_every_s": edit_every, "rss_mb": rss,
                 "longest_gap_s": round(float(gaps.max()), 3) if len(gaps) else None,
                 "capture_hz": last.get("capture_hz"), "capture_age_s": last.get("capture_age_s"),
@@ -155,11 +156,16 @@ def main() -> None:
               "calibration": str(args.calibration) if args.calibration else None,
               "machine": {"cpus": os.cpu_count(), "load_average": [round(x, 2) for x in os.getloadavg()]},
               "loops": {loop: measure(scene, loop, args) for loop in loops}}
-    text = json.dumps(result, indent=2)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
+    report(result, args.json)
+
+
+def report(result: dict, path: Path | None) -> None:
+    """Print the result as JSON and write it to ``path`` (atomically) when given."""
+    from lftransfer.imageio_utils import write_json
+
+    print(json.dumps(result, indent=2))
+    if path is not None:
+        write_json(path, result)
 
 
 if __name__ == "__main__":

@@ -122,11 +122,11 @@ def main() -> None:
     opened.rig.close()
     if args.py_spy:
         result["py_spy"] = _py_spy(args)
-    text = json.dumps(result, indent=1)
-    print(text)
+    print(json.dumps(result, indent=1))
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
+        from lftransfer.imageio_utils import write_json
+
+        write_json(args.json, result)
 
 
 def _py_spy(args) -> dict:

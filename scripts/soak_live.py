@@ -12,14 +12,13 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from measure_live_fps import measure  # noqa: E402
+from measure_live_fps import measure, report  # noqa: E402
 
 from lftransfer.choices import DEFAULT_RIG_MODEL, RIG_MODELS  # noqa: E402
 
@@ -53,11 +52,7 @@ def main() -> None:
               "no_stall": (run["longest_gap_s"] or 0) <= STALL_S and (run["edit_to_pixel_max_ms"] or 0) <= 1000 * STALL_S
               and run["edits_unseen"] <= 1,
               **run}
-    text = json.dumps(result, indent=2)
-    print(text)
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
+    report(result, args.json)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from lftransfer.app.results_format import db, fixed, num, table
+from lftransfer.app.results_format import db, fixed, median_p95, num, table
 from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
 
 __all__ = ["Run", "RUNS", "ResultsError", "StoredRun", "load_run", "load_store", "render_results", "main"]
@@ -354,10 +354,6 @@ def _spread(v) -> str:
     return fixed(v, 1)
 
 
-def _latency(x) -> str:
-    return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"
-
-
 def bench_tables(s: StoredRun) -> list[str]:
     d = s.data
     for key in ("pipeline_iteration_ms", "pipeline_fps", "step_fps", "stages_ms", "floor_ms",
@@ -401,7 +397,7 @@ def bench_tables(s: StoredRun) -> list[str]:
     for loop, lat in (d.get("latency_ms") or {}).items():
         if isinstance(lat, dict):
             rows.append([f"motion to composite / to its light, ms, median (95 %) ({loop} loop)",
-                         f"{_latency(lat.get('view'))} / {_latency(lat.get('light'))}"])
+                         f"{median_p95(lat.get('view'))} / {median_p95(lat.get('light'))}"])
     dec = d.get("decoupled")
     if isinstance(dec, dict):
         rows.append(["decoupled loop: frames per second with the captures beside them (`decoupled.render_fps`)",

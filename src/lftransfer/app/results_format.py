@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["db", "fixed", "num", "table"]
+__all__ = ["db", "fixed", "median_p95", "num", "table"]
 
 
 def num(v, digits: int = 3) -> str:
@@ -44,3 +44,8 @@ def table(header: list[str], rows: list[list[str]]) -> list[str]:
     out = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in rows]
     return out + [""]
+
+
+def median_p95(x) -> str:
+    """``median (p95)`` in whole units of a {"median", "p95"} spread; '-' for none."""
+    return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"

@@ -4,13 +4,9 @@
 
 from __future__ import annotations
 
-from lftransfer.app.results_format import fixed, num, table
+from lftransfer.app.results_format import fixed, median_p95, num, table
 
 __all__ = ["live_fps_tables", "profile_tables", "soak_tables"]
-
-
-def _ms(x) -> str:
-    return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"
 
 
 def _setting(d: dict) -> list[str]:
@@ -27,11 +23,12 @@ def live_fps_tables(s) -> list[str]:
     out = _setting(s.data)
     names = list(loops)
     rows = [["frames per second on the page", *(num(loops[k].get("frames_per_second")) for k in names)],
-            ["edit-to-pixel latency, ms: median (95 %)", *(_ms(loops[k].get("edit_to_pixel_ms")) for k in names)],
+            ["edit-to-pixel latency, ms: median (95 %)",
+             *(median_p95(loops[k].get("edit_to_pixel_ms")) for k in names)],
             ["motion to composite, ms (the session's own clock)",
-             *(_ms((loops[k].get("latency_ms") or {}).get("view")) for k in names)],
+             *(median_p95((loops[k].get("latency_ms") or {}).get("view")) for k in names)],
             ["motion to its light on the real objects, ms",
-             *(_ms((loops[k].get("latency_ms") or {}).get("light")) for k in names)],
+             *(median_p95((loops[k].get("latency_ms") or {}).get("light")) for k in names)],
             ["captures per second", *(num(loops[k].get("capture_hz")) if loops[k].get("capture_hz") else
                                       "one per frame" for k in names)],
             ["longest gap between frames, s", *(num(loops[k].get("longest_gap_s")) for k in names)],
@@ -61,7 +58,7 @@ def soak_tables(s) -> list[str]:
             ["frames, frames per second", f"{d.get('frames')}, {num(d.get('frames_per_second'))}"],
             ["longest gap between frames, s (limit)", f"{num(d.get('longest_gap_s'))} ({num(d.get('stall_limit_s'))})"],
             ["edit-to-pixel, ms: median (95 %), largest",
-             f"{_ms(d.get('edit_to_pixel_ms'))}, {fixed(d.get('edit_to_pixel_max_ms'), 0)}"],
+             f"{median_p95(d.get('edit_to_pixel_ms'))}, {fixed(d.get('edit_to_pixel_max_ms'), 0)}"],
             ["edits sent, not seen", f"{d.get('edits_sent')}, {d.get('edits_unseen')}"],
             ["no frame stalled", num(d.get("no_stall"))]]
     return out + table(["quantity", "value"], rows)

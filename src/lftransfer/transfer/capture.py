@@ -28,7 +28,7 @@ import numpy as np
 from lftransfer.lightfield import LightField
 from lftransfer.rig.base import Rig
 from lftransfer.rig.requests import RealScene
-from lftransfer.transfer.timer import StageTimer
+from lftransfer.transfer.timer import StageTimer, rate_hz
 
 __all__ = ["Capture", "CaptureWorker", "Projection", "capture_once"]
 
@@ -83,11 +83,18 @@ class Capture:
 
 
 class _Encoded:
-    """The projector image of the newest projection, encoded once."""
+    """The projector image of the newest projection and its clipped fraction, found once."""
 
     def __init__(self) -> None:
         self.projection: Projection | None = None
         self.image: np.ndarray | None = None
+        self.clipped = 0.0
+
+
+def _clipped(projection: Projection, max_radiance: float) -> float:
+    """Fraction of the projection's lit samples above the projector's range."""
+    lit = projection.lf.data[projection.lf.data > 0]
+    return float(np.mean(lit > max_radiance)) if lit.size else 0.0
 
 
 def capture_once(rig: Rig, encoder: Callable, decoder: Callable, projection: Projection, *, index: int,
@@ -113,15 +120,14 @@ def capture_once(rig: Rig, encoder: Callable, decoder: Callable, projection: Pro
     """
     own = StageTimer()
     if cache is not None and cache.projection is projection and cache.image is not None:
-        pattern = cache.image
+        pattern, clipped = cache.image, cache.clipped
         own.totals["encode"] = 0.0
     else:
         with own("encode"):
             pattern = rig.info.black() if projection.black else encoder(projection.lf)
+        clipped = _clipped(projection, max_radiance)
         if cache is not None:
-            cache.projection, cache.image = projection, pattern
-    lit = projection.lf.data[projection.lf.data > 0]
-    clipped = float(np.mean(lit > max_radiance)) if lit.size else 0.0
+            cache.projection, cache.image, cache.clipped = projection, pattern, clipped
     if pose_real:
         rig.setup(RealScene(time_s=float(real_time_s)))
     started = time.perf_counter()
@@ -172,7 +178,8 @@ class CaptureWorker:
         self._fresh = threading.Condition(self._lock)
         self._rig_lock = threading.RLock()        # held for each capture, and by holding()
         self._stop = threading.Event()
-        self._held = threading.Event()            # someone waits for the rig or holds it: no new capture begins
+        self._holders = 0                         # holding() and paused() in progress (guarded by _lock)
+        self._held = False                        # hold(True): until hold(False)
         self._thread: threading.Thread | None = None
         self._starts: deque[float] = deque(maxlen=keep_rate_of + 1)
         self.error: BaseException | None = None
@@ -212,31 +219,35 @@ class CaptureWorker:
     @property
     def rate_hz(self) -> float:
         """Captures per second over the last few (0 before two have begun)."""
-        starts = list(self._starts)
-        return (len(starts) - 1) / (starts[-1] - starts[0]) if len(starts) > 1 and starts[-1] > starts[0] else 0.0
+        return rate_hz(self._starts, last=len(self._starts))
 
     @contextmanager
     def holding(self) -> Iterator[Rig]:
-        """The rig to the caller alone: waits for the capture in progress; captures resume on exit."""
-        self._held.set()
-        try:
-            with self._rig_lock:
-                yield self.rig
-        finally:
-            self._held.clear()
+        """The rig to the caller alone: waits for the capture in progress; captures resume on exit (unless
+        something else still keeps them back)."""
+        with self.paused(), self._rig_lock:
+            yield self.rig
 
     def hold(self, held: bool) -> None:
-        """No new capture begins while held (the one in progress finishes)."""
-        (self._held.set if held else self._held.clear)()
+        """No new capture begins while held (the one in progress finishes), until ``hold(False)``."""
+        with self._lock:
+            self._held = held
 
     @contextmanager
     def paused(self) -> Iterator[None]:
-        """No new capture begins meanwhile (the one in progress finishes); unlike :meth:`holding`, nothing waits."""
-        self._held.set()
+        """No new capture begins meanwhile (the one in progress finishes); unlike :meth:`holding`, nothing waits.
+        Nested and overlapping pauses, holds and :meth:`hold` each keep captures back until all have ended."""
+        with self._lock:
+            self._holders += 1
         try:
             yield
         finally:
-            self._held.clear()
+            with self._lock:
+                self._holders -= 1
+
+    def _kept_back(self) -> bool:
+        with self._lock:
+            return self._held or self._holders > 0
 
     # -- the thread -------------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -260,7 +271,7 @@ class CaptureWorker:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            if self._held.is_set():
+            if self._kept_back():
                 time.sleep(0.005)
                 continue
             try:

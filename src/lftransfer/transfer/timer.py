@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
+from typing import Sequence
 
-__all__ = ["StageTimer"]
+__all__ = ["StageTimer", "rate_hz"]
 
 
 class StageTimer:
@@ -25,3 +26,9 @@ class StageTimer:
             yield
         finally:
             self.totals[stage] = self.totals.get(stage, 0.0) + time.perf_counter() - t0
+
+
+def rate_hz(times: Sequence[float], last: int = 8) -> float:
+    """Events per second over the last ``last`` intervals between ``time.perf_counter()`` moments (0 before two)."""
+    recent = list(times)[-(last + 1):]
+    return (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0

@@ -5,7 +5,7 @@ The comparison keeps the frame's composite as it was when asked for, so the A/B 
 however far the loop has moved on; it sends both images at one display scale, their absolute difference brightened
 by a stated gain, and the PSNR over the whole view and over the pixels the objects cover
 (:func:`lftransfer.sim.metrics.psnr`, :func:`~lftransfer.sim.metrics.object_mask`). The ground truth is a preview at
-:data:`COMPARE_SPP` samples per pixel, not the measurement ``lft run`` makes: the message says how noisy it is.
+:data:`GT_SPP` samples per pixel, not the measurement ``lft run`` makes: the message says how noisy it is.
 """
 
 from __future__ import annotations
@@ -19,10 +19,11 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["COMPARE_SPP", "Comparison", "GroundTruthCompare"]
+__all__ = ["GT_SPP", "Comparison", "GroundTruthCompare"]
 
 log = logging.getLogger(__name__)
-COMPARE_SPP = 64             # samples per pixel of the on-demand ground truth (a preview)
+GT_SPP = 64                  # samples per pixel of the page's ground truths (previews, not measurements): the
+                             # "ground truth" layer's and the comparison's
 DIFFERENCE_GAIN = 4.0        # the difference image is shown this much brighter than the images
 
 
@@ -51,7 +52,7 @@ class Comparison:
     psnr_db: float | None = None
     psnr_objects_db: float | None = None
     noise_psnr_db: float | None = None
-    spp: int = COMPARE_SPP
+    spp: int = GT_SPP
     elapsed_s: float = 0.0
     error: str | None = None
 
@@ -100,7 +101,7 @@ class GroundTruthCompare:
 
             t0 = time.perf_counter()
             try:
-                gt = self.oracle.ground_truth(spp=COMPARE_SPP, world=world, use_cache=False)
+                gt = self.oracle.ground_truth(spp=GT_SPP, world=world, use_cache=False)
                 ref = gt.image
                 mask = object_mask(gt, 1)
                 half = psnr(gt.union[0], gt.union[1], peak=float(ref.max()), mask=mask)

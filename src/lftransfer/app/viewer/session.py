@@ -29,7 +29,7 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from lftransfer.app.viewer.compare import GroundTruthCompare
+from lftransfer.app.viewer.compare import GT_SPP, GroundTruthCompare
 from lftransfer.app.viewer.recorder import Recorder
 from lftransfer.app.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
@@ -40,13 +40,13 @@ from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
+from lftransfer.transfer.timer import rate_hz
 
 __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
 
 log = logging.getLogger(__name__)
 
 LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "ground truth")
-GT_SPP = 64                # samples per pixel of the viewer's ground truth (a preview, not a measurement)
 MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces"; synchronous loop)
 LATENCY_FRAMES = 240       # the latency the page shows is over the changes the last this many frames showed
 IDLE_S = 0.005             # a decoupled loop with nothing new to show looks again after this long
@@ -496,12 +496,12 @@ class LiveSession:
     def _viewer_frame(self, frame: LiveFrame) -> ViewerFrame:
         if self.scale is None:
             self.scale = display_scale(frame.composite, ceiling=emitter_ceiling(self.scene))
-        images = {}
-        for layer in self.layers:
-            images[layer] = _jpeg(self._layer(frame, layer))
+        wanted = self.layers | ({"composite"} if self.recorder.recording else set())
+        shown = {layer: self._layer(frame, layer) for layer in wanted}    # each display image made once
+        images = {layer: _jpeg(shown[layer]) for layer in self.layers}
         if self.recorder.recording:
-            self.recorder.add(self._layer(frame, "composite"))
-        fps = _rate([r.ready_s for r in self._recent])
+            self.recorder.add(shown["composite"])
+        fps = rate_hz([r.ready_s for r in self._recent])
         latency = motion_latency(list(self.live.changes), list(self._recent), self.live.loop)
         return ViewerFrame(index=frame.index, time_s=frame.time_s, fps=fps,
                            stages_ms={k: 1000.0 * v for k, v in frame.timings_s.items()}, images=images,
@@ -529,7 +529,7 @@ class LiveSession:
         """Start or stop recording the shown composites to ``out/record-STAMP.mp4``."""
         if on and not self.recorder.recording:
             path = self.out / f"record-{time.strftime('%Y%m%d-%H%M%S')}.mp4"
-            fps = max(1, round(_rate([r.ready_s for r in self._recent])))
+            fps = max(1, round(rate_hz([r.ready_s for r in self._recent])))
             self.recorder.start(path, fps)
             self._on_message({"type": "recording", "path": str(path), "fps": fps})
         elif not on and self.recorder.recording:
@@ -603,12 +603,6 @@ class _FrameTimes:
     ready_s: float
     scene_version: int
     light_version: int
-
-
-def _rate(ready: list[float], last: int = 8) -> float:
-    """Frames shown per second over the last ``last`` intervals between frames' ready times (0 before two)."""
-    ready = ready[-(last + 1):]
-    return (len(ready) - 1) / (ready[-1] - ready[0]) if len(ready) > 1 and ready[-1] > ready[0] else 0.0
 
 
 def frame_times(frame: LiveFrame) -> _FrameTimes:
