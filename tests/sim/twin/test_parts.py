@@ -89,3 +89,34 @@ def test_05_latency_read_from_the_median_less_half_a_frame():
     assert r.to_json()["latency_s"] == pytest.approx(0.08) and r.to_json()["frame_s"] == 0.1
     unknown = LatencyResult(median_s=0.05, max_s=0.2, samples=(0.05,), black_level=0.0, marker_level=1.0)
     assert unknown.latency_s == 0.05
+
+
+def test_06_stream_timestamps_date_a_frame_by_when_it_was_taken():
+    """Frames stamped every 0.1 s by the camera arrive 20 ms later, except one that waited 0.4 s (a busy reader):
+    dated by its stamp it stays 0.4 s old, dated by its arrival it would pass for a fresh one (the negative
+    control). A stream whose stamps stop increasing (a frame counter, no timestamps) is dated by arrival."""
+    from lftransfer.rig.hardware.stream import StreamClock
+
+    clock = StreamClock()
+    stamps = 5.0 + 0.1 * np.arange(10)             # the camera's clock, seconds
+    arrivals = 100.0 + stamps + 0.02               # this machine's clock
+    arrivals[6] += 0.4                             # frame 6 waited
+    dates = [clock.date(p, a) for p, a in zip(stamps, arrivals)]
+    assert not clock.unusable
+    assert np.allclose(dates, 100.02 + stamps, atol=1e-9)
+    assert all(b > a for a, b in zip(dates, dates[1:]))
+    changed_at = 100.02 + stamps[6] + 0.2          # a change marked fresh from here: frame 6 is older than that
+    assert dates[6] < changed_at < arrivals[6]
+    late = StreamClock()           # the first frame waited: dates improve as quicker ones come, never going back
+    assert late.date(0.0, 10.5) == 10.5 and late.date(0.1, 10.2) == pytest.approx(10.5, abs=1e-5)
+    assert late.date(0.6, 10.7) == pytest.approx(10.7)
+    counter = StreamClock()
+    assert counter.date(0.0, 1.0) == 1.0 and counter.date(0.0, 1.1) == 1.1 and counter.unusable
+    assert counter.date(1.0, 1.2) == 1.2                                       # stays on arrival
+    counter.reset()
+    assert not counter.unusable and counter.date(3.0, 4.0) == 4.0
+    with pytest.raises(RigFileError, match=r"lf_camera.*timestamps.*stream URL"):
+        parse_rig_file({**RIG, "lf_camera": {**RIG["lf_camera"], "source": "/dev/video0", "control": None,
+                                             "timestamps": "stream"}}, "rig.toml")
+    assert parse_rig_file({**RIG, "lf_camera": {**RIG["lf_camera"], "timestamps": "stream"}}).lf_camera.timestamps \
+        == "stream"

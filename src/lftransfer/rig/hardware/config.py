@@ -112,6 +112,11 @@ class CameraConfig(_Model):
             returns at full depth (it returns 16 bits only as GRAY16LE) sends them so.
         control: URL of the camera's control API (HTTP, JSON ``{"exposure": value}`` read by GET and set by
             POST, as IP cameras offer), for a stream camera whose exposure is set over the network; None: none.
+        timestamps: what dates a stream camera's frame: ``"arrival"``, when the reader got it; ``"stream"``, the
+            frame's own timestamp in the stream (its presentation time, as a camera that stamps its frames at
+            exposure sends it), carried to this machine's clock by the smallest arrival delay seen. ``"stream"``
+            keeps a frame that waited in a buffer or behind a busy reader from passing as fresh; it needs a
+            camera whose stream timestamps are its capture times (the device twin's are), not a frame counter.
     """
 
     source: Annotated[Union[int, str], BeforeValidator(_source_type)]
@@ -126,6 +131,7 @@ class CameraConfig(_Model):
     timeout_s: PosFloat = 5.0
     planar: bool = False
     control: str | None = None
+    timestamps: Literal["arrival", "stream"] = "arrival"
 
     @field_validator("control")
     @classmethod
@@ -169,6 +175,9 @@ class CameraConfig(_Model):
         if self.kind == "genicam" and self.cti is None:
             raise ValueError("a genicam: source needs cti = the GenTL producer (.cti file) of the camera's "
                              "vendor")
+        if self.timestamps == "stream" and self.kind != "stream":
+            raise ValueError(f"timestamps = \"stream\" needs a stream URL source (http://, tcp://, rtsp://, ...), "
+                             f"found source {self.source!r}")
         return self
 
     @property

@@ -21,7 +21,7 @@ from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware.camera import Camera
 from lftransfer.rig.hardware.config import CameraConfig
 
-__all__ = ["StreamCamera"]
+__all__ = ["StreamCamera", "StreamClock"]
 
 _log = logging.getLogger(__name__)
 
@@ -29,11 +29,44 @@ _STREAM_OPEN = threading.Lock()
 _FFMPEG_OPTIONS = "OPENCV_FFMPEG_CAPTURE_OPTIONS"
 
 
+class StreamClock:
+    """Carries a stream's frame timestamps to this machine's monotonic clock.
+
+    A frame stamped ``pts`` seconds (the stream's own clock) that arrives at monotonic time ``a`` was taken no later
+    than ``a``; the smallest ``a - pts`` seen is the offset between the clocks plus the quickest transport, so
+    ``pts + offset`` is when the frame would have arrived with nothing in its way. A frame that waited (in a
+    buffer, behind a busy reader) keeps its early date. Clock drift between the camera and this machine is taken
+    as negligible over a connection (1 ppm is 3.6 ms an hour). :meth:`reset` on a new connection (its stamps
+    start again)."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self._offset = math.inf
+        self._last_pts = -math.inf
+        self._last_date = -math.inf
+        self.unusable = False
+
+    def date(self, pts_s: float, arrival: float) -> float:
+        """The monotonic time of a frame stamped ``pts_s`` that arrived at ``arrival``; the arrival itself once
+        the stream's stamps stop increasing (a stream without timestamps: :attr:`unusable`)."""
+        if self.unusable or not pts_s > self._last_pts:
+            self.unusable = True
+            return arrival
+        self._last_pts = pts_s
+        self._offset = min(self._offset, arrival - pts_s)
+        # dates never go back (a smaller offset found later would move a frame before the one handed out last)
+        self._last_date = max(pts_s + self._offset, self._last_date + 1e-6)
+        return self._last_date
+
+
 class StreamCamera(Camera):
     """A network camera: a stream at a URL (``http://``, ``tcp://``, ``rtsp://``, ...) read by OpenCV's FFmpeg back-end.
 
-    A reader thread takes every frame as it arrives and notes its arrival time (a stream, unlike a V4L2 driver,
-    buffers whatever is not read, so frames must be drained as they come). :meth:`read_frame` hands out the next
+    A reader thread takes every frame as it arrives and dates it (a stream, unlike a V4L2 driver, buffers whatever
+    is not read, so frames must be drained as they come): by its arrival, or with ``timestamps = "stream"`` by
+    the frame's own timestamp (:class:`StreamClock`). :meth:`read_frame` hands out the next
     frame that arrived after the last one handed out and after :meth:`mark_change`'s time: stale frames are skipped,
     never averaged. A stream that ends or stalls is reconnected in the background; a capture waiting for a frame
     gives up after ``timeout_s`` with a :class:`~lftransfer.rig.base.RigError` naming the camera, the step and why
@@ -67,6 +100,7 @@ class StreamCamera(Camera):
         self._down: str | None = None          # why the stream is down, while it is
         self._stop = threading.Event()
         self._reader: threading.Thread | None = None
+        self._clock = StreamClock() if config.timestamps == "stream" else None
         self.arrived = 0
 
     def _connect(self) -> Any:
@@ -134,10 +168,18 @@ class StreamCamera(Camera):
             if not ok or frame is None:
                 cap.release()
                 cap = None
+                if self._clock is not None:
+                    self._clock.reset()
                 with self._cond:
                     self._down = f"the stream stopped after {self.arrived} frames"
                     self._cond.notify_all()
                 continue
+            if self._clock is not None:
+                was = self._clock.unusable
+                t = self._clock.date(float(cap.get(cv2.CAP_PROP_POS_MSEC)) / 1000.0, t)
+                if self._clock.unusable and not was:
+                    _log.warning("%s: the stream's frame timestamps do not increase; frames are dated by their "
+                                 "arrival (timestamps = \"arrival\" in the rig file says so)", self.label)
             if frame.ndim == 3 and frame.shape[2] == 3 and not (self.config.bits > 8 or self.config.planar):
                 frame = cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
             with self._cond:

@@ -10,6 +10,12 @@ A render takes longer than a frame when the state is new; the camera then delive
 camera that is busy), and a frame that comes out after a long render is made again if the screen changed
 meanwhile, so no frame shows a state older than its arrival time minus the latency.
 
+Each frame carries its timestamp, as machine-vision and IP cameras stamp theirs: the moment of the screen it shows
+plus the latency drawn for it (the time it would leave the camera with no render or encoder in the way). The
+stream writes it as the frame's presentation time (:mod:`.server`), so a rig that reads stream timestamps
+(``timestamps = "stream"``) judges a frame by when it was taken, not by when a loaded machine got round to
+reading it.
+
 Faults: the stream stops ``stop_after_s`` seconds after the twin started (every client is cut off and new
 connections are refused) and comes back after ``down_for_s`` seconds (None: never).
 """
@@ -178,21 +184,22 @@ class TwinCamera:
             if frame is None:
                 next_t = time.monotonic()
                 continue
-            last_state, made, image = frame
+            last_state, made, stamp, image = frame
             if self.timing.drop_rate > 0 and self._rng.random() < self.timing.drop_rate:
                 self.dropped += 1
             else:
                 self.shape = image.shape
-                self._publish((made, image))
+                self._publish((made, stamp, image))
                 self.published += 1
             next_t += period
             if next_t < time.monotonic():        # a long render: the ticks it covered are gone
                 next_t = time.monotonic()
 
-    def _make(self, now: float, last_state: float) -> tuple[float, float, np.ndarray] | None:
-        """(state time, frame time, frame) of a tick at ``now``. A frame whose making (a render of a new state) let
-        the state change meanwhile is made again from the state of its new moment; after 3 tries it is not sent (a
-        missed frame): a frame never leaves showing a state older than its moment minus the latency."""
+    def _make(self, now: float, last_state: float) -> tuple[float, float, float, np.ndarray] | None:
+        """(state time, frame time, timestamp, frame) of a tick at ``now``; the timestamp is the state time plus the
+        frame's latency. A frame whose making (a render of a new state) let the state change meanwhile is made
+        again from the state of its new moment; after 3 tries it is not sent (a missed frame): a frame never leaves
+        showing a state older than its moment minus the latency."""
         for _ in range(3):
             latency = self._latency()
             # the frame leaves latency after the state it shows: its own encoding time counts in
@@ -201,7 +208,7 @@ class TwinCamera:
             radiance = self._render(image)
             after = time.monotonic()
             if self._state(max(t_state, after + self.delay_s - latency))[0] == key:
-                return t_state, after, self._frame(radiance)
+                return t_state, after, t_state + latency, self._frame(radiance)
             self.rerendered += 1
             now = after
         self.missed += 1

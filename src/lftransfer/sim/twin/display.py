@@ -87,8 +87,9 @@ class ProjectorScreen:
         black = np.zeros((self.size[1], self.size[0], 3), np.uint8 if bits <= 8 else np.uint16)
         self._times = [time.monotonic() - 3600.0]
         self._images = [(digest(black), black)]
-        self._lock = threading.Lock()
+        self._lock = threading.Condition()
         self._stop = threading.Event()
+        self._seen_until = -float("inf")    # the screen is known up to here (the last look's end)
         self.changes = 0
         self.error: str | None = None
         self._thread = None
@@ -115,32 +116,52 @@ class ProjectorScreen:
                 try:
                     rgb = screen.grab(*self.size)
                 except RuntimeError as exc:
-                    self.error = str(exc)
+                    with self._lock:
+                        self.error = str(exc)
+                        self._lock.notify_all()
                     _log.warning("projector screen: %s", exc)
                     self._stop.wait(0.5)
                     continue
                 t = time.monotonic()
-                if last is None or not np.array_equal(rgb, last):
+                changed = last is None or not np.array_equal(rgb, last)
+                if changed:
                     last = rgb
                     codes = self._codes(rgb)
-                    with self._lock:
+                    entry = (digest(codes), codes)
+                with self._lock:
+                    if changed:
                         self._times.append(t)
-                        self._images.append((digest(codes), codes))
+                        self._images.append(entry)
                         if len(self._times) > self.KEEP:
                             del self._times[0], self._images[0]
                         self.changes += 1
+                    self._seen_until = t
+                    self.error = None
+                    self._lock.notify_all()
                 next_t = max(next_t + self._period, time.monotonic())
                 self._stop.wait(max(0.0, next_t - time.monotonic()))
         finally:
             screen.close()
 
+    WAIT_S = 1.0                     # longest wait for the screen to be looked at after the moment asked for
+
     def at(self, t: float) -> tuple[str, np.ndarray]:
-        """(digest, (H, W, 3) projector codes) of what the screen showed at monotonic time ``t``."""
+        """(digest, (H, W, 3) projector codes) of what the screen showed at monotonic time ``t``.
+
+        What the screen showed at ``t`` is known once it has been looked at after ``t``: a moment the watcher has
+        not reached yet (it fell behind on a loaded machine, or ``t`` is the present) waits for its next look, up
+        to :attr:`WAIT_S`, so a camera frame never shows an image that had already been replaced at its moment.
+        Without a watcher (a missing projector) or after a failed look, the last image known is the answer."""
         with self._lock:
+            if self._thread is not None and self.error is None:
+                self._lock.wait_for(lambda: self._seen_until >= t or self._stop.is_set() or self.error is not None,
+                                    timeout=self.WAIT_S)
             i = bisect.bisect_right(self._times, t) - 1
             return self._images[max(i, 0)]
 
     def close(self) -> None:
         self._stop.set()
+        with self._lock:
+            self._lock.notify_all()
         if self._thread is not None:
             self._thread.join(timeout=2.0)

@@ -210,7 +210,8 @@ class Twin:
         return f"""# Rig file of a device twin, written by `lft twin serve` (lftransfer.sim.twin); see example_rig.toml
 # for every field. The cameras are network streams (NUT/FFV1 over HTTP, opened by OpenCV's VideoCapture).
 # Their 16-bit colour frames travel as three stacked GRAY16LE planes (planar = true): OpenCV's FFmpeg reader
-# returns 16 bits only for grey frames. The twin's manifest (scene, truth seed) is {manifest_path(self.rig_file).name}.
+# returns 16 bits only for grey frames. Each frame carries its camera timestamp (timestamps = "stream").
+# The twin's manifest (scene, truth seed) is {manifest_path(self.rig_file).name}.
 
 [lf_camera]
 source = "{url}/lf"
@@ -221,6 +222,7 @@ bits = {info.lf_camera_bits}
 planar = true
 frames = 1
 timeout_s = {o.camera_timeout_s}
+timestamps = "stream"
 
 [view_camera]
 source = "{url}/view"
@@ -230,6 +232,7 @@ bits = 16
 planar = true
 frames = 1
 timeout_s = {o.camera_timeout_s}
+timestamps = "stream"
 response_gamma = 1.0
 radiance_scale = {self.view_radiance_scale!r}
 

@@ -7,6 +7,8 @@ One HTTP server (standard library, a thread per connection) on the twin's port:
   three colour planes stacked (3 H x W). Why: OpenCV's ``VideoCapture`` (FFmpeg back-end) returns 16-bit frames
   only for GRAY16LE (its 16-bit colour formats arrive as 8 bits), and FFV1 keeps every bit of the 12-bit LF
   camera and the 16-bit view camera; a lossy codec (MJPEG, H.264) would add its own error to the light field.
+  Each frame's presentation time is its camera timestamp (:mod:`.cameras`), in microseconds from the first frame
+  the client was sent.
 - ``GET /lf/control``, ``POST /lf/control``: ``{"exposure": value}``, the LF camera's exposure (exposure
   bracketing during calibration), in the units of the rig file's ``lf_camera.exposure``.
 - ``POST /operator``: a set-up (:mod:`lftransfer.rig.hardware.operator`'s JSON); answered once the world shows it.
@@ -31,6 +33,8 @@ from lftransfer.sim.twin.cameras import TwinCamera
 __all__ = ["TwinServer"]
 
 _log = logging.getLogger(__name__)
+
+_PTS_UNIT = Fraction(1, 1_000_000)      # the streams' time base: frame timestamps in microseconds
 
 
 class _SocketWriter(io.RawIOBase):
@@ -75,17 +79,19 @@ def _stream(handler: BaseHTTPRequestHandler, camera: TwinCamera) -> None:
         container = av.open(_SocketWriter(handler.wfile), mode="w", format="nut",
                            container_options={"flush_packets": "1"})
         stream = container.add_stream("ffv1", rate=Fraction(camera.timing.fps).limit_denominator(1000))
-        stream.height, stream.width = first[1].shape
+        stream.height, stream.width = first[2].shape
         stream.pix_fmt = "gray16le"
-        item, index = first, 0
+        stream.codec_context.time_base = stream.time_base = _PTS_UNIT
+        item, origin, pts = first, first[1], -1
         while item is not None:
-            tick, frame = item
+            tick, stamp, frame = item
             vf = av.VideoFrame.from_ndarray(frame, format="gray16le")
-            vf.pts = index
+            # the camera's timestamp (strictly increasing, as a container needs: jitter may reorder two stamps)
+            pts = max(pts + 1, int(round((stamp - origin) / _PTS_UNIT)))
+            vf.pts, vf.time_base = pts, _PTS_UNIT
             for packet in stream.encode(vf):
                 container.mux(packet)
             camera.note_sent(time.monotonic() - tick)
-            index += 1
             item = q.get()
     except (BrokenPipeError, ConnectionResetError, OSError) as exc:
         _log.info("twin %s stream: client gone (%s)", camera.name, type(exc).__name__)
