@@ -39,6 +39,12 @@ def test_01_fig4_small_rig(variant, tmp_path):
     energies = [(b["real_energy"], b["synthetic_energy"]) for b in report["bounces"]]
     assert all(np.all(np.diff(np.array(energies)[:, s]) < 0) for s in (0, 1)), energies
     assert report["bounces"][1]["projector_gain"] > 1
+    # the fidelity floor: each side's floor beside the transfer scored alike; the real side's is the better of
+    # the optimum in codes and the transfer's own projection, so never above it
+    floor = report["fidelity_floor"]
+    assert report["real_floor"] == floor["real"]["floor"] <= floor["real"]["transfer"]
+    assert report["synthetic_floor"] == floor["synthetic"]["floor"] > 0
+    assert report["transfer_over_floor"] == pytest.approx(floor["transfer"] / floor["floor"])
 
 
 @pytest.mark.slow
@@ -56,7 +62,7 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     scene = quick_scene(load_scene(builtin_scene("fig4")))
     scene = with_overrides(scene, render={"gt_spp": 512})
     report = run_scene(scene, tmp_path, RunOptions(settings=Overrides(bounces=1), capture_spp=2, truth_seed=4,
-                                                   negative_control=True))
+                                                   negative_control=True, floor=False))
     assert report["rig_model"] == "calibrated"
     for name in ("calibration.json", "calibration_errors.json", "calibration_report.html"):
         assert (tmp_path / name).stat().st_size > 0, name
@@ -75,7 +81,8 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     assert not [w for w in report["warnings"] if "negative control" in w]
     # the calibration file runs the pipeline again without calibrating
     again = run_scene(scene, tmp_path / "again", RunOptions(settings=Overrides(bounces=1), capture_spp=2,
-                                                           truth_seed=4, calibration=tmp_path / "calibration.json"))
+                                                           truth_seed=4, calibration=tmp_path / "calibration.json",
+                                                           floor=False))
     assert again["rig_model"].startswith("calibration file")
     assert again["cross_transfer_rel_error"] == pytest.approx(report["cross_transfer_rel_error"], abs=0.02)
 
@@ -89,7 +96,7 @@ def test_03_record_then_replay_is_bit_identical(variant, tmp_path):
     from lftransfer.rig.replay import ReplayError
 
     scene = with_overrides(quick_scene(load_scene(builtin_scene("fig4"))), render={"gt_spp": 32})
-    options = RunOptions(settings=Overrides(bounces=1), capture_spp=1, truth_seed=5)
+    options = RunOptions(settings=Overrides(bounces=1), capture_spp=1, truth_seed=5, floor=False)
     session = tmp_path / "session"
     first = run_scene(scene, tmp_path / "first", RunOptions(**{**options.__dict__, "record": session}))
     manifest = json.loads((session / "manifest.json").read_text())
@@ -126,7 +133,7 @@ def test_04_two_point_lights(variant, tmp_path):
     second = {"position": [0.22, -0.10, 0.0], "intensity": [1.5, 1.5, 1.5]}
     two = with_overrides(scene, lights=[*scene.lights, second], render={"gt_spp": 1024})
     report = run_scene(two, tmp_path, RunOptions(settings=Overrides(bounces=2), capture_spp=2, truth_seed=None,
-                                                 rig_model="nominal"))
+                                                 rig_model="nominal", floor=False))
     assert report["cross_transfer_rel_error"] < 0.25
     assert report["psnr_db"] > report["psnr_db_direct_only"] + 0.5
     assert report["lf_camera_saturated_fraction"] < 0.01 and not [w for w in report["warnings"] if "full scale" in w]

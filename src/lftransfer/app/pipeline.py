@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from lftransfer.sim.metrics import NegativeControl
 
 __all__ = ["BY_MODEL_KEYS", "CalibrationFailedError", "RigSpec", "RunOptions", "VIEWS_FILE", "calibrate",
-           "check_resolution", "count_run_steps", "knowledge", "negative_control_skipped", "open_rig",
+           "check_resolution", "count_run_steps", "floor_skipped", "knowledge", "negative_control_skipped", "open_rig",
            "quick_scene", "run_scene", "write_calibration", "write_views"]
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
@@ -67,6 +67,8 @@ class RunOptions:
         negative_control: also run the transfer with the rig file's nominal values on the same rig (no
             calibration, the same ground truth) and report how much worse it scores (the report's
             ``negative_control``; :func:`negative_control_skipped` says when it cannot run). ``lft demo`` sets it.
+        floor: on the simulated rig, verified: find the fidelity floor (:mod:`lftransfer.sim.floor`: the best any
+            algorithm could do through this rig, each side) and report the error against it.
     """
 
     settings: Overrides = Overrides()
@@ -79,6 +81,7 @@ class RunOptions:
     record: Path | None = None
     verify: bool = True
     negative_control: bool = False
+    floor: bool = True
 
     def __post_init__(self) -> None:
         problems = []
@@ -204,6 +207,22 @@ def negative_control_skipped(options: RunOptions, bounces: int) -> str | None:
     return None
 
 
+def floor_skipped(options: RunOptions) -> str | None:
+    """Why a run finds no fidelity floor (:mod:`lftransfer.sim.floor`), or None when it does: it needs the
+    simulated rig itself (its renderer and truth) and verification."""
+    if not options.floor:
+        return "not asked for (--no-floor)"
+    if options.rig.kind != "sim":
+        return (f"the fidelity floor is found on the simulated rig only (this run's rig: {options.rig.kind}), with "
+                f"its truth")
+    if not options.verify:
+        return "the run is not verified against ground truth"
+    return None
+
+
+FLOOR_STEPS = 2                 # progress steps of the fidelity floor: the synthetic side, the real side
+
+
 def _runs_control(options: RunOptions, settings: RunSettings) -> bool:
     return options.negative_control and negative_control_skipped(options, settings.bounces) is None
 
@@ -217,7 +236,9 @@ def count_run_steps(scene, options: RunOptions) -> int:
         + (1 if _calibrates(options) or options.calibration is not None else 0)
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
-    return 1 + calibration + count_steps(settings.transfer) + (6 if _verifies(options) else 0) + reruns + control + 1
+    floor = FLOOR_STEPS if floor_skipped(options) is None else 0
+    return (1 + calibration + count_steps(settings.transfer) + (6 if _verifies(options) else 0) + floor + reruns
+            + control + 1)
 
 
 def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
@@ -333,10 +354,11 @@ class _Run:
         known, label, errors = self.know_rig()
         result = self.transfer(known)
         gt, metrics, tables, gt_spp_needed = self.verify(result)
+        floor = self.floor(result, gt)
         self.compare(known, gt, tables)
         control = self.negative_control(result, gt)
         self.timings["total"] = time.perf_counter() - t0
-        report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed)
+        report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor)
         self.step("write outputs")
         comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
@@ -411,6 +433,21 @@ class _Run:
             gt_spp_needed = noisy.spp_needed
         return gt, metrics, tables, gt_spp_needed
 
+    def floor(self, result, gt):
+        """Stage 3b: the fidelity floor (through the oracle), where the run can find one; else its reason in
+        ``undefined``."""
+        why = floor_skipped(self.options)
+        if why is None and gt is None:
+            why = "the run is not verified against ground truth"
+        if why is not None:
+            self.undefined["fidelity_floor"] = why
+            return None
+        t = time.perf_counter()
+        floor = self.opened.oracle.fidelity_floor(getattr(self.opened.rig, "inner", self.opened.rig), result, gt,
+                                                  self.settings.transfer, progress=self.step)
+        self.timings["fidelity_floor"] = time.perf_counter() - t
+        return floor
+
     def compare(self, known: Knowledge, gt, tables: dict) -> None:
         """Stage 4: the same run with one setting changed, for each comparison the settings ask for, measured."""
         for name, value in self.settings.comparisons:
@@ -448,7 +485,7 @@ class _Run:
         return control
 
     def report(self, known: Knowledge, label: str, errors, result, metrics, tables: dict,
-               control: ControlRun | None, gt_spp_needed) -> dict:
+               control: ControlRun | None, gt_spp_needed, floor=None) -> dict:
         """Stage 6: the report (``report.json``): metrics, comparisons, settings, energies, timings, provenance."""
         from lftransfer.backend import variant
 
@@ -468,6 +505,10 @@ class _Run:
             "window": s.window,
             "by_window": tables["by_window"],
             "negative_control": control.result.to_json() if control is not None else None,
+            "real_floor": floor.real.floor if floor is not None and floor.real is not None else None,
+            "synthetic_floor": floor.synthetic.floor if floor is not None and floor.synthetic is not None else None,
+            "transfer_over_floor": floor.transfer_over_floor if floor is not None else None,
+            "fidelity_floor": floor.to_json() if floor is not None else None,
             "undefined_metrics": undefined,
             "warnings": self.warnings,
             "gt_spp_needed": gt_spp_needed,

@@ -310,6 +310,24 @@ def demo_tables(s: StoredRun) -> list[str]:
         why = (d.get("undefined_metrics") or {}).get("negative_control", "not run")
         out += [f"Negative control: not run ({why}).", ""]
 
+    floor = d.get("fidelity_floor")
+    if isinstance(floor, dict):
+        out += ["The fidelity floor (`fidelity_floor`, docs/architecture.md \"The fidelity floor\"): each side's best "
+                "through this rig against the transfer, both scored against the ground truth's second seed with its "
+                "noise taken off, in the cross-transfer error's units:", ""]
+        rows = []
+        for side in ("real", "synthetic"):
+            v = floor.get(side)
+            if isinstance(v, dict):
+                rows.append([side, num(v.get("floor")), num(v.get("transfer")), num(v.get("relaxed")),
+                             num(v.get("noise")), num(v.get("pixels"))])
+        rows.append(["both (root sum of squares)", num(floor.get("floor")), num(floor.get("transfer")), "", "", ""])
+        out += table(["side", "floor", "transfer", "relaxed optimum (real)", "reference noise", "pixels"], rows)
+        out += [f"Transfer / floor (`transfer_over_floor`): {num(floor.get('transfer_over_floor'))}.", ""]
+    elif "fidelity_floor" in d:
+        why = (d.get("undefined_metrics") or {}).get("fidelity_floor", "not found")
+        out += [f"Fidelity floor: not found ({why}).", ""]
+
     sides = d.get("cross_by_side") or {}
     if sides:
         out += ["The cross term by side (`cross_by_side`; real: light the synthetic objects sent through the "

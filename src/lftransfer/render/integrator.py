@@ -59,9 +59,10 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     return radiance, hit, distance
 
 
-def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
-          max_depth: int = 3, seed: int = 0) -> np.ndarray:
-    """Path-traced radiance for rays that are known to hit (no compaction). Shapes as in :func:`trace`."""
+def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: int, seed: int):
+    """The path vertices of :func:`shade`: yields (depth, si, active, throughput) for depth 0 .. max_depth - 1.
+    The paths depend on the scene and the seed only, never on the lights, so :func:`shade` and
+    :func:`shade_adjoint` walk the same ones."""
     mi = mitsuba()
     import drjit as dr
 
@@ -71,25 +72,57 @@ def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     sampler.seed(dr.opaque(mi.UInt32, seed), n)
     ctx = mi.BSDFContext()
     throughput = mi.Color3f(1.0)
-    result = mi.Color3f(0.0)
     active = mi.Bool(True)
     for depth in range(max_depth):
         si = scene.ray_intersect(ray, active)
         active &= si.is_valid()
-        if depth == 0:     # emitters seen directly; later vertices gather them by next-event estimation
-            for light in lights:
-                if hasattr(light, "emitted"):
-                    result += light.emitted(scene, si, active)
-        for light in lights:
-            result += throughput * light.illuminate(scene, si, active, seed=seed * 16 + depth)
+        yield depth, si, active, throughput
         if depth + 1 == max_depth:
             break
         bs, weight = si.bsdf().sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
         throughput *= weight
         active &= dr.any(weight != 0.0)
         ray = si.spawn_ray(si.to_world(bs.wo))
-        dr.eval(result, throughput, ray, active)
+        dr.eval(throughput, ray, active)
         sampler.schedule_state()
         if not dr.any(active):
             break
+
+
+def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
+          max_depth: int = 3, seed: int = 0) -> np.ndarray:
+    """Path-traced radiance for rays that are known to hit (no compaction). Shapes as in :func:`trace`."""
+    mi = mitsuba()
+    import drjit as dr
+
+    result = mi.Color3f(0.0)
+    for depth, si, active, throughput in _vertices(scene, origins, directions, max_depth=max_depth, seed=seed):
+        if depth == 0:     # emitters seen directly; later vertices gather them by next-event estimation
+            for light in lights:
+                if hasattr(light, "emitted"):
+                    result += light.emitted(scene, si, active)
+        for light in lights:
+            result += throughput * light.illuminate(scene, si, active, seed=seed * 16 + depth)
+        dr.eval(result)
     return to_numpy(result)
+
+
+def shade_adjoint(scene, origins: np.ndarray, directions: np.ndarray, light, weights: np.ndarray, *,
+                  max_depth: int = 3, seed: int = 0) -> None:
+    """The transpose of :func:`shade` for one light that is linear in a table (a light field light's radiance
+    table): adds A^T w to the light's gradient table (``light.illuminate_adjoint``), where A maps the table to
+    the rays' radiance with these paths and samples. So <w, shade(table)> = <A^T w, table> exactly, for the same
+    seed: the adjoint of the estimator, not of the integral it estimates.
+
+    Args:
+        scene, origins, directions, max_depth, seed: as in :func:`shade` (rays that hit).
+        light: a light with ``illuminate_adjoint(scene, si, active, weight, seed)``.
+        weights: (N, 3) float, w per ray and channel (e.g. d loss / d radiance).
+    """
+    mi = mitsuba()
+    from lftransfer.render.lights import jit_array
+
+    w = np.ascontiguousarray(weights, dtype=np.float32)
+    wj = mi.Color3f(*(jit_array(mi.Float, w[:, c]) for c in range(3)))
+    for depth, si, active, throughput in _vertices(scene, origins, directions, max_depth=max_depth, seed=seed):
+        light.illuminate_adjoint(scene, si, active, throughput * wj, seed=seed * 16 + depth)

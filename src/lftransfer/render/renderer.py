@@ -271,3 +271,30 @@ class HalfSpaceRenderer:
         means = self.render_samples(o, d, lights, spp, seed=seed)
         return ViewImage(rgb=means.radiance.reshape(height, width, 3), alpha=means.coverage.reshape(height, width),
                          depth=means.depth.reshape(height, width))
+
+    def render_view_adjoint(self, sensor, width: int, height: int, light, weights: np.ndarray, *,
+                            spp: int = DEFAULT_SPP, seed: int = 0) -> None:
+        """The transpose of :meth:`render_view`'s radiance as a linear map of one light's table (a light field
+        light, :meth:`~lftransfer.render.lights.LightFieldLight.illuminate_adjoint`): adds A^T ``weights`` to the
+        light's gradient table, for the same rays, paths and samples (the same ``spp`` and ``seed``).
+
+        Args:
+            sensor, width, height, spp, seed: as in :meth:`render_view`.
+            light: the light whose table the view is linear in (the only light of the forward render).
+            weights: (H, W, 3) float, d loss / d (pixel radiance).
+        """
+        from lftransfer.render.camera import view_rays
+        from lftransfer.render.integrator import shade_adjoint
+
+        weights = np.asarray(weights, np.float32)
+        if weights.shape != (height, width, 3):
+            raise ValueError(f"weights have shape {weights.shape}, expected {(height, width, 3)}")
+        o, d = self._rays(("view", id(sensor), width, height, spp, seed),
+                          lambda: view_rays(sensor, width, height, spp, seed))
+        t = np.array(self.scene.ray_intersect_preliminary(self.jit_rays(o, d)).t)
+        idx = np.flatnonzero(np.isfinite(t))
+        if len(idx) == 0:
+            return
+        per_ray = weights.reshape(-1, 3)[idx // spp] * np.float32(1.0 / spp)   # a pixel is the mean of its rays
+        shade_adjoint(self.scene, o[idx], d[idx], light, per_ray, max_depth=self.max_depth, seed=seed)
+

@@ -45,6 +45,20 @@ class Oracle:
         return render_ground_truth(self.world if world is None else world, spp=spp, use_cache=use_cache,
                                    progress=progress, warn=warn)
 
+    def fidelity_floor(self, rig, result, gt, settings, *, progress: Callable[[str], None] | None = None):
+        """The fidelity floor of a run on the simulated rig ``rig`` (:func:`lftransfer.sim.floor.fidelity_floor`:
+        both sides' floors and the run's error scored as they are).
+
+        Raises:
+            ValueError: ``rig`` is not the simulated rig (the floor renders with its truth).
+        """
+        from lftransfer.sim.floor import fidelity_floor
+        from lftransfer.sim.rig import SimRig
+
+        if not isinstance(rig, SimRig):
+            raise ValueError(f"the fidelity floor needs the simulated rig, got {type(rig).__name__}")
+        return fidelity_floor(rig, self.world, result, gt, settings, progress=progress)
+
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built
         (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`)."""

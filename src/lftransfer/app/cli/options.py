@@ -69,6 +69,8 @@ Quick = Annotated[bool, flag("--quick", "Quarter resolution: every device at a q
                                         "angular samples (at least 8), a quarter of the ground-truth samples (at "
                                         "least 16).")]
 NoCache = Annotated[bool, flag("--no-cache", "Render the ground truth again (do not read or write the cache).")]
+NoFloor = Annotated[bool, flag("--no-floor", "Skip the fidelity floor (on the simulated rig: the best any algorithm "
+                                             "could do through this rig, each side; a few hundred renders).")]
 MaxMemory = Annotated[Optional[str], option(
     "--max-memory", metavar="SIZE", callback=_memory_check,
     help="Largest memory the run may need, e.g. 64G (default: what the machine has available now). The need is "

@@ -14,9 +14,9 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, progress_bar,
                                        rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, OutDir, Projection,
-                                            Quick, Reconstruction, Renderer, RigArgs, SceneArg, TruthArgs, Window,
-                                            flag, option)
+from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, NoFloor,
+                                        OutDir, Projection, Quick, Reconstruction, Renderer, RigArgs, SceneArg,
+                                        TruthArgs, Window, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides
 
@@ -69,6 +69,18 @@ def control_line(control: dict) -> str:
             f"dB and {num('cross_error_margin', '+.3g')}: {verdict}")
 
 
+def floor_line(floor: dict) -> str:
+    """The fidelity floor in one line: each side's floor against the transfer (scored alike), the whole and the
+    ratio."""
+    def side(name: str) -> str:
+        s = floor.get(name)
+        return "none" if s is None else f"{s['floor']:.3g} (transfer {s['transfer']:.3g})"
+
+    whole = "undefined" if floor.get("floor") is None else f"{floor['floor']:.3g}"
+    ratio = "undefined" if floor.get("transfer_over_floor") is None else f"{floor['transfer_over_floor']:.3g}"
+    return f"{side('real')} / {side('synthetic')}; floor {whole}, transfer / floor {ratio}"
+
+
 def summary(report: dict, out: Path) -> None:
     """A run's report as a table on stdout, and why each undefined metric is undefined."""
     table = Table(title=escape(f"light field transfer -> {out}"))
@@ -93,6 +105,9 @@ def summary(report: dict, out: Path) -> None:
         for name, m in by_choice.items():
             if len(by_choice) > 1 and m.get("cross_transfer_rel_error") is not None:
                 row(table, f"cross error, {name} {label}", f"{m['cross_transfer_rel_error']:.4g}")
+    floor = report.get("fidelity_floor")
+    if floor is not None:
+        row(table, "fidelity floor (real / synthetic side)", floor_line(floor))
     control = report.get("negative_control")
     if control is not None:
         row(table, f"negative control: {control['rig_model']}", control_line(control))
@@ -117,7 +132,7 @@ def register(app: typer.Typer) -> None:
     @command(app)
     def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
              no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-             rig: RigArgs = None, max_memory: MaxMemory = None) -> None:
+             rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False) -> None:
         """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
         transfer, check against ground truth (both lighting models, both reconstructions, both projections, both
         windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
@@ -126,7 +141,7 @@ def register(app: typer.Typer) -> None:
         scene = load(None, quick)
         rig_opts = rig_options(scene, truth, rig)
         options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer),
-                             use_cache=not no_cache, negative_control=True, **rig_opts)
+                             use_cache=not no_cache, negative_control=True, floor=not no_floor, **rig_opts)
         check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                           bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
         _run(scene, out, options)
@@ -141,7 +156,7 @@ def register(app: typer.Typer) -> None:
                                                               "re-run.")] = False,
             gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
             renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-            max_memory: MaxMemory = None) -> None:
+            max_memory: MaxMemory = None, no_floor: NoFloor = False) -> None:
         """Run light field transfer on any scene file with a rig (calibrating it first)."""
         from lftransfer.app.pipeline import RunOptions
 
@@ -150,7 +165,7 @@ def register(app: typer.Typer) -> None:
         asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
                      projection=projection, window=window, gt_spp=gt_spp, renderer=renderer)
         settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
-        options = RunOptions(settings=settings, use_cache=not no_cache, **rig_opts)
+        options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, **rig_opts)
         check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                           bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
         _run(scene, out, options)

@@ -426,3 +426,107 @@ class LightFieldLight:
 
         _, result = dr.while_loop((mi.UInt32(0), result), cond, body)
         return result
+
+    # -- the transpose (for inverse problems) ------------------------------------------------------------------
+    def _check_linear_table(self, what: str) -> None:
+        if self.model == "prefiltered" or self.reconstruction != "box" or self.window != "cut":
+            raise ValueError(f"{what} is written for a table read directly (point or area model, box "
+                             f"reconstruction, cut window: a projector's lenslets), not model={self.model!r}, "
+                             f"reconstruction={self.reconstruction!r}, window={self.window!r}")
+
+    def set_data(self, data: np.ndarray) -> None:
+        """Replace the radiance table by ``data`` ((K, V, U, 3) float, W m^-2 sr^-1), keeping the lenslets visited
+        and every sample: the light stays the same linear map of its table (what an inverse problem iterates on).
+
+        Raises:
+            ValueError: a light whose table is not read directly (:meth:`illuminate_adjoint`), or a wrong shape.
+        """
+        self._check_linear_table("set_data")
+        data = np.asarray(data, np.float32)
+        if data.shape != (self.K, self.V, self.U, 3):
+            raise ValueError(f"data has shape {data.shape}, expected {(self.K, self.V, self.U, 3)}")
+        self._table = jit_array(mitsuba().Float, data.ravel())
+
+    def zero_grad(self) -> None:
+        """Start a new transpose: the gradient table (:meth:`grad`) is set to zero."""
+        import drjit as dr
+
+        self._grad = dr.zeros(mitsuba().Float, self.K * self.V * self.U * 3)
+
+    def grad(self) -> np.ndarray:
+        """(K, V, U, 3) float32: what :meth:`illuminate_adjoint` added since :meth:`zero_grad`."""
+        import drjit as dr
+
+        dr.eval(self._grad)
+        return np.array(self._grad, dtype=np.float32).reshape(self.K, self.V, self.U, 3)
+
+    def illuminate_adjoint(self, scene, si, active, weight, seed: int = 0) -> None:
+        """The transpose of :meth:`illuminate` as a map from the table to the reflected radiance: adds
+        sum over points of ``weight`` times d(radiance) / d(table) to the gradient table, with the same aperture
+        points, visibility and BSDF values (the same ``seed``), so that for any table T and weights w,
+        <w, illuminate(T)> = <grad, T>.
+
+        Args:
+            scene, si, active, seed: as in :meth:`illuminate`.
+            weight: mi.Color3f (N,), d loss / d (reflected radiance) per point.
+
+        Raises:
+            ValueError: a light whose table is not read directly (prefiltered, linear or edge).
+        """
+        mi = mitsuba()
+        import drjit as dr
+
+        self._check_linear_table("illuminate_adjoint")
+        if getattr(self, "_grad", None) is None:
+            self.zero_grad()
+        n_active = len(self.active_lenslets)
+        if n_active == 0:
+            return
+        side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
+        active = mi.Bool(active) & side_ok
+        n_total = dr.opaque(mi.UInt32, n_active * self.M)
+        M, pool = self.M, self.pool
+        area_weight = self.area / M
+        if pool > M:   # the same random start as illuminate
+            n = dr.width(si.p)
+            rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
+            start = rng.next_uint32() % pool
+        else:
+            start = mi.UInt32(0)
+        grad = self._grad
+        weight = mi.Color3f(weight)
+        a, U, V = self.a, self.U, self.V
+
+        def cond(i):
+            return i < n_total
+
+        def body(i):
+            k = dr.gather(mi.UInt32, self._active, i // M)
+            m = (start + i % M + (i // M) * 7919) % pool
+            p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
+                           dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
+            w = p - si.p
+            r2 = dr.squared_norm(w)
+            wn = w * dr.rsqrt(r2)
+            d = (-1.0 if self.side == "real" else 1.0) * wn
+            u, v = d.x / d.z, d.y / d.z
+            inside = active & (dr.abs(u) <= a) & (dr.abs(v) <= a)
+            visible = inside & ~scene.ray_test(si.spawn_ray_to(p), inside)
+            f = direction_weight(si, wn, visible, False, None)
+            g = f * weight * (dr.abs(wn.z) * area_weight / r2)
+            # the bilinear read of _bilinear, transposed: each of its four texels gets its weight times g
+            fx = dr.clip((u + a) * (U / (2 * a)) - 0.5, 0.0, U - 1.0)
+            fy = dr.clip((v + a) * (V / (2 * a)) - 0.5, 0.0, V - 1.0)
+            x0 = dr.minimum(mi.UInt32(dr.floor(fx)), U - 2) if U > 1 else mi.UInt32(0)
+            y0 = dr.minimum(mi.UInt32(dr.floor(fy)), V - 2) if V > 1 else mi.UInt32(0)
+            tx, ty = fx - mi.Float(x0), fy - mi.Float(y0)
+            base = (k * V + y0) * U + x0
+            x1, y1 = (1 if U > 1 else 0), (U if V > 1 else 0)
+            for idx, wt in ((base, (1 - tx) * (1 - ty)), (base + x1, tx * (1 - ty)),
+                            (base + y1, (1 - tx) * ty), (base + y1 + x1, tx * ty)):
+                for c in range(3):
+                    dr.scatter_add(grad, wt * g[c], idx * 3 + c, visible)
+            return (i + 1,)
+
+        dr.while_loop((mi.UInt32(0),), cond, body)
+

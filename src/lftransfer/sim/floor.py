@@ -1,0 +1,426 @@
+"""The fidelity floor: how close any algorithm could bring the cross-transfer term through this rig, found on the
+simulated rig with the truth (docs/architecture.md, "The fidelity floor").
+
+Real side: the best projector light field. The real objects' added light in the view camera is linear in what
+the projector's lenslets emit: V(X) = A X, with X the light field emitted above the projector's black, A the
+simulated rig's own view render of its projector light (the same rays, paths, aperture points and seeds as its
+captures, :meth:`SimRig.capture_view`). The floor is
+
+    min over 0 <= X <= X_white of || M D ((1 - alpha) A X + alpha dS) - C_gt ||^2
+
+over the pixels where only real objects are seen (M; D the metrics' box downsampling; alpha and dS the
+transfer's own synthetic coverage and added synthetic light, which on those pixels are a thin edge), solved by
+projected gradient descent with Nesterov momentum and a monotone safeguard (MFISTA), started from the transfer's
+own projection so that it can only improve on it. The gradient 2 A^T r is the exact transpose of the render
+(:meth:`HalfSpaceRenderer.render_view_adjoint`: the same gathers scattered back), not Dr.Jit's automatic
+differentiation: the lenslets' symbolic loop would have to be recorded iteration by iteration for that, about
+240 copies of the image's state per path vertex, while the transpose of a linear map needs none. The box
+[0, X_white] is the projector's range per light field entry (the light field of a white image above that of a
+black one); the optimum is then encoded into projector codes through the true encoder (the rig as built) and
+projected as the rig would, so the floor reported is an image the projector can show.
+
+The truth it is fitted to is the ground truth's first seed and the score is taken against its second (and the
+transfer's own projection is scored the same way), so the floor cannot pass for good by fitting the reference's
+noise: with more light field entries than pixels it could fit that noise exactly. A score against one noisy seed
+overstates every error by that seed's noise; since the seed's noise is independent of what is scored, its
+expected square, half the squared difference of the two seeds' cross terms, is taken off each squared error
+(the noise-corrected error; both the floors and the transfer's error as scored here are corrected so).
+
+Synthetic side: the synthetic objects lit by the light field the real objects really send, sampled as the LF
+camera samples it (the true array, the run's angular grid, aperture-averaged, many rays per entry, no sensor
+noise, no codec), rendered by the run's own renderer: what one sample per lenslet and direction allows.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from lftransfer.sim.metrics import cross_term_truth, downsample, metric_factor, object_mask
+
+_log = logging.getLogger(__name__)
+
+__all__ = ["BoxFit", "FidelityFloor", "ProjectorOperator", "SideFloor", "box_least_squares", "fidelity_floor",
+           "nonnegative_bound", "real_floor", "synthetic_floor", "true_incident_lightfield"]
+
+FLOOR_ITERATIONS = 40          # MFISTA steps of the real side's floor
+POWER_ITERATIONS = 6           # for the step size (largest eigenvalue of A^T W A)
+TRUE_LF_SPP = 16               # rays per light field entry of the synthetic side's true light field
+
+
+class ProjectorOperator:
+    """The simulated rig's view of its real objects as a linear map of its projector's light field.
+
+    ``forward(X)`` is the view camera's radiance added by the projector emitting X above its black ((K, V, U, 3),
+    the projector codec's grid, W m^-2 sr^-1) in the real scene, exactly as :meth:`SimRig.capture_view` renders
+    it (same rays, paths, aperture points and seeds; every lenslet visited); ``adjoint(W)`` its transpose.
+
+    Args:
+        rig: the :class:`~lftransfer.sim.rig.SimRig`, in its real-scene set-up.
+    """
+
+    def __init__(self, rig) -> None:
+        from lftransfer.lightfield import LightField
+        from lftransfer.render.lights import LightFieldLight
+
+        self.rig = rig
+        info = rig.info
+        black = info.black()
+        white = np.full_like(black, (1 << info.projector_bits) - 1)
+        self.black = self._emitted_lf(black)
+        self.white = self._emitted_lf(white) - self.black          # X_white: the range of each entry
+        ones = LightField(np.ones_like(self.black), rig.truth.array)
+        self.light = LightFieldLight(ones, side="real", model="area", aperture_samples=rig.aperture_samples,
+                                     seed=rig._seed + 3)
+        self.width, self.height = rig._view.resolution
+        self.calls = 0
+
+    def _emitted_lf(self, codes: np.ndarray) -> np.ndarray:
+        """(K, V, U, 3) what the projector's lenslets emit for projector ``codes``."""
+        rig = self.rig
+        return rig._prj_codec.image_to_lightfield(rig._prj_encoder.emitted(codes)).data.astype(np.float32)
+
+    def of_codes(self, codes: np.ndarray) -> np.ndarray:
+        """X of a projector image: what it emits above the black."""
+        return self._emitted_lf(codes) - self.black
+
+    def codes_of(self, x: np.ndarray) -> np.ndarray:
+        """The projector image the rig as built shows for X (its true encoder: quantised to the projector's codes)."""
+        from lftransfer.lightfield import LightField
+
+        return self.rig._prj_encoder(LightField(x + self.black, self.rig.truth.array))
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        """(H, W, 3) view radiance added by X."""
+        self.calls += 1
+        rig = self.rig
+        self.light.set_data(x)
+        return rig._real.render_view(rig._view_sensor, self.width, self.height, [self.light], spp=rig.view_spp,
+                                     seed=rig._seed).rgb
+
+    def adjoint(self, weights: np.ndarray) -> np.ndarray:
+        """(K, V, U, 3) A^T ``weights`` ((H, W, 3))."""
+        self.calls += 1
+        rig = self.rig
+        self.light.zero_grad()
+        rig._real.render_view_adjoint(rig._view_sensor, self.width, self.height, self.light, weights,
+                                      spp=rig.view_spp, seed=rig._seed)
+        return self.light.grad()
+
+
+@dataclass(frozen=True)
+class SideFloor:
+    """One side's floor, in the cross-transfer error's units: ||e|| over that side's pixels / ||C_gt|| over all
+    the objects' pixels, so that the two sides add as squares to a whole error.
+
+    Attributes:
+        floor: the best found (real side: the optimum projected through the projector's codes, or the transfer's
+            own projection where that is better; synthetic side: the sampled true light field).
+        transfer: the run's own result scored the same way.
+        relaxed: real side: the optimum before its encoding into codes (the box relaxation), else None.
+        noise: the ground truth's second seed's own noise on these pixels, the same units (taken off the squares
+            of the three above, which are scored against that seed).
+        pixels: pixels of this side at the metrics' resolution.
+        iterations: optimiser steps (real side), else 0.
+        seconds: wall time.
+    """
+
+    floor: float
+    transfer: float
+    relaxed: float | None
+    noise: float
+    pixels: int
+    iterations: int = 0
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class FidelityFloor:
+    """Both sides' floors and the whole (:func:`fidelity_floor`).
+
+    Attributes:
+        real, synthetic: :class:`SideFloor` of each side (None where a side has no pixels or no cross term).
+        floor: sqrt(real.floor^2 + synthetic.floor^2): the smallest cross-transfer error this rig allows.
+        transfer: the run's own error scored as the floors are (real side against the held-out seed).
+        transfer_over_floor: transfer / floor.
+        notes: what the floor assumes.
+    """
+
+    real: SideFloor | None
+    synthetic: SideFloor | None
+    floor: float | None
+    transfer: float | None
+    transfer_over_floor: float | None
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        from dataclasses import asdict
+
+        return {"real": asdict(self.real) if self.real else None,
+                "synthetic": asdict(self.synthetic) if self.synthetic else None,
+                "floor": self.floor, "transfer": self.transfer, "transfer_over_floor": self.transfer_over_floor,
+                "notes": list(self.notes)}
+
+
+@dataclass
+class _Metric:
+    """The cross-transfer error's pixels and truth at the metrics' resolution."""
+
+    factor: int
+    pair: list            # the two seeds' cross terms, (h, w, 3) each
+    covered: np.ndarray   # (h, w) bool
+    synthetic: np.ndarray  # (h, w) bool, a synthetic object is seen
+    norm: float           # ||C_gt|| (mean of the pair) over the covered pixels
+
+    @classmethod
+    def of(cls, gt, width: int, target_width: int) -> "_Metric":
+        f = metric_factor(width, target_width)
+        pair = cross_term_truth(gt, f)
+        covered = object_mask(gt, f)
+        c_gt = 0.5 * (pair[0] + pair[1])
+        return cls(f, pair, covered, downsample(gt.alpha_synthetic, f) > 0.5,
+                   float(np.sqrt(np.sum(c_gt[covered] ** 2))))
+
+    def score(self, c: np.ndarray, where: np.ndarray) -> float:
+        """The noise-corrected error of a cross term ``c`` ((h, w, 3)) over ``where`` against the second seed, in
+        the error's units: sqrt(max(0, ||c - C_2||^2 - ||C_1 - C_2||^2 / 2)) / ||C_gt|| (module docstring)."""
+        e2 = float(np.sum((c - self.pair[1])[where] ** 2))
+        n2 = 0.5 * float(np.sum((self.pair[0] - self.pair[1])[where] ** 2))
+        return float(np.sqrt(max(0.0, e2 - n2))) / self.norm
+
+    def noise(self, where: np.ndarray) -> float:
+        """One seed's noise on the cross term over ``where``, in the error's units."""
+        return float(np.sqrt(0.5 * np.sum((self.pair[0] - self.pair[1])[where] ** 2))) / self.norm
+
+    def up(self, small: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """D^T: (h, w, 3) at the metrics' resolution -> (H, W, 3), each value spread over its block / f^2."""
+        f = self.factor
+        big = np.zeros((*shape, 3), np.float32)
+        h, w = small.shape[:2]
+        big[:h * f, :w * f] = np.repeat(np.repeat(small, f, axis=0), f, axis=1) / np.float32(f * f)
+        return big
+
+
+@dataclass(frozen=True)
+class BoxFit:
+    """What :func:`box_least_squares` found.
+
+    Attributes:
+        x: the best point found, the shape of ``start``.
+        losses: ||A x - b||^2 of the start and after each step (the best so far: never increasing).
+        lipschitz: the largest eigenvalue of A^T A found by power iteration (the step is 1 / (1.05 of it)).
+    """
+
+    x: np.ndarray
+    losses: list[float]
+    lipschitz: float
+
+
+def box_least_squares(apply: Callable[[np.ndarray], np.ndarray], transpose: Callable[[np.ndarray], np.ndarray],
+                      target: np.ndarray, start: np.ndarray, upper: np.ndarray, *,
+                      iterations: int = FLOOR_ITERATIONS, power_iterations: int = POWER_ITERATIONS,
+                      progress: Callable[[str], None] | None = None) -> BoxFit:
+    """min ||A x - b||^2 over 0 <= x <= upper by MFISTA (projected gradient with Nesterov momentum, each step kept
+    only where it lowers the loss, so the result is never worse than ``start``; Beck and Teboulle 2009).
+
+    Args:
+        apply: x -> A x; transpose: r -> A^T r (exact transposes of each other).
+        target: b, the shape of A x.
+        start: a feasible x.
+        upper: the upper bound of each x (>= 0).
+        iterations: steps (3 applications of A or A^T each).
+        power_iterations: power-iteration steps for the step size (2 applications each).
+        progress: called every 10 steps.
+    """
+    rng = np.random.default_rng(0)
+    v = rng.random(start.shape).astype(np.float32) * upper
+    lipschitz = 0.0
+    for _ in range(power_iterations):
+        av = transpose(apply(v))
+        lipschitz = float(np.sqrt(np.sum(av.astype(np.float64) ** 2) / max(np.sum(v.astype(np.float64) ** 2),
+                                                                            1e-300)))
+        v = av / max(float(np.abs(av).max()), 1e-30)
+    step = np.float32(1.0 / (1.05 * lipschitz)) if lipschitz > 0 else np.float32(0.0)
+
+    def loss(x: np.ndarray) -> tuple[float, np.ndarray]:
+        r = apply(x) - target
+        return float(np.sum(r.astype(np.float64) ** 2)), r
+
+    x = np.clip(start, 0.0, upper).astype(np.float32)
+    best_loss, r_y = loss(x)
+    losses = [best_loss]
+    best, y, tk = x, x, 1.0
+    for k in range(iterations):
+        z = np.clip(y - step * transpose(r_y), 0.0, upper)
+        z_loss, _ = loss(z)
+        if z_loss < best_loss:
+            best, best_loss = z, z_loss
+        losses.append(best_loss)
+        t_next = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * tk * tk))
+        y = np.clip(best + np.float32(tk / t_next) * (z - best) + np.float32((tk - 1.0) / t_next) * (best - x),
+                    0.0, upper)
+        x, tk = best, t_next
+        if k + 1 < iterations:
+            r_y = apply(y) - target
+        if progress and (k + 1) % 10 == 0:
+            progress(f"step {k + 1}/{iterations}, loss {best_loss / max(losses[0], 1e-300):.3g} of the start's")
+    return BoxFit(x=best, losses=losses, lipschitz=lipschitz)
+
+
+def nonnegative_bound(apply: Callable[[np.ndarray], np.ndarray], target: np.ndarray, upper: np.ndarray) -> float:
+    """A lower bound of min ||A x - b||^2 over 0 <= x <= upper for a non-negative A (light adds, never takes away):
+    A x >= 0 everywhere and is 0 wherever A upper is (no light of the projector reaches there), so no x does
+    better than b^2 summed over those values and over the values where b < 0."""
+    reach = apply(upper)
+    b = np.asarray(target, np.float64)
+    return float(np.sum(np.where((reach <= 0) | (b < 0), b * b, 0.0)))
+
+
+def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FLOOR_ITERATIONS,
+               progress: Callable[[str], None] | None = None) -> SideFloor | None:
+    """The real side's floor (module docstring): the best projector image for the real objects' cross term.
+
+    Args:
+        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through (its real scene in place).
+        result: the run's :class:`~lftransfer.transfer.TransferResult`.
+        gt: the ground truth at the view's resolution.
+        target_width: the metrics' width.
+        iterations: MFISTA steps.
+        progress: called with a message every 10 steps.
+
+    Returns:
+        :class:`SideFloor`, or None where no pixel shows only real objects or the truth has no cross term there.
+    """
+    t0 = time.perf_counter()
+    h, w = result.real_view.shape[:2]
+    m = _Metric.of(gt, w, target_width)
+    where = m.covered & ~m.synthetic
+    if not where.any() or not m.norm > 0:
+        return None
+    alpha = result.synthetic_view.alpha.astype(np.float32)[..., None]
+    d_syn = alpha * (result.synthetic_view.rgb - result.bounces[0].synthetic_view.rgb)
+    base = downsample(d_syn, m.factor)                        # the synthetic part on these pixels, held
+    targets = [np.where(where[..., None], m.pair[i] - base, 0.0) for i in range(2)]
+    op = ProjectorOperator(rig)
+    weight = 1.0 - alpha                                      # what of the real view the composite shows
+
+    def apply(x: np.ndarray) -> np.ndarray:
+        return np.where(where[..., None], downsample(weight * op.forward(x), m.factor), 0.0)
+
+    def transpose(r: np.ndarray) -> np.ndarray:
+        return op.adjoint(weight * m.up(r.astype(np.float32), (h, w)))
+
+    def error(x: np.ndarray) -> float:
+        return m.score(apply(x) + np.where(where[..., None], base, 0.0), where)
+
+    own = np.clip(op.of_codes(result.projected_image), 0.0, op.white)
+    fit = box_least_squares(apply, transpose, targets[0], own, op.white, iterations=iterations,
+                            progress=(lambda msg: progress(f"real floor: {msg}")) if progress else None)
+    best = fit.x
+    relaxed = error(best)
+    in_codes = error(op.of_codes(op.codes_of(best)))
+    transfer = error(op.of_codes(result.projected_image))
+    return SideFloor(floor=min(in_codes, transfer), transfer=transfer, relaxed=relaxed, noise=m.noise(where),
+                     pixels=int(where.sum()), iterations=iterations, seconds=time.perf_counter() - t0)
+
+
+def true_incident_lightfield(rig, world, angular_samples: int, *, spp: int = TRUE_LF_SPP, time_s: float = 0.0,
+                             seed: int = 0):
+    """The light field the real objects really send to the array, sampled as the LF camera samples it: the union
+    of the real and synthetic objects under the true lights (every interreflection between them), rendered at the
+    true array's lenslets on the run's angular grid, aperture-averaged over ``spp`` rays per entry, without sensor
+    noise or codec. (K, V, U, 3) :class:`~lftransfer.lightfield.LightField` on the true array, radiance travelling
+    towards the array (what a decoded capture holds)."""
+    from lftransfer.render.lights import EmitterLight, PointLight
+    from lftransfer.render.renderer import HalfSpaceRenderer
+    from lftransfer.scenes.frame import scene_in_frame
+
+    truth = rig.truth
+    union = scene_in_frame(world.at(time_s), truth.world_to_array())
+    renderer = HalfSpaceRenderer([*union.real, *union.synthetic], max_depth=union.render.max_depth)
+    lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float)) for lt in union.lights]
+    if union.emitters:
+        lights.append(EmitterLight(seed=seed))
+    return renderer.render_lightfield(truth.array, lights, angular_samples, angular_samples, side="real",
+                                      model="area", spp=spp, seed=seed)
+
+
+def synthetic_floor(rig, world, result, gt, settings, *, target_width: int = 256, spp: int = TRUE_LF_SPP,
+                    time_s: float = 0.0) -> SideFloor | None:
+    """The synthetic side's floor (module docstring): the synthetic objects lit by the true light field sampled as
+    the LF camera samples it, rendered by the run's renderer with its settings on the true rig model.
+
+    Args:
+        rig: the :class:`~lftransfer.sim.rig.SimRig` (its truth).
+        world: the hidden world (``Oracle.world``: real and synthetic objects, the true lights).
+        result: the run's :class:`~lftransfer.transfer.TransferResult`.
+        gt: the ground truth at the view's resolution.
+        settings: the run's ``TransferSettings``.
+        target_width: the metrics' width.
+        spp: rays per light field entry of the true light field.
+        time_s: the moment of an animated scene.
+
+    Returns:
+        :class:`SideFloor` scored against the ground truth's second seed, or None where no pixel shows a synthetic
+        object or the truth has no cross term.
+    """
+    from lftransfer.transfer.synthetic_side import SyntheticSide
+
+    t0 = time.perf_counter()
+    h, w = result.real_view.shape[:2]
+    m = _Metric.of(gt, w, target_width)
+    where = m.covered & m.synthetic
+    if not where.any() or not m.norm > 0:
+        return None
+    true_lf = true_incident_lightfield(rig, world, settings.angular_samples, spp=spp, time_s=time_s,
+                                       seed=settings.seed)
+    side = SyntheticSide(rig.truth, world.synthetic_part(), settings, time_s=time_s)
+    incident = side.incident_light(true_lf, settings.seed + 1)
+    lit = side.renderer.render_view(side.sensor, side.width, side.height, [incident], spp=settings.view_spp,
+                                    seed=settings.seed + 1000)
+    alpha = result.synthetic_view.alpha.astype(np.float32)[..., None]
+    d_real = (1.0 - alpha) * (result.real_view - result.real_view_direct)     # the real part there, held
+    d_transfer = alpha * (result.synthetic_view.rgb - result.bounces[0].synthetic_view.rgb)
+
+    def error(d_syn: np.ndarray) -> float:
+        return m.score(downsample(d_syn + d_real, m.factor), where)
+
+    return SideFloor(floor=error(alpha * lit.rgb), transfer=error(d_transfer), relaxed=None, noise=m.noise(where),
+                     pixels=int(where.sum()), seconds=time.perf_counter() - t0)
+
+
+def fidelity_floor(rig, world, result, gt, settings, *, target_width: int = 256,
+                   iterations: int = FLOOR_ITERATIONS, time_s: float = 0.0,
+                   progress: Callable[[str], None] | None = None) -> FidelityFloor:
+    """Both sides' floors of a run on the simulated rig and its error scored the same way (module docstring).
+
+    Args:
+        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through.
+        world: the hidden world (``Oracle.world``).
+        result: the run's :class:`~lftransfer.transfer.TransferResult`.
+        gt: the ground truth.
+        settings: the run's ``TransferSettings``.
+        target_width, iterations, time_s: as in :func:`real_floor` and :func:`synthetic_floor`.
+        progress: called once per side (the real side's steps go to the log).
+
+    Returns:
+        :class:`FidelityFloor`.
+    """
+    say = progress or (lambda _msg: None)
+    say("fidelity floor: the synthetic side (the true light field, sampled as the LF camera samples it)")
+    syn = synthetic_floor(rig, world, result, gt, settings, target_width=target_width, time_s=time_s)
+    say("fidelity floor: the real side (the best projector image)")
+    real = real_floor(rig, result, gt, target_width=target_width, iterations=iterations, progress=_log.info)
+    sides = [s for s in (real, syn) if s is not None]
+    floor = float(np.sqrt(sum(s.floor ** 2 for s in sides))) if sides else None
+    transfer = float(np.sqrt(sum(s.transfer ** 2 for s in sides))) if sides else None
+    notes = ["both sides scored against the ground truth's second seed, its noise taken off the squared errors; the "
+             "real side's floor was fitted to its first seed",
+             "the real side's floor is the better of the optimum encoded into projector codes and the transfer's own "
+             "projection"]
+    return FidelityFloor(real=real, synthetic=syn, floor=floor, transfer=transfer,
+                         transfer_over_floor=transfer / floor if floor else None, notes=notes)
