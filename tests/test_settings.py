@@ -99,7 +99,7 @@ def _run_counting(scene, out, options, monkeypatch):
     return report, seen, given
 
 
-@pytest.mark.parametrize("case", ["compare_and_control", "calibration_file", "unverified_point"])
+@pytest.mark.parametrize("case", ["compare_and_control", "calibration_file", "unverified_point", "quiet_no_floor"])
 def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it_used(variant, tiny, tmp_path,
                                                                                       case, monkeypatch):
     """The progress total (count_run_steps) equals the steps the run makes, on runs that take every branch:
@@ -112,9 +112,12 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
         path = nominal_calibration(tiny).write(tmp_path / "given" / "calibration.json")
         options = RunOptions(settings=Overrides(bounces=1), calibration=path, truth_seed=3, use_cache=False,
                              capture_spp=1)
-    else:
+    elif case == "unverified_point":
         options = RunOptions(settings=Overrides(bounces=2, lighting_model="point"), rig_model="nominal",
                              verify=False, capture_spp=1)
+    else:               # a quiet reference (rounds of unknown number), no fidelity floor
+        options = RunOptions(settings=Overrides(bounces=1, gt_spp=16, quiet_reference=True), rig_model="oracle",
+                             truth_seed=3, use_cache=False, capture_spp=1, floor=False)
     report, seen, given = _run_counting(tiny, tmp_path / "out", options, monkeypatch)
     assert seen == list(range(1, len(seen) + 1))
     assert seen[-1] == count_run_steps(tiny, options)
@@ -132,6 +135,11 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
         assert [w for w in report["warnings"] if "no light section" in w and str(path) in w]
     else:
         assert not [w for w in report["warnings"] if "no light section" in w]
+    if case == "quiet_no_floor":
+        assert report["reference"]["met"] and report["reference"]["first_spp"] == 16
+        assert report["fidelity_floor"] is None and "--no-floor" in report["undefined_metrics"]["fidelity_floor"]
+    elif case == "compare_and_control":     # the simulated rig, verified: the floor is found, the reference fixed
+        assert report["fidelity_floor"]["floor"] is not None and report["reference"] is None
 
 
 def test_the_command_line_reports_the_settings_it_resolved(variant, tiny, tmp_path):

@@ -34,6 +34,8 @@ class Overrides:
         lighting_model, reconstruction, projection, window, renderer: one value of the choice's ``Literal``
             (:mod:`lftransfer.choices`).
         gt_spp: samples per pixel of each ground-truth render (>= 1).
+        quiet_reference: render the ground truth in rounds until its noise on the cross term is at most a third
+            of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
         compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
             reconstruction, projection and window only under the area model), e.g.
             ``{"lighting_model": ("area", "point")}``.
@@ -46,6 +48,7 @@ class Overrides:
     window: choices.Window | None = None
     renderer: choices.Renderer | None = None
     gt_spp: int | None = None
+    quiet_reference: bool | None = None
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self) -> None:
@@ -91,7 +94,8 @@ class RunSettings:
     Attributes:
         transfer: the transfer's settings (bounces, lighting model, reconstruction, projection, window, renderer,
             angular samples, aperture samples, rays per light field entry and per view pixel).
-        gt_spp: samples per pixel of each ground-truth render.
+        gt_spp: samples per pixel of each ground-truth render (with ``quiet_reference``, of its first round).
+        quiet_reference: render the ground truth until it is quiet enough (:mod:`lftransfer.sim.reference`).
         comparisons: the re-runs measured beside the run: (choice, value) pairs, each the run with that one choice
             changed, in the order of :data:`COMPARABLE`; none that equals the run's own value, and no
             reconstruction, projection or window unless the area model.
@@ -103,6 +107,7 @@ class RunSettings:
     gt_spp: int
     comparisons: tuple[tuple[str, str], ...] = ()
     reruns: tuple[TransferSettings, ...] = ()
+    quiet_reference: bool = False
 
     @property
     def bounces(self) -> int:
@@ -116,7 +121,9 @@ class RunSettings:
 
     def to_json(self) -> dict:
         """The settings as JSON (the run's report and a sequence's key write them)."""
+        # quiet_reference only where asked for: a sequence's key of the same settings stays as it was
         return {"transfer": asdict(self.transfer), "gt_spp": self.gt_spp,
+                **({"quiet_reference": True} if self.quiet_reference else {}),
                 "comparisons": [list(c) for c in self.comparisons]}
 
 
@@ -162,4 +169,5 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
                                     **{**transfer_changes, "bounce_views": False}).transfer
                    for name, value in comparisons)
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
-    return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns)
+    return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
+                       quiet_reference=bool(overrides.quiet_reference))

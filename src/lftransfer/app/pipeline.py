@@ -237,8 +237,15 @@ def count_run_steps(scene, options: RunOptions) -> int:
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
     floor = FLOOR_STEPS if floor_skipped(options) is None else 0
-    return (1 + calibration + count_steps(settings.transfer) + (6 if _verifies(options) else 0) + floor + reruns
-            + control + 1)
+    return (1 + calibration + count_steps(settings.transfer) + (gt_steps(settings) if _verifies(options) else 0)
+            + floor + reruns + control + 1)
+
+
+def gt_steps(settings: RunSettings) -> int:
+    """Progress steps of a run's ground truth: its 6 renders, or a quiet reference's rounds at most."""
+    from lftransfer.sim.reference import MAX_ROUNDS
+
+    return 1 + MAX_ROUNDS if settings.quiet_reference else 6
 
 
 def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
@@ -333,6 +340,7 @@ class _Run:
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     undefined: dict = field(default_factory=dict)
+    reference: object = None          # what a quiet reference reached (sim.reference.Reference)
 
     def step(self, msg: str) -> None:
         self.done += 1
@@ -419,19 +427,46 @@ class _Run:
         from lftransfer.sim.metrics import evaluate, gt_noise_verdict
 
         t = time.perf_counter()
-        gt = self.opened.oracle.ground_truth(spp=self.settings.gt_spp, use_cache=self.options.use_cache,
-                                             progress=self.step, warn=self.warning)
+        if self.settings.quiet_reference:
+            gt = self.quiet_ground_truth(result)
+        else:
+            gt = self.opened.oracle.ground_truth(spp=self.settings.gt_spp, use_cache=self.options.use_cache,
+                                                 progress=self.step, warn=self.warning)
         self.timings["ground_truth"] = time.perf_counter() - t
         metrics = evaluate(result, gt)
         row = {k: getattr(metrics, k) for k in BY_MODEL_KEYS}
         for table in tables.values():
             table[next(iter(table))] = row
-        noisy = gt_noise_verdict(metrics, self.settings.gt_spp)
+        noisy = gt_noise_verdict(metrics, self.reference.spp if self.reference is not None else self.settings.gt_spp)
         gt_spp_needed = None
         if noisy is not None:
             self.warning(noisy.message())
             gt_spp_needed = noisy.spp_needed
         return gt, metrics, tables, gt_spp_needed
+
+    def quiet_ground_truth(self, result):
+        """The ground truth rendered until its noise on the cross term is at most a third of the run's error
+        (:mod:`lftransfer.sim.reference`); what it reached goes to the report's ``reference``."""
+        from lftransfer.sim.metrics import composites, cross_transfer_error, metric_factor
+        from lftransfer.sim.reference import MAX_ROUNDS
+
+        comp_n, comp_0 = composites(result)
+
+        def judge(gt):
+            check = cross_transfer_error(comp_n, comp_0, gt)
+            return check.error, check.gt_noise
+
+        gt, self.reference = self.opened.oracle.quiet_ground_truth(
+            judge, spp=self.settings.gt_spp, multiple=metric_factor(comp_n.shape[1]),
+            use_cache=self.options.use_cache, progress=self.step, warn=self.warning)
+        for _ in range(1 + MAX_ROUNDS - self.reference.rounds):
+            self.step("ground truth: quiet enough")
+        if not self.reference.met:
+            self.warning(f"the quiet reference stopped at {self.reference.spp} samples per pixel with its noise on "
+                         f"the cross term at {self.reference.ratio:.2g} of the error (target "
+                         f"{self.reference.target:.2g})" if self.reference.ratio is not None else
+                         "the quiet reference has no error to judge (no cross term)")
+        return gt
 
     def floor(self, result, gt):
         """Stage 3b: the fidelity floor (through the oracle), where the run can find one; else its reason in
@@ -509,6 +544,7 @@ class _Run:
             "synthetic_floor": floor.synthetic.floor if floor is not None and floor.synthetic is not None else None,
             "transfer_over_floor": floor.transfer_over_floor if floor is not None else None,
             "fidelity_floor": floor.to_json() if floor is not None else None,
+            "reference": self.reference.to_json() if self.reference is not None else None,
             "undefined_metrics": undefined,
             "warnings": self.warnings,
             "gt_spp_needed": gt_spp_needed,

@@ -310,6 +310,12 @@ def demo_tables(s: StoredRun) -> list[str]:
         why = (d.get("undefined_metrics") or {}).get("negative_control", "not run")
         out += [f"Negative control: not run ({why}).", ""]
 
+    ref = d.get("reference")
+    if isinstance(ref, dict):
+        out += [f"Quiet reference (`reference`): {num(ref.get('spp'))} samples per pixel in the objects' box over "
+                f"{num(ref.get('rounds'))} rounds ({num(ref.get('samples'))} camera samples in all); the ground "
+                f"truth's noise on the cross term {num(ref.get('noise'))}, {num(ref.get('ratio'))} of the error "
+                f"(target {num(ref.get('target'))}: {'met' if ref.get('met') else 'not met'}).", ""]
     floor = d.get("fidelity_floor")
     if isinstance(floor, dict):
         out += ["The fidelity floor (`fidelity_floor`, docs/architecture.md \"The fidelity floor\"): each side's best "

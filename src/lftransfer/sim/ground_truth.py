@@ -50,7 +50,7 @@ class GroundTruth:
         return self.union.mean(axis=0)
 
 
-def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
+def _inputs_hash(scene, spp: int, seeds: tuple[int, ...], crop: tuple[int, int, int, int] | None = None) -> str:
     """SHA-256 (hex) of everything the ground-truth renders depend on."""
     import mitsuba
 
@@ -69,6 +69,8 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...]) -> str:
         "light": _lights_key(scene.lights), "view": scene.view.model_dump(mode="json"),
         "spp": spp, "seeds": list(seeds), "depth": GT_MAX_DEPTH, "mitsuba": mitsuba.__version__, "v": 1,
     }
+    if crop is not None:                     # whole frames hash as they did before crops existed
+        payload["crop"] = list(crop)
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
@@ -82,13 +84,16 @@ STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real 
 
 def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
                         progress: Callable[[str], None] | None = None,
-                        warn: Callable[[str], None] | None = None) -> GroundTruth:
+                        warn: Callable[[str], None] | None = None,
+                        crop: tuple[int, int, int, int] | None = None) -> GroundTruth:
     """Path trace the union, real-alone and synthetic-alone scenes from the view camera.
 
     Args:
         scene: ``lftransfer.scenes.SceneConfig`` (its ``real`` objects are the hidden truth).
         spp: samples per pixel of each render.
         seeds: the two independent seeds.
+        crop: (x, y, width, height) of the view's pixels to render (the film's crop window, so the samples go
+            there only); None: the whole frame. The images are of the crop's size.
         use_cache: read and write the cache (:mod:`lftransfer.sim.gt_cache`); an entry that fails its checks is
             rendered again and replaced.
         progress: called before each render.
@@ -100,9 +105,10 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
     from lftransfer.backend import mitsuba
 
     w, h = scene.view.resolution
-    inputs = _inputs_hash(scene, spp, seeds)
+    inputs = _inputs_hash(scene, spp, seeds, crop)
+    shape = (h, w) if crop is None else (crop[3], crop[2])
     if use_cache:
-        cached = read_entry(inputs, (h, w, STACK_CHANNELS))
+        cached = read_entry(inputs, (*shape, STACK_CHANNELS))
         if isinstance(cached, np.ndarray):
             return _unpack(cached)
         if isinstance(cached, CacheProblem) and warn is not None:
@@ -113,7 +119,13 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
              {"type": "point", "position": list(map(float, lt.position)),
               "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
              for i, lt in enumerate(scene.lights)}
-    extra = {"sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
+    sensor = sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp)
+    if crop is not None:
+        x, y, cw, ch = map(int, crop)
+        if not (0 <= x and 0 <= y and cw >= 1 and ch >= 1 and x + cw <= w and y + ch <= h):
+            raise ValueError(f"crop {crop} is not inside the {w} x {h} view")
+        sensor["film"].update(crop_offset_x=x, crop_offset_y=y, crop_width=cw, crop_height=ch)
+    extra = {"sensor": sensor,
              "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
              **light}
     images: dict[str, list[np.ndarray]] = {}

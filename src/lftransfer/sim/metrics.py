@@ -15,8 +15,9 @@ from lftransfer.composite import composite
 from lftransfer.sim.ground_truth import GroundTruth, single_seed
 
 __all__ = ["CrossCheck", "CrossSide", "Evaluation", "IDENTICAL", "NO_CROSS", "NO_LIGHT", "NO_PIXELS",
-           "NegativeControl", "NoiseVerdict", "cross_by_side", "cross_term_truth", "cross_transfer_error",
-           "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control", "object_mask", "psnr"]
+           "NegativeControl", "NoiseVerdict", "composites", "cross_by_side", "cross_term_truth",
+           "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control",
+           "object_mask", "psnr"]
 
 def downsample(image: np.ndarray, factor: int) -> np.ndarray:
     """Box-downsample the first two axes by an integer factor (cropping the remainder)."""
@@ -221,6 +222,15 @@ def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], covered: np.nd
     return out
 
 
+def composites(result) -> tuple[np.ndarray, np.ndarray]:
+    """(the composite after the exchange, the composite without it) of a transfer result: what the cross term of
+    :func:`cross_transfer_error` is the difference of, (H, W, 3) each."""
+    alpha = result.synthetic_view.alpha
+    comp_n = composite(result.synthetic_view.rgb, alpha, result.real_view)
+    comp_0 = composite(result.bounces[0].synthetic_view.rgb, alpha, result.real_view_direct)
+    return comp_n, comp_0
+
+
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
     """Metrics of a transfer result against the ground truth (docs/architecture.md, "Verification").
 
@@ -236,10 +246,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
         :class:`Evaluation`.
     """
     f = metric_factor(result.real_view.shape[1], target_width)
-    alpha = result.synthetic_view.alpha
-    comp_n = composite(result.synthetic_view.rgb, alpha, result.real_view)
-    s0 = result.bounces[0].synthetic_view
-    comp_0 = composite(s0.rgb, alpha, result.real_view_direct)
+    comp_n, comp_0 = composites(result)
     ds = lambda x: downsample(x, f)  # noqa: E731
     union = ds(gt.image)
     peak = float(union.max())

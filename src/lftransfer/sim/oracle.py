@@ -45,6 +45,15 @@ class Oracle:
         return render_ground_truth(self.world if world is None else world, spp=spp, use_cache=use_cache,
                                    progress=progress, warn=warn)
 
+    def quiet_ground_truth(self, judge, *, spp: int, multiple: int = 1, use_cache: bool = True,
+                           progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
+        """The ground truth rendered in rounds until its noise on the cross term is at most a third of the error
+        ``judge`` measures (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth, ``Reference``)."""
+        from lftransfer.sim.reference import quiet_ground_truth
+
+        return quiet_ground_truth(self.world, judge, spp=spp, multiple=multiple, use_cache=use_cache,
+                                  progress=progress, warn=warn)
+
     def fidelity_floor(self, rig, result, gt, settings, *, progress: Callable[[str], None] | None = None):
         """The fidelity floor of a run on the simulated rig ``rig`` (:func:`lftransfer.sim.floor.fidelity_floor`:
         both sides' floors and the run's error scored as they are).

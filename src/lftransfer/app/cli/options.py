@@ -20,9 +20,9 @@ from rich.markup import escape
 
 from lftransfer import choices
 
-__all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache",
-           "OutDir", "Projection", "Quick", "Reconstruction", "Renderer", "RigArgs", "SceneArg", "TruthArgs",
-           "Window", "Workers", "choice_check", "flag", "metavar", "option", "option_groups"]
+__all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache", "NoFloor",
+           "OutDir", "Projection", "Quick", "QuietReference", "Reconstruction", "Renderer", "RigArgs", "SceneArg",
+           "TruthArgs", "Window", "Workers", "choice_check", "flag", "metavar", "option", "option_groups"]
 
 
 def metavar(choice) -> str:
@@ -69,6 +69,10 @@ Quick = Annotated[bool, flag("--quick", "Quarter resolution: every device at a q
                                         "angular samples (at least 8), a quarter of the ground-truth samples (at "
                                         "least 16).")]
 NoCache = Annotated[bool, flag("--no-cache", "Render the ground truth again (do not read or write the cache).")]
+QuietReference = Annotated[bool, flag("--quiet-reference", "Render the ground truth in rounds (the objects' pixels "
+                                                             "only after the first) until its noise on the cross "
+                                                             "term is at most a third of the error; --gt-spp is the "
+                                                             "first round's samples.")]
 NoFloor = Annotated[bool, flag("--no-floor", "Skip the fidelity floor (on the simulated rig: the best any algorithm "
                                              "could do through this rig, each side; a few hundred renders).")]
 MaxMemory = Annotated[Optional[str], option(

@@ -15,8 +15,8 @@ from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, progress_bar,
                                        rig_options, row)
 from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, NoFloor,
-                                        OutDir, Projection, Quick, Reconstruction, Renderer, RigArgs, SceneArg,
-                                        TruthArgs, Window, flag, option)
+                                        OutDir, Projection, Quick, QuietReference, Reconstruction, Renderer, RigArgs,
+                                        SceneArg, TruthArgs, Window, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides
 
@@ -105,6 +105,12 @@ def summary(report: dict, out: Path) -> None:
         for name, m in by_choice.items():
             if len(by_choice) > 1 and m.get("cross_transfer_rel_error") is not None:
                 row(table, f"cross error, {name} {label}", f"{m['cross_transfer_rel_error']:.4g}")
+    ref = report.get("reference")
+    if ref is not None:
+        row(table, "quiet reference", f"{ref['spp']} samples per pixel in {ref['rounds']} rounds; noise "
+                                      f"{ref['noise']:.3g} = {ref['ratio']:.2g} of the error (target "
+                                      f"{ref['target']:.2g}{', met' if ref['met'] else ', NOT met'})"
+            if ref.get("ratio") is not None else "no error to judge")
     floor = report.get("fidelity_floor")
     if floor is not None:
         row(table, "fidelity floor (real / synthetic side)", floor_line(floor))
@@ -132,7 +138,8 @@ def register(app: typer.Typer) -> None:
     @command(app)
     def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
              no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-             rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False) -> None:
+             rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False,
+             quiet_reference: QuietReference = False) -> None:
         """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
         transfer, check against ground truth (both lighting models, both reconstructions, both projections, both
         windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
@@ -140,7 +147,8 @@ def register(app: typer.Typer) -> None:
 
         scene = load(None, quick)
         rig_opts = rig_options(scene, truth, rig)
-        options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer),
+        options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer,
+                                                              quiet_reference=quiet_reference or None),
                              use_cache=not no_cache, negative_control=True, floor=not no_floor, **rig_opts)
         check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                           bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
@@ -156,14 +164,16 @@ def register(app: typer.Typer) -> None:
                                                               "re-run.")] = False,
             gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
             renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-            max_memory: MaxMemory = None, no_floor: NoFloor = False) -> None:
+            max_memory: MaxMemory = None, no_floor: NoFloor = False,
+            quiet_reference: QuietReference = False) -> None:
         """Run light field transfer on any scene file with a rig (calibrating it first)."""
         from lftransfer.app.pipeline import RunOptions
 
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
         asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                     projection=projection, window=window, gt_spp=gt_spp, renderer=renderer)
+                     projection=projection, window=window, gt_spp=gt_spp, renderer=renderer,
+                     quiet_reference=quiet_reference or None)
         settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
         options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, **rig_opts)
         check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
