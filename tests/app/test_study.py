@@ -44,7 +44,7 @@ def test_01_bad_study_files_name_the_field(tmp_path):
         (STUDY.format(extra="").replace('"tiny.toml"', '"fig9"'), "neither a built-in scene"),
         (STUDY.format(extra="").replace('name = "point"', 'name = "box"'), "setting names must differ"),
         (STUDY.format(extra="").replace('lighting_model = "point"', 'lighting_model = "magic"'),
-         "setting[1].render (point) on tiny.toml"),
+         "setting[1] (point) on tiny.toml"),
         (STUDY.format(extra="[other]\nx = 1"), "other: unknown table"),
         (STUDY.format(extra="").replace("bounces = 1", "bounces = -1"), "bounces"),
     ]
@@ -123,3 +123,49 @@ def test_04_the_command(variant, tmp_path):
     assert bad.exit_code == 2 and "study.toml" in text and "bounces" in text, text
     missing = runner.invoke(app, ["study", str(tmp_path / "none.toml")])
     assert missing.exit_code == 2 and "no such file" in " ".join(missing.output.split())
+
+
+def test_05_the_rig_designer_redesigns_the_array_and_finds_the_floors(variant, tmp_path):
+    """Settings with array_pitch_mm: the array keeps its extent and f-number, the devices their pixels per
+    lenslet; each cell is transferred on its own rig and carries the fidelity floor (the real side's never above
+    the transfer's own, scored alike); the pitch plot is written; the built-in pitch study loads."""
+    from lftransfer.app.study import FLOOR_METRICS, builtin_studies, builtin_study, redesigned_array
+    from lftransfer.scenes import load_scene
+
+    write_tiny_scene(tmp_path / "tiny.toml")
+    rig = load_scene(tmp_path / "tiny.toml").rig
+    half = redesigned_array(rig, rig.pitch_mm / 2)
+    assert (half["rows"], half["cols"]) == (2 * rig.rows, 2 * rig.cols)
+    assert half["focal_mm"] / half["pitch_mm"] == pytest.approx(rig.focal_mm / rig.pitch_mm)
+    assert half["lf_camera"] == [2 * rig.lf_camera[0], 2 * rig.lf_camera[1]]
+    path = tmp_path / "pitch.toml"
+    path.write_text("""
+[study]
+title = "pitch"
+scenes = ["tiny.toml"]
+truth_seeds = [1]
+rig_model = "oracle"
+bounces = 1
+floor = true
+
+[[setting]]
+name = "coarse"
+array_pitch_mm = 25.4
+
+[[setting]]
+name = "fine"
+array_pitch_mm = 19.05
+""", encoding="utf-8")
+    study = load_study(path)
+    assert study.scene("tiny.toml", study.config.setting[1]).rig.rows == 4
+    out = tmp_path / "out"
+    result = run_study(study, out)
+    assert result.pitches == {"coarse": 25.4, "fine": 19.05}
+    for c in result.cells:
+        assert set(c.metrics) == set(METRICS) | set(FLOOR_METRICS)
+        assert c.metrics["real_floor"] is not None and c.metrics["floor"] > 0
+    assert result.cells[0].metrics["cross_transfer_rel_error"] != result.cells[1].metrics["cross_transfer_rel_error"]
+    assert (out / "pitch.png").read_bytes()[:4] == b"\x89PNG"
+    assert "floor" in (out / "study.md").read_text()
+    assert "pitch" in builtin_studies() and load_study(builtin_study("pitch")).config.floor
+

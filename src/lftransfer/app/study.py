@@ -21,6 +21,13 @@ path-traced ground truth (:func:`lftransfer.sim.metrics.evaluate`). Example::
     name = "linear"
     render = { reconstruction = "linear" }
 
+A setting may change the rig too (``rig = { angular_samples = 12, projector_bits = 10 }``: any field of the scene's
+``[rig]``), and ``array_pitch_mm`` redesigns the lens array: lenslets of that pitch over the scene's array's extent
+(rows and columns scaled, the focal length keeping the scene's f-number), the LF camera and the projector scaled
+to keep their pixels per lenslet. With ``floor = true`` each cell also finds the fidelity floor
+(:mod:`lftransfer.sim.floor`), and a study whose settings all set ``array_pitch_mm`` plots the error and the
+floors against the pitch (``pitch.png``): the rig designer (``lft study pitch``, the built-in pitch study).
+
 The work comes in two rounds: first each (scene, seed) pair gets its rig model (calibrated, if asked, once for
 every setting) and its ground truth (rendered once, kept in the ground-truth cache); then every cell. Both rounds
 run in this process or as tasks on a Ray cluster (:mod:`lftransfer.app.cluster`), with the same results. Each
@@ -47,8 +54,9 @@ from lftransfer.imageio_utils import write_json, write_text
 from lftransfer.scenes import SceneError, builtin_scene, builtin_scenes, load_scene, with_overrides
 from lftransfer.validation import read_json, read_toml, validation_message
 
-__all__ = ["METRICS", "Study", "StudyCell", "StudyConfig", "StudyError", "StudyResult", "StudySetting", "cell_key",
-           "load_study", "run_study", "write_study_outputs"]
+__all__ = ["FLOOR_METRICS", "METRICS", "Study", "StudyCell", "StudyConfig", "StudyError", "StudyResult",
+           "StudySetting", "builtin_studies", "builtin_study", "cell_key", "load_study", "redesigned_array",
+           "run_study", "write_study_outputs"]
 
 # metric -> (label, unit, lower is better, short label); the cells' columns (lftransfer.sim.metrics.evaluate)
 METRICS = {
@@ -58,6 +66,13 @@ METRICS = {
     "psnr_objects_db_direct_only": ("PSNR over the objects, direct light only", "dB", False, "PSNR objects, direct"),
     "psnr_db": ("PSNR, every pixel", "dB", False, "PSNR all pixels"),
 }
+# the fidelity floor's columns, in studies with floor = true (lftransfer.sim.floor, in the error's units)
+FLOOR_METRICS = {
+    "floor_transfer": ("the transfer's error, scored as the floors are", "relative", True, "transfer (scored)"),
+    "floor": ("fidelity floor, both sides", "relative", True, "floor"),
+    "real_floor": ("real side's floor", "relative", True, "real floor"),
+    "synthetic_floor": ("synthetic side's floor", "relative", True, "synthetic floor"),
+}
 CELLS = "cells"
 
 
@@ -66,11 +81,33 @@ class StudyError(ValueError):
 
 
 class StudySetting(BaseModel):
-    """One setting of a study: a name and changes to every scene's ``[render]`` table."""
+    """One setting of a study: a name, changes to every scene's ``[render]`` and ``[rig]`` tables, and optionally a
+    lens array redesigned at another pitch (module docstring)."""
 
     model_config = ConfigDict(extra="forbid")
     name: str = Field(min_length=1, max_length=40, pattern=r"^[A-Za-z0-9_.+-]+$")
     render: dict[str, object] = Field(default_factory=dict)
+    rig: dict[str, object] = Field(default_factory=dict)
+    array_pitch_mm: Optional[float] = Field(default=None, gt=0)
+
+    @property
+    def changes_rig(self) -> bool:
+        return bool(self.rig) or self.array_pitch_mm is not None
+
+
+def redesigned_array(rig, pitch_mm: float) -> dict:
+    """``[rig]`` changes for a lens array of ``pitch_mm`` over the same extent as ``rig``'s: rows and columns
+    scaled by the pitch ratio (at least 2 each), the focal length keeping the f-number (focal / pitch), the LF camera
+    and projector keeping their pixels per lenslet (even sizes)."""
+    k = rig.pitch_mm / pitch_mm
+
+    def even(n: float) -> int:
+        return max(2, 2 * int(round(n / 2)))
+
+    return {"pitch_mm": float(pitch_mm), "focal_mm": float(rig.focal_mm * pitch_mm / rig.pitch_mm),
+            "rows": max(2, int(round(rig.rows * k))), "cols": max(2, int(round(rig.cols * k))),
+            "lf_camera": [even(rig.lf_camera[0] * k), even(rig.lf_camera[1] * k)],
+            "projector": [even(rig.projector[0] * k), even(rig.projector[1] * k)]}
 
 
 class StudyConfig(BaseModel):
@@ -84,6 +121,7 @@ class StudyConfig(BaseModel):
     bounces: int = Field(default=choices.DEFAULT_BOUNCES, ge=0, le=choices.MAX_BOUNCES)
     quick: bool = False
     gt_spp: Optional[int] = Field(default=None, ge=1)
+    floor: bool = False
     setting: list[StudySetting] = Field(min_length=1)
 
     @field_validator("truth_seeds")
@@ -120,15 +158,43 @@ class Study:
     digest: str
 
     def scene(self, label: str, setting: StudySetting | None = None):
-        """The scene ``label``, with ``setting``'s changes to its ``[render]`` table."""
+        """The scene ``label``, with ``setting``'s changes to its ``[rig]`` (the redesigned array first) and
+        ``[render]`` tables."""
         scene = self.scenes[label]
-        return scene if setting is None or not setting.render else with_overrides(scene, render=setting.render)
+        if setting is None:
+            return scene
+        rig = {**(redesigned_array(scene.rig, setting.array_pitch_mm) if setting.array_pitch_mm else {}),
+               **setting.rig}
+        changes = {**({"rig": rig} if rig else {}), **({"render": setting.render} if setting.render else {})}
+        return with_overrides(scene, **changes) if changes else scene
+
+    @property
+    def metrics(self) -> dict:
+        """The cells' columns: :data:`METRICS`, and :data:`FLOOR_METRICS` where the study finds floors."""
+        return {**METRICS, **(FLOOR_METRICS if self.config.floor else {})}
 
     def gt_spp(self, label: str) -> int:
         """Samples per pixel of the ground truth of scene ``label``: the study's ``gt_spp``, else the scene's."""
         from lftransfer.settings import Overrides, resolve_settings
 
         return resolve_settings(self.scenes[label], Overrides(gt_spp=self.config.gt_spp)).gt_spp
+
+
+def builtin_studies() -> list[str]:
+    """Names of the studies that come with lftransfer (``lft study NAME``)."""
+    return sorted(p.stem for p in (Path(__file__).parent / "studies").glob("*.toml"))
+
+
+def builtin_study(name: str) -> Path:
+    """The file of the built-in study ``name``.
+
+    Raises:
+        StudyError: no such built-in study (the message lists them).
+    """
+    path = Path(__file__).parent / "studies" / f"{name}.toml"
+    if not path.is_file():
+        raise StudyError(f"{name!r} is not a built-in study ({', '.join(builtin_studies())})")
+    return path
 
 
 def load_study(path: str | Path) -> Study:
@@ -175,7 +241,7 @@ def load_study(path: str | Path) -> Study:
             try:
                 study.scene(label, setting)
             except SceneError as exc:
-                raise StudyError(f"{path}: setting[{j}].render ({setting.name}) on {label}: {exc}") from None
+                raise StudyError(f"{path}: setting[{j}] ({setting.name}) on {label}: {exc}") from None
     return study
 
 
@@ -222,6 +288,8 @@ class StudyResult:
         bounces: N.
         cluster: where it ran (None: in one process).
         seconds: wall time of the whole study, s (every run of a resumed one, added up).
+        floor: whether the cells carry the fidelity floor (:data:`FLOOR_METRICS`).
+        pitches: setting -> its redesigned array's pitch, mm (settings with ``array_pitch_mm``).
     """
 
     title: str
@@ -233,6 +301,13 @@ class StudyResult:
     cells: list[StudyCell] = field(default_factory=list)
     cluster: dict | None = None
     seconds: float = 0.0
+    floor: bool = False
+    pitches: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def metrics(self) -> dict:
+        """The cells' columns: :data:`METRICS`, and :data:`FLOOR_METRICS` where the cells carry floors."""
+        return {**METRICS, **(FLOOR_METRICS if self.floor else {})}
 
     def cell(self, scene: str, seed: int, setting: str) -> StudyCell | None:
         return next((c for c in self.cells if (c.scene, c.seed, c.setting) == (scene, seed, setting)), None)
@@ -257,20 +332,21 @@ class StudyResult:
     def to_json(self) -> dict:
         return {**{k: v for k, v in asdict(self).items() if k != "cells"},
                 "cells": [asdict(c) for c in self.cells],
-                "summary": {m: self.summary(m) for m in METRICS}}
+                "summary": {m: self.summary(m) for m in self.metrics}}
 
     def markdown(self) -> str:
         """The table: one row per scene and setting, the mean over the seeds of each metric (range in brackets
         where there are several seeds)."""
-        head = "| scene | setting | " + " | ".join(f"{METRICS[m][3]} ({METRICS[m][1]})" for m in METRICS) + " |"
-        rows = [head, "|" + "---|" * (len(METRICS) + 2)]
-        tables = {m: {(r["scene"], r["setting"]): r for r in self.summary(m)} for m in METRICS}
+        metrics = self.metrics
+        head = "| scene | setting | " + " | ".join(f"{metrics[m][3]} ({metrics[m][1]})" for m in metrics) + " |"
+        rows = [head, "|" + "---|" * (len(metrics) + 2)]
+        tables = {m: {(r["scene"], r["setting"]): r for r in self.summary(m)} for m in metrics}
         for scene in self.scenes:
             for setting in self.settings:
                 cells = []
-                for m in METRICS:
+                for m in metrics:
                     r = tables[m][(scene, setting)]
-                    fmt = "{:.2f}" if METRICS[m][1] == "dB" else "{:.3f}"
+                    fmt = "{:.2f}" if metrics[m][1] == "dB" else "{:.3f}"
                     if r["mean"] is None:
                         cells.append("n/a")
                     elif r["n"] > 1:
@@ -314,23 +390,38 @@ class StudyWorker(Worker):
         return known.model, known.scene
 
     def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
-        """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared)."""
+        """Round 2: one cell (its ground truth read from the cache, or rendered again where it is not shared). A
+        setting that changes the rig gets a simulated rig of its own and its own rig model (the same hidden world,
+        so the same ground truth)."""
+        from lftransfer.app.pipeline import RunOptions
+        from lftransfer.app.rigs import knowledge, open_rig
         from lftransfer.settings import Overrides, resolve_settings
         from lftransfer.sim.metrics import evaluate
         from lftransfer.transfer.bounce import run_transfer
 
         setting = next(s for s in self.study.config.setting if s.name == setting_name)
-        ps = with_overrides(ps, render=setting.render) if setting.render else ps
-        opened = self._opened(label, seed)
-        settings = resolve_settings(self.study.scene(label, setting), Overrides(bounces=self.study.config.bounces)).transfer
+        scene = self.study.scene(label, setting)
+        if setting.changes_rig:
+            opened = open_rig(scene, RunOptions(truth_seed=seed))
+            known = knowledge(opened, scene, self.study.config.rig_model)
+            model, ps = known.model, known.scene
+        else:
+            opened = self._opened(label, seed)
+            ps = with_overrides(ps, render=setting.render) if setting.render else ps
+        settings = resolve_settings(scene, Overrides(bounces=self.study.config.bounces)).transfer
         t0 = time.perf_counter()
         opened.start_frame(0)
         result = run_transfer(opened.rig, model, ps, settings)
         seconds = time.perf_counter() - t0
         gt = opened.oracle.ground_truth(spp=self.study.gt_spp(label), use_cache=use_cache)
         metrics = evaluate(result, gt)
-        return StudyCell(scene=label, seed=int(seed), setting=setting_name,
-                         metrics={m: getattr(metrics, m) for m in METRICS}, seconds=seconds)
+        values = {m: getattr(metrics, m) for m in METRICS}
+        if self.study.config.floor:
+            floor = opened.oracle.fidelity_floor(opened.rig, result, gt, settings)
+            values.update(floor_transfer=floor.transfer, floor=floor.floor,
+                          real_floor=floor.real.floor if floor.real is not None else None,
+                          synthetic_floor=floor.synthetic.floor if floor.synthetic is not None else None)
+        return StudyCell(scene=label, seed=int(seed), setting=setting_name, metrics=values, seconds=seconds)
 
 
 def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = None, resume: bool = False,
@@ -356,7 +447,8 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
     pairs = [(label, seed) for label in c.scenes for seed in c.truth_seeds]
     total = len(pairs) * len(c.setting)
     result = StudyResult(title=c.title, scenes=list(c.scenes), seeds=list(c.truth_seeds),
-                         settings=[s.name for s in c.setting], rig_model=c.rig_model, bounces=c.bounces)
+                         settings=[s.name for s in c.setting], rig_model=c.rig_model, bounces=c.bounces,
+                         floor=c.floor, pitches={s.name: s.array_pitch_mm for s in c.setting if s.array_pitch_mm})
     cells_dir = out / CELLS
     marker = out / "study_key.json"
     before = 0.0                                   # seconds the earlier runs of a resumed study took

@@ -17,7 +17,7 @@ from lftransfer.app import figures
 from lftransfer.app.templating import environment
 from lftransfer.imageio_utils import write_bytes, write_text
 
-__all__ = ["PANELS", "study_figure", "write_study_report"]
+__all__ = ["PANELS", "pitch_figure", "study_figure", "write_study_report"]
 
 PANELS = ("cross_transfer_rel_error", "psnr_objects_db")
 
@@ -67,19 +67,58 @@ def study_figure(result):
     return fig
 
 
+def pitch_figure(result):
+    """The rig designer's plot (a study whose settings redesign the lens array, ``array_pitch_mm``): per scene, the
+    cross-transfer error, the transfer scored as the floors are, the fidelity floor and each side's floor against
+    the lens pitch (means over the seeds), with the ground truth's own noise.
+
+    Returns:
+        A matplotlib Figure (Agg canvas), or None where the settings do not all set a pitch.
+    """
+    if not result.pitches or set(result.pitches) != set(result.settings):
+        return None
+    order = sorted(result.settings, key=result.pitches.get)
+    pitch = np.array([result.pitches[s] for s in order])
+    lines = [("cross_transfer_rel_error", "cross-transfer error", "C0", "-"),
+             ("cross_gt_noise_rel", "ground truth's own noise", "k", ":")]
+    if result.floor:
+        lines += [("floor_transfer", "transfer, scored as the floors", "C1", "-"), ("floor", "floor", "C2", "-"),
+                  ("real_floor", "real side's floor", "C2", "--"), ("synthetic_floor", "synthetic side's floor",
+                                                                      "C2", "-.")]
+    fig = figures.new_figure(4.2 * len(result.scenes) + 0.6, 3.4)
+    axes = np.atleast_1d(fig.subplots(1, len(result.scenes)))
+    for ax, scene in zip(axes, result.scenes):
+        for metric, label, colour, style in lines:
+            rows = {r["setting"]: r["mean"] for r in result.summary(metric) if r["scene"] == scene}
+            y = np.array([np.nan if rows.get(s) is None else rows[s] for s in order])
+            ax.plot(pitch, y, style, color=colour, marker="o", ms=3, label=label)
+        ax.set_title(Path(scene).stem if scene.endswith(".toml") else scene)
+        ax.set_xlabel("lens pitch (mm)")
+        ax.set_ylabel("relative error")
+        ax.set_ylim(0, None)
+    axes[0].legend(loc="best", fontsize=7)
+    return fig
+
+
 def write_study_report(out: Path, result) -> None:
-    """``study.png`` and ``study.html`` (one self-contained page: the figure embedded, the table, every cell)."""
-    from lftransfer.app.study import METRICS
+    """``study.png`` and ``study.html`` (one self-contained page: the figure embedded, the table, every cell), and
+    ``pitch.png`` where the settings redesign the lens array (:func:`pitch_figure`)."""
+    metrics = result.metrics
 
     fig = study_figure(result)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     write_bytes(out / "study.png", buf.getvalue())
-    head = ["scene", "setting"] + [f"{short} ({unit})" for _, unit, _, short in METRICS.values()]
-    tables = {m: {(r["scene"], r["setting"]): r for r in result.summary(m)} for m in METRICS}
-    rows = [[scene, setting] + [tables[m][(scene, setting)] for m in METRICS]
+    pitch = pitch_figure(result)
+    if pitch is not None:
+        buf = io.BytesIO()
+        pitch.savefig(buf, format="png", dpi=110)
+        write_bytes(out / "pitch.png", buf.getvalue())
+    head = ["scene", "setting"] + [f"{short} ({unit})" for _, unit, _, short in metrics.values()]
+    tables = {m: {(r["scene"], r["setting"]): r for r in result.summary(m)} for m in metrics}
+    rows = [[scene, setting] + [tables[m][(scene, setting)] for m in metrics]
             for scene in result.scenes for setting in result.settings]
-    cells = [[c.scene, str(c.seed), c.setting] + [c.metrics.get(m) for m in METRICS] + [c.seconds]
+    cells = [[c.scene, str(c.seed), c.setting] + [c.metrics.get(m) for m in metrics] + [c.seconds]
              for c in result.cells]
     page = environment().get_template("study.html").render(
         title=f"Study: {result.title}",
@@ -87,8 +126,12 @@ def write_study_report(out: Path, result) -> None:
                  f"rig model {result.rig_model}; {result.bounces} bounces",
         sections=["Summary", "Every cell"], result=result, figure=figures.embed(fig, "Mean over the hidden truths "
         "(bars), their range (error bars); dotted: the ground truth's own noise on the cross term.", fmt="svg"),
-        head=head, rows=rows, metrics=list(METRICS), units=[m[1] for m in METRICS.values()],
-        legend=[(m[3], m[0], m[1]) for m in METRICS.values()],
-        cell_head=["scene", "seed", "setting"] + [m[3] for m in METRICS.values()] + ["transfer (s)"],
-        cells=cells)
+        head=head, rows=rows, metrics=list(metrics), units=[m[1] for m in metrics.values()],
+        legend=[(m[3], m[0], m[1]) for m in metrics.values()],
+        cell_head=["scene", "seed", "setting"] + [m[3] for m in metrics.values()] + ["transfer (s)"],
+        cells=cells,
+        pitch_figure=None if pitch is None else figures.embed(
+            pitch, "Against the lens pitch (the array redesigned over the same extent, the cameras keeping their "
+                   "pixels per lenslet): the error, the floors (both sides and each), the ground truth's noise.",
+            fmt="svg"))
     write_text(out / "study.html", page)

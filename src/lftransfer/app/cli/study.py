@@ -21,8 +21,9 @@ def register(app: typer.Typer) -> None:
 
     @command(app, "study")
     def study_cmd(study_file: Annotated[Path, typer.Argument(metavar="STUDY.toml", help=escape(
-                      "Study file: [study] (scenes, truth_seeds, rig_model, bounces, quick, gt_spp) and [[setting]] "
-                      "tables (name, render = {...}); see docs/architecture.md, 'Scale-out'."))],
+                      "Study file: [study] (scenes, truth_seeds, rig_model, bounces, quick, gt_spp, floor) and "
+                      "[[setting]] tables (name, render = {...}, rig = {...}, array_pitch_mm); or a built-in "
+                      "study's name (pitch: the rig designer); see docs/architecture.md, 'Scale-out'."))],
                   out: OutDir = Path("out/study"),
                   resume: Annotated[bool, flag("--resume", "Keep the cells a previous run of the same study wrote "
                                                            "into DIR.")] = False,
@@ -33,9 +34,13 @@ def register(app: typer.Typer) -> None:
         from lftransfer.app.cluster import ClusterError
         from lftransfer.app.study import StudyError, load_study, run_study
 
+        from lftransfer.app.study import builtin_study, builtin_studies
+
         spec = cluster_spec(cluster, workers)
+        if not study_file.is_file() and str(study_file) in builtin_studies():
+            study_file = builtin_study(str(study_file))
         if not study_file.is_file():
-            fail(f"{study_file}: no such file")
+            fail(f"{study_file}: no such file (built-in studies: {', '.join(builtin_studies())})")
         try:
             study = load_study(study_file)
         except StudyError as exc:
