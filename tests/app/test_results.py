@@ -179,3 +179,21 @@ def test_08_live_page_tables(tmp_path):
     write(store, "soak_live_quick", "soak", {"minutes": 10})
     with pytest.raises(ResultsError, match="soak_live_quick.json: missing field 'data.rss_mb'"):
         render_results(load_store(store))
+
+
+def test_the_pitch_study_answers_the_pitch_for_a_target_error():
+    """A power law error = 0.004 pitch^1.0 gives pitch 12.5 mm for an error of 0.05 (within the measured pitches);
+    a flat curve gives no answer; the table carries the floors and the answer for each scene."""
+    from lftransfer.app.results_study import pitch_for, study_tables
+
+    pitches = {"a": 10.0, "b": 20.0, "c": 40.0}
+    fit = pitch_for(pitches, {s: 0.004 * p for s, p in pitches.items()})
+    assert fit["pitch_mm"] == pytest.approx(12.5) and fit["exponent"] == pytest.approx(1.0)
+    assert not fit["extrapolated"]
+    assert pitch_for(pitches, {"a": 0.1, "b": 0.1, "c": 0.1}) is None
+    assert pitch_for(pitches, {s: 0.02 * p for s, p in pitches.items()})["extrapolated"]      # 2.5 mm: below 10
+    summary = {m: [{"scene": "fig4", "setting": s, "mean": v * p} for s, p in pitches.items()]
+               for m, v in (("cross_transfer_rel_error", 0.005), ("floor_transfer", 0.004), ("floor", 0.002))}
+    text = "\n".join(study_tables({"scenes": ["fig4"], "settings": list(pitches), "pitches": pitches,
+                                   "summary": summary}))
+    assert "| fig4 | a | 10 |" in text.replace("10.0", "10") and "12.5" in text and "25" in text

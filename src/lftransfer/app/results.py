@@ -6,14 +6,15 @@ Every number in docs/results.md comes from a stored run; nothing is typed by han
 ``docs/runs/NAME.json`` written by ``scripts/store_runs.py NAME`` (``make runs``), which runs the run's commands
 (the ``lft`` command a user runs) into ``out/runs/`` and copies what they wrote, with its provenance::
 
-    {"run": NAME, "kind": "demo" | "bench" | "sequence" | "calibration_seeds" | "twin_compare",
+    {"run": NAME, "kind": "demo" | "bench" | "sequence" | "calibration_seeds" | "twin_compare" | "study" | ...,
      "provenance": {"commands": [...], "commit": "...", "dirty": false, "date": "...",
                     "machine": {"cpus": 2, "platform": "...", "load_average": [1.0, 1.2, 1.5]}, "wall_s": 120.5},
      "data": {...}}
 
 ``data`` is the run's own JSON: ``report.json`` of ``lft demo`` / ``lft run``; the ``--json`` file of ``lft bench``;
 ``report`` (``report.json``) and ``effect`` (``effect.json``, or null) of ``lft render``; ``calibration_errors.json``
-of ``lft calibrate seeds``; ``twin_compare.json`` of ``benchmarks/twin/compare.py``.
+of ``lft calibrate seeds``; ``twin_compare.json`` of ``benchmarks/twin/compare.py``; ``study.json`` of
+``lft study``.
 
 :data:`RUNS` lists the runs that results.md carries, in order, with the commands that reproduce each; a run with no
 file gets the line "not stored yet". A file that is not valid JSON or lacks a field its table needs stops the
@@ -30,6 +31,7 @@ from pathlib import Path
 
 from lftransfer.app.results_format import db, fixed, median_p95, num, table
 from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
+from lftransfer.app.results_study import study_tables
 
 __all__ = ["Run", "RUNS", "ResultsError", "StoredRun", "load_run", "load_store", "render_results", "main"]
 
@@ -138,6 +140,10 @@ RUNS: tuple[Run, ...] = (
          ("python", "scripts/profile_pipeline.py", "--py-spy", "--src", "out/runs/src_1a07f36", "--calibration",
           "out/runs/demo/calibration.json", "--json", "out/runs/profile_before.json")),
         (("", "out/runs/profile_before.json"),), needs=("demo",)),
+    Run("study_pitch", "study", "The rig designer: Figs. 4 and 5 against the lens pitch, with the fidelity floor "
+        "(`lft study pitch`, quarter resolution)",
+        (("lft", "study", "pitch", "--out", "out/runs/study_pitch"),), (("", "out/runs/study_pitch/study.json"),),
+        quick=True),
     Run("calibration_seeds", "calibration_seeds",
         "Calibration accuracy over five hidden truths (`lft calibrate seeds`)",
         (("lft", "calibrate", "seeds", "--seeds", "1,2,3,4,5", "--out", "out/runs/calibration_seeds"),),
@@ -180,7 +186,7 @@ class StoredRun:
 
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
-KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile")
+KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -563,7 +569,8 @@ def twin_tables(s: StoredRun) -> list[str]:
 
 TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_tables,
           "calibration_seeds": calibration_seeds_tables, "twin_compare": twin_tables,
-          "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables}
+          "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
+          "study": lambda s: study_tables(s.data)}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
@@ -571,6 +578,7 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "oracle")),
                                           "profile")),
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig1b_quick",
                                             "fig5", "fig6", "fig1b")),
+          ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))
 
