@@ -13,8 +13,9 @@ transfer's own synthetic coverage and added synthetic light, which on those pixe
 projected gradient descent with Nesterov momentum and a monotone safeguard (MFISTA), started from the transfer's
 own projection so that it can only improve on it. The gradient 2 A^T r is the exact transpose of the render
 (:meth:`HalfSpaceRenderer.render_view_adjoint`: the same gathers scattered back), not Dr.Jit's automatic
-differentiation: the lenslets' symbolic loop would have to be recorded iteration by iteration for that, about
-240 copies of the image's state per path vertex, while the transpose of a linear map needs none. The box
+differentiation: the lenslets' symbolic loop would have to be recorded iteration by iteration for that (a copy
+of the image's state per lenslet and aperture point, 240 for the paper's array, at every path vertex), while the
+transpose of a linear map needs none. The box
 [0, X_white] is the projector's range per light field entry (the light field of a white image above that of a
 black one); the optimum is then encoded into projector codes through the true encoder (the rig as built) and
 projected as the rig would, so the floor reported is an image the projector can show.
@@ -27,8 +28,9 @@ expected square, half the squared difference of the two seeds' cross terms, is t
 (the noise-corrected error; both the floors and the transfer's error as scored here are corrected so).
 
 Synthetic side: the synthetic objects lit by the light field the real objects really send, sampled as the LF
-camera samples it (the true array, the run's angular grid, aperture-averaged, many rays per entry, no sensor
-noise, no codec), rendered by the run's own renderer: what one sample per lenslet and direction allows.
+camera samples it (the true array, the run's angular grid, aperture-averaged, 16 rays per entry, no sensor
+noise, no codec), rendered by the run's own renderer with the run's samples (so the floor keeps the renderer's
+own sampling noise, as the transfer does): what one sample per lenslet and direction allows.
 """
 
 from __future__ import annotations
@@ -56,8 +58,10 @@ class ProjectorOperator:
     """The simulated rig's view of its real objects as a linear map of its projector's light field.
 
     ``forward(X)`` is the view camera's radiance added by the projector emitting X above its black ((K, V, U, 3),
-    the projector codec's grid, W m^-2 sr^-1) in the real scene, exactly as :meth:`SimRig.capture_view` renders
-    it (same rays, paths, aperture points and seeds; every lenslet visited); ``adjoint(W)`` its transpose.
+    the projector codec's grid, W m^-2 sr^-1) in the real scene, as :meth:`SimRig.capture_view` renders it (the
+    same rays, paths and seeds); ``adjoint(W)`` its transpose. Every lenslet is visited, while a capture visits
+    those that carry light: where some are dark, the others take their aperture points in another order (the same
+    estimator with other samples), so the transfer's own projection is scored through this operator too.
 
     Args:
         rig: the :class:`~lftransfer.sim.rig.SimRig`, in its real-scene set-up.
