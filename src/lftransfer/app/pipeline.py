@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from lftransfer.sim.metrics import NegativeControl
 
 __all__ = ["BY_MODEL_KEYS", "CalibrationFailedError", "RigSpec", "RunOptions", "VIEWS_FILE", "calibrate",
-           "check_resolution", "count_run_steps", "floor_skipped", "knowledge", "negative_control_skipped", "open_rig",
-           "quick_scene", "run_scene", "write_calibration", "write_views"]
+           "check_resolution", "count_run_steps", "floor_skipped", "gt_steps", "knowledge",
+           "negative_control_skipped", "open_rig", "quick_scene", "run_scene", "write_calibration", "write_views"]
 
 Progress = Callable[[str, int], None]   # (description, steps done so far)
 Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits

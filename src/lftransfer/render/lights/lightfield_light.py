@@ -313,6 +313,17 @@ class LightFieldLight:
         mi = mitsuba()
         import drjit as dr
 
+        inside, taps = self._bilinear_taps(k, u, v, active)
+        out = mi.Color3f(0.0)
+        for idx, w in taps:
+            out += w * self._texel(idx * 3, inside)
+        return dr.select(inside, out, 0.0)
+
+    def _bilinear_taps(self, k, u, v, active):
+        """Where :meth:`_bilinear` reads: (the points inside the window, its four (texel index, weight) taps)."""
+        mi = mitsuba()
+        import drjit as dr
+
         a, m = self.a, self._margin
         fx = (u + a) * (self.U / (2 * a)) - 0.5 + m
         fy = (v + a) * (self.V / (2 * a)) - 0.5 + m
@@ -330,11 +341,8 @@ class LightFieldLight:
         base = (k * V + y0) * U + x0
         x1 = 1 if U > 1 else 0
         y1 = U if V > 1 else 0
-        out = mi.Color3f(0.0)
-        for idx, w in ((base, (1 - tx) * (1 - ty)), (base + x1, tx * (1 - ty)),
-                       (base + y1, (1 - tx) * ty), (base + y1 + x1, tx * ty)):
-            out += w * self._texel(idx * 3, inside)
-        return dr.select(inside, out, 0.0)
+        return inside, ((base, (1 - tx) * (1 - ty)), (base + x1, tx * (1 - ty)),
+                        (base + y1, (1 - tx) * ty), (base + y1 + x1, tx * ty))
 
     def _texel(self, i, active):
         mi = mitsuba()
@@ -495,7 +503,6 @@ class LightFieldLight:
             start = mi.UInt32(0)
         grad = self._grad
         weight = mi.Color3f(weight)
-        a, U, V = self.a, self.U, self.V
 
         def cond(i):
             return i < n_total
@@ -510,20 +517,11 @@ class LightFieldLight:
             wn = w * dr.rsqrt(r2)
             d = (-1.0 if self.side == "real" else 1.0) * wn
             u, v = d.x / d.z, d.y / d.z
-            inside = active & (dr.abs(u) <= a) & (dr.abs(v) <= a)
+            inside, taps = self._bilinear_taps(k, u, v, active)
             visible = inside & ~scene.ray_test(si.spawn_ray_to(p), inside)
             f = direction_weight(si, wn, visible, False, None)
             g = f * weight * (dr.abs(wn.z) * area_weight / r2)
-            # the bilinear read of _bilinear, transposed: each of its four texels gets its weight times g
-            fx = dr.clip((u + a) * (U / (2 * a)) - 0.5, 0.0, U - 1.0)
-            fy = dr.clip((v + a) * (V / (2 * a)) - 0.5, 0.0, V - 1.0)
-            x0 = dr.minimum(mi.UInt32(dr.floor(fx)), U - 2) if U > 1 else mi.UInt32(0)
-            y0 = dr.minimum(mi.UInt32(dr.floor(fy)), V - 2) if V > 1 else mi.UInt32(0)
-            tx, ty = fx - mi.Float(x0), fy - mi.Float(y0)
-            base = (k * V + y0) * U + x0
-            x1, y1 = (1 if U > 1 else 0), (U if V > 1 else 0)
-            for idx, wt in ((base, (1 - tx) * (1 - ty)), (base + x1, tx * (1 - ty)),
-                            (base + y1, (1 - tx) * ty), (base + y1 + x1, tx * ty)):
+            for idx, wt in taps:            # _bilinear's read, transposed: each texel gets its weight times g
                 for c in range(3):
                     dr.scatter_add(grad, wt * g[c], idx * 3 + c, visible)
             return (i + 1,)
