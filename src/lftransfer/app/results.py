@@ -84,6 +84,10 @@ RUNS: tuple[Run, ...] = (
     Run("demo_quick", "demo", "Fig. 4 at quarter resolution (`lft demo --quick`)",
         (("lft", "demo", "--quick", "--out", "out/runs/demo_quick"),),
         (("", "out/runs/demo_quick/report.json"),), quick=True),
+    Run("demo_quick_quiet", "demo", "Fig. 4 at quarter resolution with a quiet reference (`lft run fig4 --quick "
+        "--quiet-reference`)",
+        (("lft", "run", "fig4", "--quick", "--quiet-reference", "--out", "out/runs/demo_quick_quiet"),),
+        (("", "out/runs/demo_quick_quiet/report.json"),), quick=True),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
         (("", "out/runs/oracle/report.json"),)),
@@ -572,7 +576,7 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
           "study": lambda s: study_tables(s.data)}
 
-GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "oracle")),
+GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
           ("The live page: `lft live`", ("live_fps_quick", "live_fps", "soak_live_quick", "profile_before",
                                           "profile")),

@@ -202,13 +202,15 @@ class TwinCamera:
         showing a state older than its moment minus the latency."""
         for _ in range(3):
             latency = self._latency()
-            # the frame leaves latency after the state it shows: its own encoding time counts in
-            t_state = max(last_state, now + self.delay_s - latency)
+            # the frame leaves latency after the state it shows: its own encoding time counts in. Never a moment
+            # still to come: where encoding takes longer than the latency, the frame shows the present (asking
+            # the screen about the future would wait for it, and the wait would count as encoding time)
+            t_state = max(last_state, now + min(0.0, self.delay_s - latency))
             key, image = self._state(t_state)
             radiance = self._render(image)
             after = time.monotonic()
-            if self._state(max(t_state, after + self.delay_s - latency))[0] == key:
-                return t_state, after, t_state + latency, self._frame(radiance)
+            if self._state(max(t_state, after + min(0.0, self.delay_s - latency)))[0] == key:
+                return t_state, time.monotonic(), t_state + latency, self._frame(radiance)
             self.rerendered += 1
             now = after
         self.missed += 1

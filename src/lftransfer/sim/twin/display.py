@@ -148,10 +148,12 @@ class ProjectorScreen:
     def at(self, t: float) -> tuple[str, np.ndarray]:
         """(digest, (H, W, 3) projector codes) of what the screen showed at monotonic time ``t``.
 
-        What the screen showed at ``t`` is known once it has been looked at after ``t``: a moment the watcher has
-        not reached yet (it fell behind on a loaded machine, or ``t`` is the present) waits for its next look, up
-        to :attr:`WAIT_S`, so a camera frame never shows an image that had already been replaced at its moment.
-        Without a watcher (a missing projector) or after a failed look, the last image known is the answer."""
+        What the screen showed at ``t`` is known once it has been looked at after ``t``: a past moment the watcher
+        has not reached yet (it fell behind on a loaded machine) waits for its next look, up to :attr:`WAIT_S`, so
+        a camera frame never shows an image that had already been replaced at its moment. A moment still to come
+        is answered as the present (nobody waits for the future). Without a watcher (a missing projector) or after
+        a failed look, the last image known is the answer."""
+        t = min(t, time.monotonic())
         with self._lock:
             if self._thread is not None and self.error is None:
                 self._lock.wait_for(lambda: self._seen_until >= t or self._stop.is_set() or self.error is not None,
