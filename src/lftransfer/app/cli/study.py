@@ -67,6 +67,8 @@ def register(app: typer.Typer) -> None:
                 fail(f"{exc} (the finished cells are in {out / 'cells'}; --resume continues)", FAILED)
         Console().print(escape(f"# {result.title}"))
         Console().print(escape(result.markdown()), soft_wrap=True)
-        Console().print(escape(f"wrote {out / 'study.html'}, study.json, study.md, study.png ({result.seconds:.0f} s"
+        pitch = ", pitch.png" if (out / "pitch.png").is_file() else ""
+        Console().print(escape(f"wrote {out / 'study.html'}, study.json, study.md, study.png{pitch} "
+                               f"({result.seconds:.0f} s"
                                + (f" on {result.cluster['workers']} workers" if result.cluster else "") + ")"),
                         soft_wrap=True)
