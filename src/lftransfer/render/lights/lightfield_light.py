@@ -248,10 +248,8 @@ class LightFieldLight:
             return result
         side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
         active = mi.Bool(active) & side_ok
-        M, pool = self.M, self.pool
-        n = dr.width(si.p)
-        rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed + 7), dr.arange(mi.UInt64, n))
-        start = rng.next_uint32() % pool if pool > M else mi.UInt32(0)
+        M = self.M
+        start = self._start(si, seed + 7)
         n_total = dr.opaque(mi.UInt32, n_active * M)
         bsdf = si.bsdf()
         mis = lobe_samples > 0 and self.model == "area"
@@ -260,8 +258,7 @@ class LightFieldLight:
             return active & (i < n_total)
 
         def body(i, acc):
-            k = dr.gather(mi.UInt32, self._active, i // M)
-            m = (start + i % M + (i // M) * 7919) % pool
+            k, m = self._step(i, start)
             p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
             seen = visibility(k)
             lit = active & dr.any(radiance != 0.0) & (seen > 0.0)
@@ -283,15 +280,7 @@ class LightFieldLight:
         mi = mitsuba()
         import drjit as dr
 
-        sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
-        p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
-                       dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
-        w = p - x
-        r2 = dr.squared_norm(w)
-        wn = w * dr.rsqrt(r2)
-        d = sign * wn
-        u = d.x / d.z
-        v = d.y / d.z
+        p, wn, r2, u, v = self._aperture_point(k, m, x)
         if self.model == "prefiltered":
             # u = (x - p)_x / x_z, so an aperture of width sqrt(A) spans sqrt(A) / |x_z| in u (and v).
             half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(x.z), 1e-6)
@@ -305,6 +294,43 @@ class LightFieldLight:
         else:
             radiance = self._bilinear(k, u, v, active)
         return p, wn, r2, radiance
+
+    def _aperture_point(self, k, m, x):
+        """Aperture point m of lenslet k seen from points x: (p mi.Point3f, unit direction x -> p, squared
+        distance, and the (u, v) of the lenslet's direction d = -w (real side) or w (synthetic side) there)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
+        p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
+                       dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
+        w = p - x
+        r2 = dr.squared_norm(w)
+        wn = w * dr.rsqrt(r2)
+        d = sign * wn
+        u = d.x / d.z
+        v = d.y / d.z
+        return p, wn, r2, u, v
+
+    def _start(self, si, seed: int):
+        """Each shading point's random start in the stratified pool of aperture points (0 where the pool is the M
+        points themselves)."""
+        mi = mitsuba()
+        import drjit as dr
+
+        if self.pool <= self.M:
+            return mi.UInt32(0)
+        n = dr.width(si.p)
+        rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
+        return rng.next_uint32() % self.pool
+
+    def _step(self, i, start):
+        """(lenslet k, aperture point m) of step i of a loop over the active lenslets' M points each."""
+        mi = mitsuba()
+        import drjit as dr
+
+        M = self.M
+        return dr.gather(mi.UInt32, self._active, i // M), (start + i % M + (i // M) * 7919) % self.pool
 
     # -- texture lookups ---------------------------------------------------------------------------------
     def _bilinear(self, k, u, v, active):
@@ -407,21 +433,14 @@ class LightFieldLight:
         side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
         active = mi.Bool(active) & side_ok
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
-        M, pool = self.M, self.pool
-        weight = self.area / M
-        if pool > M:  # a random start in the stratified pool for every shading point
-            n = dr.width(si.p)
-            rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
-            start = rng.next_uint32() % pool
-        else:
-            start = mi.UInt32(0)
+        weight = self.area / self.M
+        start = self._start(si, seed)
 
         def cond(i, acc):
             return i < n_total
 
         def body(i, acc):
-            k = dr.gather(mi.UInt32, self._active, i // M)
-            m = (start + i % M + (i // M) * 7919) % pool
+            k, m = self._step(i, start)
             p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
             cos_p = dr.abs(wn.z)
             lit = active & dr.any(radiance != 0.0)
@@ -493,14 +512,8 @@ class LightFieldLight:
         side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
         active = mi.Bool(active) & side_ok
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
-        M, pool = self.M, self.pool
-        area_weight = self.area / M
-        if pool > M:   # the same random start as illuminate
-            n = dr.width(si.p)
-            rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed), dr.arange(mi.UInt64, n))
-            start = rng.next_uint32() % pool
-        else:
-            start = mi.UInt32(0)
+        area_weight = self.area / self.M
+        start = self._start(si, seed)                  # the same points as illuminate
         grad = self._grad
         weight = mi.Color3f(weight)
 
@@ -508,15 +521,8 @@ class LightFieldLight:
             return i < n_total
 
         def body(i):
-            k = dr.gather(mi.UInt32, self._active, i // M)
-            m = (start + i % M + (i // M) * 7919) % pool
-            p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
-                           dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
-            w = p - si.p
-            r2 = dr.squared_norm(w)
-            wn = w * dr.rsqrt(r2)
-            d = (-1.0 if self.side == "real" else 1.0) * wn
-            u, v = d.x / d.z, d.y / d.z
+            k, m = self._step(i, start)
+            p, wn, r2, u, v = self._aperture_point(k, m, si.p)
             inside, taps = self._bilinear_taps(k, u, v, active)
             visible = inside & ~scene.ray_test(si.spawn_ray_to(p), inside)
             f = direction_weight(si, wn, visible, False, None)
