@@ -168,11 +168,6 @@ class Study:
         changes = {**({"rig": rig} if rig else {}), **({"render": setting.render} if setting.render else {})}
         return with_overrides(scene, **changes) if changes else scene
 
-    @property
-    def metrics(self) -> dict:
-        """The cells' columns: :data:`METRICS`, and :data:`FLOOR_METRICS` where the study finds floors."""
-        return {**METRICS, **(FLOOR_METRICS if self.config.floor else {})}
-
     def gt_spp(self, label: str) -> int:
         """Samples per pixel of the ground truth of scene ``label``: the study's ``gt_spp``, else the scene's."""
         from lftransfer.settings import Overrides, resolve_settings
@@ -380,13 +375,14 @@ class StudyWorker(Worker):
 
     def prepare(self, label: str, seed: int, use_cache: bool):
         """Round 1 of a (scene, seed) pair: its rig model and synthetic scene, and its ground truth rendered into
-        the cache. Returns (model, pipeline scene)."""
+        the cache. Returns (model, pipeline scene), or (None, None) where every setting changes the rig."""
         from lftransfer.app.rigs import knowledge
 
         opened = self._opened(label, seed)
-        scene = self.study.scene(label)
-        known = knowledge(opened, scene, self.study.config.rig_model)
         opened.oracle.ground_truth(spp=self.study.gt_spp(label), use_cache=use_cache)
+        if all(s.changes_rig for s in self.study.config.setting):
+            return None, None              # every cell knows its own rig (no calibration of one it never uses)
+        known = knowledge(opened, self.study.scene(label), self.study.config.rig_model)
         return known.model, known.scene
 
     def cell(self, label: str, seed: int, setting_name: str, model, ps, use_cache: bool) -> StudyCell:
@@ -418,9 +414,8 @@ class StudyWorker(Worker):
         values = {m: getattr(metrics, m) for m in METRICS}
         if self.study.config.floor:
             floor = opened.oracle.fidelity_floor(opened.rig, result, gt, settings)
-            values.update(floor_transfer=floor.transfer, floor=floor.floor,
-                          real_floor=floor.real.floor if floor.real is not None else None,
-                          synthetic_floor=floor.synthetic.floor if floor.synthetic is not None else None)
+            values.update(floor_transfer=floor.transfer, floor=floor.floor, real_floor=floor.real_floor,
+                          synthetic_floor=floor.synthetic_floor)
         return StudyCell(scene=label, seed=int(seed), setting=setting_name, metrics=values, seconds=seconds)
 
 

@@ -45,11 +45,7 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     distance = np.full(n, np.inf, np.float32)
     if n == 0:
         return radiance, np.zeros(0, bool), distance
-    o = np.ascontiguousarray(origins, dtype=np.float32)
-    d = np.ascontiguousarray(directions, dtype=np.float32)
-    rays = jit_rays(o, d)
-    t = scene.ray_intersect_preliminary(rays).t
-    t_np = np.array(t)
+    o, d, t_np = _first_hits(scene, origins, directions)
     hit = np.isfinite(t_np)
     idx = np.flatnonzero(hit)
     distance[idx] = t_np[idx]
@@ -57,6 +53,24 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         return radiance, hit, distance
     radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed)
     return radiance, hit, distance
+
+
+def _first_hits(scene, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(origins, directions) as contiguous float32 and (N,) the distance to each ray's first hit (inf: none)."""
+    o = np.ascontiguousarray(origins, dtype=np.float32)
+    d = np.ascontiguousarray(directions, dtype=np.float32)
+    return o, d, np.array(scene.ray_intersect_preliminary(jit_rays(o, d)).t)
+
+
+def trace_adjoint(scene, origins: np.ndarray, directions: np.ndarray, light, weights: np.ndarray, *,
+                  max_depth: int = 3, seed: int = 0) -> None:
+    """The transpose of :func:`trace`'s radiance as a linear map of one light's table: the rays that hit, as
+    :func:`trace` finds them, through :func:`shade_adjoint`. ``weights``: (N, 3) per ray."""
+    o, d, t = _first_hits(scene, origins, directions)
+    idx = np.flatnonzero(np.isfinite(t))
+    if len(idx):
+        shade_adjoint(scene, o[idx], d[idx], light, np.asarray(weights, np.float32)[idx], max_depth=max_depth,
+                      seed=seed)
 
 
 def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: int, seed: int):

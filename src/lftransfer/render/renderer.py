@@ -284,17 +284,13 @@ class HalfSpaceRenderer:
             weights: (H, W, 3) float, d loss / d (pixel radiance).
         """
         from lftransfer.render.camera import view_rays
-        from lftransfer.render.integrator import shade_adjoint
+        from lftransfer.render.integrator import trace_adjoint
 
         weights = np.asarray(weights, np.float32)
         if weights.shape != (height, width, 3):
             raise ValueError(f"weights have shape {weights.shape}, expected {(height, width, 3)}")
         o, d = self._rays(("view", id(sensor), width, height, spp, seed),
                           lambda: view_rays(sensor, width, height, spp, seed))
-        t = np.array(self.scene.ray_intersect_preliminary(self.jit_rays(o, d)).t)
-        idx = np.flatnonzero(np.isfinite(t))
-        if len(idx) == 0:
-            return
-        per_ray = weights.reshape(-1, 3)[idx // spp] * np.float32(1.0 / spp)   # a pixel is the mean of its rays
-        shade_adjoint(self.scene, o[idx], d[idx], light, per_ray, max_depth=self.max_depth, seed=seed)
+        per_ray = np.repeat(weights.reshape(-1, 3), spp, axis=0) * np.float32(1.0 / spp)   # a pixel: its rays' mean
+        trace_adjoint(self.scene, o, d, light, per_ray, max_depth=self.max_depth, seed=seed)
 

@@ -161,6 +161,16 @@ class FidelityFloor:
     transfer_over_floor: float | None
     notes: list[str] = field(default_factory=list)
 
+    @property
+    def real_floor(self) -> float | None:
+        """The real side's floor (None without that side)."""
+        return self.real.floor if self.real is not None else None
+
+    @property
+    def synthetic_floor(self) -> float | None:
+        """The synthetic side's floor (None without that side)."""
+        return self.synthetic.floor if self.synthetic is not None else None
+
     def to_json(self) -> dict:
         from dataclasses import asdict
 
