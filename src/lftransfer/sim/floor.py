@@ -81,7 +81,6 @@ class ProjectorOperator:
         self.light = LightFieldLight(ones, side="real", model="area", aperture_samples=rig.aperture_samples,
                                      seed=rig._seed + 3)
         self.width, self.height = rig._view.resolution
-        self.calls = 0
 
     def _emitted_lf(self, codes: np.ndarray) -> np.ndarray:
         """(K, V, U, 3) what the projector's lenslets emit for projector ``codes``."""
@@ -100,7 +99,6 @@ class ProjectorOperator:
 
     def forward(self, x: np.ndarray) -> np.ndarray:
         """(H, W, 3) view radiance added by X."""
-        self.calls += 1
         rig = self.rig
         self.light.set_data(x)
         return rig._real.render_view(rig._view_sensor, self.width, self.height, [self.light], spp=rig.view_spp,
@@ -108,7 +106,6 @@ class ProjectorOperator:
 
     def adjoint(self, weights: np.ndarray) -> np.ndarray:
         """(K, V, U, 3) A^T ``weights`` ((H, W, 3))."""
-        self.calls += 1
         rig = self.rig
         self.light.zero_grad()
         rig._real.render_view_adjoint(rig._view_sensor, self.width, self.height, self.light, weights,
@@ -318,7 +315,7 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     alpha = result.synthetic_view.alpha.astype(np.float32)[..., None]
     d_syn = alpha * (result.synthetic_view.rgb - result.bounces[0].synthetic_view.rgb)
     base = downsample(d_syn, m.factor)                        # the synthetic part on these pixels, held
-    targets = [np.where(where[..., None], m.pair[i] - base, 0.0) for i in range(2)]
+    target = np.where(where[..., None], m.pair[0] - base, 0.0)    # fitted to the first seed (module docstring)
     op = ProjectorOperator(rig)
     weight = 1.0 - alpha                                      # what of the real view the composite shows
 
@@ -328,16 +325,15 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     def transpose(r: np.ndarray) -> np.ndarray:
         return op.adjoint(weight * m.up(r.astype(np.float32), (h, w)))
 
-    def error(x: np.ndarray) -> float:
-        return m.score(apply(x) + np.where(where[..., None], base, 0.0), where)
+    def error(x: np.ndarray) -> float:                        # scored against the second seed, over ``where``
+        return m.score(apply(x) + base, where)
 
-    own = np.clip(op.of_codes(result.projected_image), 0.0, op.white)
-    fit = box_least_squares(apply, transpose, targets[0], own, op.white, iterations=iterations,
+    own = op.of_codes(result.projected_image)
+    fit = box_least_squares(apply, transpose, target, np.clip(own, 0.0, op.white), op.white, iterations=iterations,
                             progress=(lambda msg: progress(f"real floor: {msg}")) if progress else None)
-    best = fit.x
-    relaxed = error(best)
-    in_codes = error(op.of_codes(op.codes_of(best)))
-    transfer = error(op.of_codes(result.projected_image))
+    relaxed = error(fit.x)
+    in_codes = error(op.of_codes(op.codes_of(fit.x)))
+    transfer = error(own)
     return SideFloor(floor=min(in_codes, transfer), transfer=transfer, relaxed=relaxed, noise=m.noise(where),
                      pixels=int(where.sum()), iterations=iterations, seconds=time.perf_counter() - t0)
 
