@@ -12,6 +12,7 @@ from lftransfer.app.effects import EffectCurve, EffectPoint, verify_exchange
 from lftransfer.app.pipeline import RunOptions, quick_scene
 from lftransfer.app.sequence import SequenceOptions, render_sequence
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+from lftransfer.settings import Overrides
 from lftransfer.sim.effects import EffectMeasure
 
 
@@ -60,6 +61,16 @@ def test_01_reflection_curve_against_ground_truth(variant, tmp_path):
                    for side in ("real", "synthetic"))
         assert min(m["cross_real_rel_error"], m["cross_synthetic_rel_error"]) <= m["cross_transfer_rel_error"] \
             <= max(m["cross_real_rel_error"], m["cross_synthetic_rel_error"]) + 1e-9
+    # ... and its fidelity floor (the run's default): the frame scored as the floors are, the real side's floor no
+    # worse than the frame, the whole the two sides' root sum of squares
+    for f in (f for f in saved["frames"] if f["metrics"]):
+        m, floor = f["metrics"], f["fidelity_floor"]
+        assert 0 < m["real_floor"] <= floor["real"]["transfer"] and 0 < m["synthetic_floor"] < 0.5
+        assert m["fidelity_floor"] == pytest.approx(np.hypot(m["real_floor"], m["synthetic_floor"]))
+        assert m["floor_transfer"] == pytest.approx(np.hypot(floor["real"]["transfer"], floor["synthetic"]["transfer"]))
+        assert m["transfer_over_floor"] == pytest.approx(m["floor_transfer"] / m["fidelity_floor"])
+    ratios = [f["metrics"]["transfer_over_floor"] for f in saved["frames"] if f["metrics"]]
+    assert saved["summary"]["transfer_over_floor_max"] == max(ratios)
 
 
 def test_02_no_verified_frame_checks_nothing(tmp_path):
@@ -81,3 +92,26 @@ def test_03_curve_errors_and_trend():
     worst = curve.worst_relative_error()
     assert worst["contrast"] == pytest.approx(0.2) and worst["penumbra_m"] == pytest.approx(0.25)
     assert curve.trend() == {"contrast": 1.0, "penumbra_m": 1.0, "area_m2": None}    # no area given
+
+
+def test_04_quiet_reference_of_a_frame(variant, tmp_path):
+    """``--quiet-reference`` on a sequence: the verified frame's ground truth is rendered until its noise on the
+    frame's cross term is at most a third of the error (64 samples per pixel leave it above the error), and the
+    frame's metrics are taken against it."""
+    scene = _approaching_scene()
+    out = tmp_path / "seq"
+    options = RunOptions(rig_model="oracle", truth_seed=None, floor=False,
+                         settings=Overrides(quiet_reference=True))
+    report = render_sequence(scene, out, options, SequenceOptions(mode="converged", frames=1, verify_every=1))
+    plain = dict(report["frames"][0]["metrics"])
+    verify_exchange(scene, out, options, report)
+    saved = json.loads((out / "report.json").read_text())
+    f = saved["frames"][0]
+    reference, m = f["reference"], f["metrics"]
+    assert reference["met"] and reference["ratio"] <= 1 / 3 and reference["spp"] > 64 and reference["rounds"] > 1
+    assert m["reference_spp"] == reference["spp"] and m["cross_gt_noise_rel"] == pytest.approx(reference["noise"])
+    assert m["cross_gt_noise_rel"] <= m["cross_transfer_rel_error"] / 3
+    assert m["psnr_objects_db"] != plain["psnr_objects_db"]            # taken again against the quiet reference
+    assert saved["summary"]["psnr_objects_db_min"] == m["psnr_objects_db"]
+    assert saved["summary"]["references_met"] == saved["summary"]["references"] == 1
+    assert "real_floor" not in m and "fidelity_floor" not in f         # floor=False

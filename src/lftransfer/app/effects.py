@@ -14,6 +14,12 @@ of no bounces: the projector black), for converged frames too (the same measure 
 The transfer without ``by`` is a converged N-bounce transfer at the frame's time in both modes: in live mode
 it stands for what the live loop without ``by`` converges to (the object ``by`` is the one that moves). The live
 loop's first N frames are not measured: it starts with a black projector and needs N frames to bring N bounces.
+
+With the run's ``floor`` (on the simulated rig), each verified frame also gets its fidelity floor
+(:mod:`lftransfer.sim.floor`, docs/architecture.md "The fidelity floor") at the frame's moment, the frame itself
+scored as the floors are; with ``quiet_reference``, its ground truth is rendered until its noise on the frame's
+cross term is at most a third of the error (:mod:`lftransfer.sim.reference`), and all the frame's metrics are
+taken against that.
 """
 
 from __future__ import annotations
@@ -24,7 +30,8 @@ from typing import Callable
 
 import numpy as np
 
-from lftransfer.app.pipeline import RunOptions, open_rig
+from lftransfer.app.pipeline import RunOptions, floor_skipped, open_rig
+from lftransfer.app.sequence import frame_metrics, sequence_summary
 from lftransfer.composite import composite
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
@@ -140,14 +147,18 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     ``cross_gt_noise_rel`` (and the error's range into the summary), and split by side (``cross_synthetic_rel_error``
     and ``cross_real_rel_error``, each with its ``..._gt_noise_rel``: the synthetic objects' pixels, lit by the
     captured light field, and the real ones', lit through the projector); and, for
-    a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png. The transfer
+    a scene with an ``[effect]``, the effect (module docstring), written to effect.json and effect.png; where the
+    options ask for them, each frame's fidelity floor (``real_floor``, ``synthetic_floor``, ``fidelity_floor``,
+    ``floor_transfer``, ``transfer_over_floor`` in its metrics, the whole in its ``fidelity_floor``) and a quiet
+    reference (its ``reference``; ``reference_spp``, ``reference_noise_over_error`` in its metrics). The transfer
     without ``by`` prefilters with the depth the live frames used (``state/depth.npz``) where there is one: a depth
     measured anew differs by the capture's noise, which showed as a faint "shadow" where there was none.
 
     Args:
         scene: the ``SceneConfig`` the sequence was rendered from.
         out: the sequence's folder (its ``frames/NNNN.exr`` and ``report.json``).
-        options: the sequence's :class:`RunOptions` (the simulated rig, its truth seed, ground-truth samples).
+        options: the sequence's :class:`RunOptions` (the simulated rig, its truth seed, ground-truth samples,
+            ``floor``, ``quiet_reference``).
         report: the sequence's report (the frames with metrics are the verified ones; ``key.settings`` the
             transfer settings); updated and rewritten. The rig model is the sequence's: its calibration file,
             ``out/calibration.json``, the oracle or the nominal model
@@ -171,7 +182,8 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     settings = TransferSettings(**{**report["key"]["settings"], "bounce_views": False})
     direct = TransferSettings(**{**report["key"]["settings"], "bounce_views": False, "bounces": 0})
     check = ExchangeCheck(effect=EffectCurve(kind=effect.kind, on=effect.on, by=effect.by) if effect else None)
-    spp = options.resolve(scene).gt_spp
+    resolved = options.resolve(scene)
+    spp = resolved.gt_spp
     opened = open_rig(scene, options)
     try:
         oracle = opened.oracle
@@ -185,16 +197,28 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
             step(f"check the exchange: frame {i}")
             world = oracle.world.at(t)
             frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
-            gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
             alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
             no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
                                     alone.real_view_direct)
+            if resolved.quiet_reference:
+                gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step)
+            else:
+                gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
             cross = cross_transfer_error(frame, no_exchange, gt)
             check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
             f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
             for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
                 f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
                 f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
+            if floor_skipped(options) is None:
+                step(f"fidelity floor: frame {i}")
+                converged = run_transfer(opened.rig, model, ps, settings, time_s=t, depth=depth)
+                floor = oracle.fidelity_floor(getattr(opened.rig, "inner", opened.rig), converged, gt, settings,
+                                              time_s=t, cross=frame - no_exchange)
+                f["fidelity_floor"] = floor.to_json()
+                f["metrics"].update(real_floor=floor.real_floor, synthetic_floor=floor.synthetic_floor,
+                                    fidelity_floor=floor.floor, floor_transfer=floor.transfer,
+                                    transfer_over_floor=floor.transfer_over_floor)
             if effect is None:
                 continue
             truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
@@ -214,11 +238,31 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
         report["summary"]["cross_transfer_rel_error_min"] = min(values)
         report["summary"]["cross_transfer_rel_error_max"] = max(values)
         report["summary"]["cross_gt_noise_rel_max"] = max(noise) if noise else None
+        report["summary"].update(sequence_summary(report["frames"]))   # the PSNRs again: a quiet reference
     write_json(out / "report.json", report)
     if check.effect is not None:
         write_json(out / EFFECT_JSON, check.effect.to_json())
         plot_effect(check.effect, out / EFFECT_PLOT, title=scene.source.stem if scene.source else None)
     return check
+
+
+def _quiet_frame_truth(oracle, world, frame: np.ndarray, no_exchange: np.ndarray, record: dict, spp: int,
+                       use_cache: bool, step: Callable[[str], None]):
+    """A verified frame's ground truth rendered until its noise on the frame's cross term is at most a third of
+    the error (:mod:`lftransfer.sim.reference`); the frame's PSNRs are taken again against it, and what it reached
+    goes to the frame's ``reference``."""
+    from lftransfer.sim.metrics import cross_transfer_error, metric_factor
+
+    def judge(gt):
+        c = cross_transfer_error(frame, no_exchange, gt)
+        return c.error, c.gt_noise
+
+    gt, reference = oracle.quiet_ground_truth(judge, spp=spp, world=world, multiple=metric_factor(frame.shape[1]),
+                                              use_cache=use_cache, progress=step)
+    record["reference"] = reference.to_json()
+    record["metrics"].update(frame_metrics(frame, gt), reference_spp=reference.spp,
+                             reference_noise_over_error=reference.ratio)
+    return gt
 
 
 _LABELS = {"added_radiance": ("radiance added to {on} by {by}", "W m$^{{-2}}$ sr$^{{-1}}$", 1.0),

@@ -110,9 +110,9 @@ RUNS: tuple[Run, ...] = (
                     "out/runs/fig5_quick_cal/calibration.json"),
          calibration="out/runs/fig5_quick_cal/calibration.json", render=("--verify-every", "4")),
     _seq("fig6_quick", "Fig. 6 at quarter resolution: the photograph's reflection in the bowl", "fig6",
-         quick=True, calibrate=None, calibration=None, render=("--verify-every", "6")),
-    _seq("fig1b_quick", "Fig. 1b at quarter resolution: the gold frame", "fig1b", quick=True, calibrate=None,
-         calibration=None, render=("--verify-every", "12")),
+         quick=True, calibrate=None, calibration=None, render=("--verify-every", "12")),
+    _seq("fig1b_quick", "Fig. 1b at quarter resolution: the gold frame, with a quiet reference", "fig1b", quick=True,
+         calibrate=None, calibration=None, render=("--verify-every", "16", "--quiet-reference")),
     _seq("fig5", "Fig. 5 at the paper's resolution", "fig5", quick=False,
          calibrate=("lft", "calibrate", "rig", "fig5", "--out", "out/runs/fig5_cal/calibration.json"),
          calibration="out/runs/fig5_cal/calibration.json",
@@ -472,7 +472,9 @@ def sequence_tables(s: StoredRun) -> list[str]:
     out: list[str] = []
     keys = [k for k in ("frames", "median_frame_s", "transfer_fps", "psnr_objects_db_min", "psnr_objects_db_max",
                         "cross_transfer_rel_error_min", "cross_transfer_rel_error_max", "cross_gt_noise_rel_max",
-                        "stale_captures", "captures_used", "capture_behind_s_median", "capture_behind_s_max",
+                        "fidelity_floor_min", "fidelity_floor_max", "transfer_over_floor_min",
+                        "transfer_over_floor_max", "reference_spp_min", "reference_spp_max",
+                        "reference_noise_over_error_max", "references_met", "references", "stale_captures", "captures_used", "capture_behind_s_median", "capture_behind_s_max",
                         "capture_age_s_median") if k in summary]
     settings = ", ".join(f"{k} {report[k]}" for k in ("mode", "loop", "rig_model", "renderer", "projection",
                                                       "variant")
@@ -484,10 +486,14 @@ def sequence_tables(s: StoredRun) -> list[str]:
     verified = [f for f in frames if isinstance(f, dict) and f.get("metrics")]
     if verified:
         cols = ("psnr_objects_db", "cross_transfer_rel_error", "cross_gt_noise_rel", "cross_synthetic_rel_error",
-                "cross_synthetic_gt_noise_rel", "cross_real_rel_error", "cross_real_gt_noise_rel")
+                "cross_synthetic_gt_noise_rel", "cross_real_rel_error", "cross_real_gt_noise_rel", "real_floor",
+                "synthetic_floor", "floor_transfer", "transfer_over_floor", "reference_spp",
+                "reference_noise_over_error")
         present = [c for c in cols if any(c in f["metrics"] for f in verified)]
         out += ["Verified frames (each against its own path-traced ground truth; `..._gt_noise_rel` is the ground "
-                "truth's own noise on the same term):", ""]
+                "truth's own noise on the same term; the floors and `floor_transfer`, the frame scored as they are, "
+                "are noise-corrected, docs/architecture.md \"The fidelity floor\"; `reference_...`: the quiet "
+                "reference's samples per pixel and its noise over the error):", ""]
         out += table(["frame", "t, s", *(f"`{c}`" for c in present)],
                      [[num(f.get("index")), fixed(f.get("time_s"), 2),
                        *((db if c.endswith("_db") else num)(f["metrics"].get(c)) for c in present)]

@@ -42,7 +42,8 @@ from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
 
 __all__ = ["ConvergedFrame", "FrameRecord", "FrameWorker", "SequenceError", "SequenceOptions", "acquire_model",
-           "converged_frame", "frame_ground_truth", "frame_metrics", "read_depth", "render_sequence", "sequence_times"]
+           "converged_frame", "frame_ground_truth", "frame_metrics", "read_depth", "render_sequence",
+           "sequence_summary", "sequence_times"]
 
 MODES = ("live", "converged")
 STILL_LIVE_FRAMES = 8            # frames of a still scene in live mode when --frames is not given
@@ -377,7 +378,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                     report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, ps,
                                                               settings, todo, step)
             step("write the videos")
-            report["summary"] = _summary(report["frames"])
+            report["summary"] = sequence_summary(report["frames"])
             stale = getattr(getattr(opened.rig, "inner", opened.rig), "stale_captures", None)
             if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
                 report["summary"]["stale_captures"] = int(stale)
@@ -521,8 +522,13 @@ def _fps(scene) -> float:
     return float(scene.animation.fps) if scene.animation is not None else 24.0
 
 
-def _summary(frames: list[dict]) -> dict:
-    """Frames per second of the transfer (median frame time) and the metrics' range over verified frames."""
+RANGED = ("psnr_db", "psnr_objects_db", "psnr_real_db", "real_floor", "synthetic_floor", "fidelity_floor",
+          "transfer_over_floor", "reference_spp", "reference_noise_over_error")   # the summary's ``KEY_min``, ``_max``
+
+
+def sequence_summary(frames: list[dict]) -> dict:
+    """Frames per second of the transfer (median frame time), the metrics' range over verified frames (those of
+    :data:`RANGED` that the frames have) and how many quiet references met their target."""
     seconds = [f["timings_s"].get("total", sum(v for k, v in f["timings_s"].items() if k != "total"))
                for f in frames]
     verified = [f["metrics"] for f in frames if f.get("metrics")]
@@ -534,10 +540,14 @@ def _summary(frames: list[dict]) -> dict:
         out["capture_behind_s_median"] = float(np.median([c["behind_s"] for c in captured]))
         out["capture_behind_s_max"] = float(max(c["behind_s"] for c in captured))
         out["capture_age_s_median"] = float(np.median([c["age_s"] for c in captured]))
-    for key in ("psnr_db", "psnr_objects_db", "psnr_real_db"):
+    for key in RANGED:
         values = [m[key] for m in verified if m.get(key) is not None]
         if values:
             out[f"{key}_min"], out[f"{key}_max"] = float(min(values)), float(max(values))
+    references = [f["reference"] for f in frames if f.get("reference")]
+    if references:
+        out["references_met"] = sum(bool(r["met"]) for r in references)
+        out["references"] = len(references)
     return out
 
 

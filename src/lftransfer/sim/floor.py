@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -47,7 +47,7 @@ from lftransfer.sim.metrics import cross_term_truth, downsample, metric_factor, 
 _log = logging.getLogger(__name__)
 
 __all__ = ["BoxFit", "FidelityFloor", "ProjectorOperator", "SideFloor", "box_least_squares", "fidelity_floor",
-           "nonnegative_bound", "real_floor", "synthetic_floor", "true_incident_lightfield"]
+           "nonnegative_bound", "real_floor", "score_cross", "synthetic_floor", "true_incident_lightfield"]
 
 FLOOR_ITERATIONS = 40          # MFISTA steps of the real side's floor
 POWER_ITERATIONS = 6           # for the step size (largest eigenvalue of A^T W A)
@@ -403,18 +403,40 @@ def synthetic_floor(rig, world, result, gt, settings, *, target_width: int = 256
                      pixels=int(where.sum()), seconds=time.perf_counter() - t0)
 
 
+def score_cross(gt, cross: np.ndarray, *, target_width: int = 256) -> tuple[float | None, float | None]:
+    """A cross term as the view shows it, scored as the floors are: (real side, synthetic side), each None where
+    that side has no pixels or the truth no cross term.
+
+    Args:
+        gt: the ground truth.
+        cross: (H, W, 3) what the exchange adds to the composite (the composite minus the composite without any
+            exchange, the projector black), W m^-2 sr^-1.
+        target_width: the metrics' width.
+    """
+    m = _Metric.of(gt, cross.shape[1], target_width)
+    if not m.norm > 0:
+        return None, None
+    c = downsample(cross, m.factor)
+    real, syn = m.covered & ~m.synthetic, m.covered & m.synthetic
+    return (m.score(c, real) if real.any() else None), (m.score(c, syn) if syn.any() else None)
+
+
 def fidelity_floor(rig, world, result, gt, settings, *, target_width: int = 256,
-                   iterations: int = FLOOR_ITERATIONS, time_s: float = 0.0,
+                   iterations: int = FLOOR_ITERATIONS, time_s: float = 0.0, cross: np.ndarray | None = None,
                    progress: Callable[[str], None] | None = None) -> FidelityFloor:
     """Both sides' floors of a run on the simulated rig and its error scored the same way (module docstring).
 
     Args:
-        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through.
+        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through, its real scene at ``time_s``.
         world: the hidden world (``Oracle.world``).
-        result: the run's :class:`~lftransfer.transfer.TransferResult`.
+        result: the run's :class:`~lftransfer.transfer.TransferResult` (the real side's search starts from its
+            projection; the other side's light is held from it).
         gt: the ground truth.
         settings: the run's ``TransferSettings``.
         target_width, iterations, time_s: as in :func:`real_floor` and :func:`synthetic_floor`.
+        cross: (H, W, 3) the cross term to score as the transfer's (:func:`score_cross`), where it is not
+            ``result``'s: a live sequence's frame, whose light came from earlier captures, against a converged
+            ``result`` at the same moment. The real side's floor is then also no worse than that frame.
         progress: called once per side (the real side's steps go to the log).
 
     Returns:
@@ -425,6 +447,12 @@ def fidelity_floor(rig, world, result, gt, settings, *, target_width: int = 256,
     syn = synthetic_floor(rig, world, result, gt, settings, target_width=target_width, time_s=time_s)
     say("fidelity floor: the real side (the best projector image)")
     real = real_floor(rig, result, gt, target_width=target_width, iterations=iterations, progress=_log.info)
+    if cross is not None:
+        real_t, syn_t = score_cross(gt, cross, target_width=target_width)
+        if real is not None and real_t is not None:
+            real = replace(real, transfer=real_t, floor=min(real.floor, real_t))
+        if syn is not None and syn_t is not None:
+            syn = replace(syn, transfer=syn_t)
     sides = [s for s in (real, syn) if s is not None]
     floor = float(np.sqrt(sum(s.floor ** 2 for s in sides))) if sides else None
     transfer = float(np.sqrt(sum(s.transfer ** 2 for s in sides))) if sides else None
@@ -432,5 +460,8 @@ def fidelity_floor(rig, world, result, gt, settings, *, target_width: int = 256,
              "real side's floor was fitted to its first seed",
              "the real side's floor is the better of the optimum encoded into projector codes and the transfer's own "
              "projection"]
+    if cross is not None:
+        notes.append("the transfer scored is the frame as the view showed it; the real side's search started from a "
+                     "converged transfer at the same moment, and its floor is no worse than the frame")
     return FidelityFloor(real=real, synthetic=syn, floor=floor, transfer=transfer,
                          transfer_over_floor=transfer / floor if floor else None, notes=notes)

@@ -45,18 +45,21 @@ class Oracle:
         return render_ground_truth(self.world if world is None else world, spp=spp, use_cache=use_cache,
                                    progress=progress, warn=warn)
 
-    def quiet_ground_truth(self, judge, *, spp: int, multiple: int = 1, use_cache: bool = True,
+    def quiet_ground_truth(self, judge, *, spp: int, world=None, multiple: int = 1, use_cache: bool = True,
                            progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
-        """The ground truth rendered in rounds until its noise on the cross term is at most a third of the error
-        ``judge`` measures (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth, ``Reference``)."""
+        """The ground truth of the world (or of ``world``, one frame of a sequence) rendered in rounds until its
+        noise on the cross term is at most a third of the error ``judge`` measures
+        (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth, ``Reference``)."""
         from lftransfer.sim.reference import quiet_ground_truth
 
-        return quiet_ground_truth(self.world, judge, spp=spp, multiple=multiple, use_cache=use_cache,
-                                  progress=progress, warn=warn)
+        return quiet_ground_truth(self.world if world is None else world, judge, spp=spp, multiple=multiple,
+                                  use_cache=use_cache, progress=progress, warn=warn)
 
-    def fidelity_floor(self, rig, result, gt, settings, *, progress: Callable[[str], None] | None = None):
+    def fidelity_floor(self, rig, result, gt, settings, *, time_s: float = 0.0, cross=None,
+                       progress: Callable[[str], None] | None = None):
         """The fidelity floor of a run on the simulated rig ``rig`` (:func:`lftransfer.sim.floor.fidelity_floor`:
-        both sides' floors and the run's error scored as they are).
+        both sides' floors and the run's error scored as they are), at ``time_s`` of an animated world; ``cross``:
+        the frame's own cross term to score, where it is not ``result``'s.
 
         Raises:
             ValueError: ``rig`` is not the simulated rig (the floor renders with its truth).
@@ -66,7 +69,8 @@ class Oracle:
 
         if not isinstance(rig, SimRig):
             raise ValueError(f"the fidelity floor needs the simulated rig, got {type(rig).__name__}")
-        return fidelity_floor(rig, self.world, result, gt, settings, progress=progress)
+        return fidelity_floor(rig, self.world, result, gt, settings, time_s=time_s, cross=cross,
+                              progress=progress)
 
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built

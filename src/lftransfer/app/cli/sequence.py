@@ -14,9 +14,9 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
                                        rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, OutDir, Quick, Renderer,
-                                            RigArgs, SceneArg, TruthArgs, Workers, choice_check, flag, metavar,
-                                            option)
+from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, NoFloor, OutDir, Quick,
+                                            QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
+                                            choice_check, flag, metavar, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
 from lftransfer.settings import Overrides
 
@@ -48,6 +48,16 @@ def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
             f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}"
             + (f" (ground truth's own noise on it: up to {summary['cross_gt_noise_rel_max']:.3f})"
                if summary.get("cross_gt_noise_rel_max") is not None else ""))
+    if "transfer_over_floor_min" in summary:
+        row(table, "fidelity floor (verified frames)",
+            _range(summary, "fidelity_floor") + f" (real {_range(summary, 'real_floor')}, synthetic "
+            f"{_range(summary, 'synthetic_floor')}); the frames {_range(summary, 'transfer_over_floor', '.2f')} "
+            "x the floor")
+    if "references" in summary:
+        row(table, "quiet reference (verified frames)",
+            f"{_range(summary, 'reference_spp', '.0f')} samples per pixel, noise "
+            f"{_range(summary, 'reference_noise_over_error', '.2f')} of the error; target met in "
+            f"{summary['references_met']} of {summary['references']} frames")
     effect = check.effect if check is not None else None
     if effect is not None:
         for name, worst in effect.worst_relative_error().items():
@@ -65,6 +75,15 @@ def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
     for line in report.get("warnings", []):
         warn(line)
     Console().print(table)
+
+
+def _range(summary: dict, key: str, spec: str = ".3f") -> str:
+    """``min .. max`` of ``key`` in a sequence's summary (one number where they agree; - where missing)."""
+    lo, hi = summary.get(f"{key}_min"), summary.get(f"{key}_max")
+    if lo is None or hi is None:
+        return "-"
+    a, b = format(lo, spec), format(hi, spec)
+    return a if a == b else f"{a} .. {b}"
 
 
 def register(app: typer.Typer) -> None:
@@ -131,9 +150,11 @@ def register(app: typer.Typer) -> None:
                             "simulated rig).")] = 0,
                    gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
                    renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-                   cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None) -> None:
+                   cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
+                   no_floor: NoFloor = False, quiet_reference: QuietReference = False) -> None:
         """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
-        report with per-frame timings (and metrics with --verify-every)."""
+        report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
+        error and fidelity floor)."""
         from lftransfer.app.cluster import ClusterError
         from lftransfer.app.effects import verify_exchange
         from lftransfer.app.pipeline import RunOptions
@@ -146,8 +167,9 @@ def register(app: typer.Typer) -> None:
             fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
-        options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer),
-                             use_cache=not no_cache, **rig_opts)
+        options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
+                                                quiet_reference=quiet_reference or None),
+                             use_cache=not no_cache, floor=not no_floor, **rig_opts)
         try:
             seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
                                   cluster=cluster_spec(cluster, workers))
