@@ -95,3 +95,42 @@ def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(var
                               read_exr(tmp_path / "one" / "frames" / "0003.exr"))
     assert json.loads((tmp_path / "many" / "status.json").read_text())["state"] == "complete"
     assert (tmp_path / "many" / "composite.mp4").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_04_quiet_reference_on_a_cluster_equals_one_process(tmp_path):
+    """A quiet reference spread over a local cluster of 2 workers (one part of each round per worker) is
+    bit-identical to the same reference split alike in one process (one round after the first, to keep it short);
+    split in two it differs from the reference in one part (other seeds), so the equality is not of one render with
+    itself."""
+    pytest.importorskip("ray")
+    from lftransfer.app.reference_pool import reference_renderer
+    from lftransfer.scenes import load_scene
+    from lftransfer.settings import resolve_settings
+    from lftransfer.sim.metrics import composites, cross_transfer_error
+    from lftransfer.sim.oracle import open_simulated_rig
+    from lftransfer.sim.reference import quiet_ground_truth
+    from lftransfer.transfer.bounce import run_transfer
+
+    from tests.app.small import write_tiny_scene
+
+    scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(64, 48)))
+    rig, oracle = open_simulated_rig(scene, 3)
+    result = run_transfer(rig, oracle.model, scene.synthetic_part(), resolve_settings(scene, Overrides()).transfer)
+    comp_n, comp_0 = composites(result)
+
+    def judge(gt):
+        check = cross_transfer_error(comp_n, comp_0, gt)
+        return check.error, check.gt_noise
+
+    local, ref_local = quiet_ground_truth(oracle.world, judge, spp=16, max_rounds=1, use_cache=False, parts=2)
+    with reference_renderer(ClusterSpec("local", workers=2), use_cache=False) as (render, parts):
+        assert parts == 2
+        many, ref_many = quiet_ground_truth(oracle.world, judge, spp=16, max_rounds=1, use_cache=False,
+                                            parts=parts, render=render)
+    assert ref_many.parts == 2 and ref_many.rounds == 2 and ref_many.noise < ref_many.error
+    assert (ref_many.spp, ref_many.noise, ref_many.error) == (ref_local.spp, ref_local.noise, ref_local.error)
+    for name in ("union", "real", "synthetic", "alpha_real", "alpha_synthetic"):
+        assert np.array_equal(getattr(many, name), getattr(local, name)), name
+    one, ref_one = quiet_ground_truth(oracle.world, judge, spp=16, max_rounds=1, use_cache=False)
+    assert ref_one.spp == ref_many.spp and not np.array_equal(one.union, many.union)

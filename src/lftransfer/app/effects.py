@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.app.pipeline import RunOptions, floor_skipped, open_rig
+from lftransfer.app.reference_pool import reference_renderer
 from lftransfer.app.sequence import frame_metrics, sequence_summary
 from lftransfer.composite import composite
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
@@ -192,44 +193,43 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
         known = acquire_model(opened, scene, options, out, True, step)
         model, ps = known.model, known.scene
         depth = read_depth(out)         # the live frames' own depth: both sides prefilter alike
-        for f in verified:
-            i, t = int(f["index"]), float(f["time_s"])
-            step(f"check the exchange: frame {i}")
-            world = oracle.world.at(t)
-            frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
-            alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
-            no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
-                                    alone.real_view_direct)
-            if resolved.quiet_reference:
-                gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step)
-            else:
-                gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
-            cross = cross_transfer_error(frame, no_exchange, gt)
-            check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
-            f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
-            for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
-                f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
-                f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
-            if floor_skipped(options) is None:
-                step(f"fidelity floor: frame {i}")
-                converged = run_transfer(opened.rig, model, ps, settings, time_s=t, depth=depth)
-                floor = oracle.fidelity_floor(getattr(opened.rig, "inner", opened.rig), converged, gt, settings,
-                                              time_s=t, cross=frame - no_exchange)
-                f["fidelity_floor"] = floor.to_json()
-                f["metrics"].update(real_floor=floor.real_floor, synthetic_floor=floor.synthetic_floor,
-                                    fidelity_floor=floor.floor, floor_transfer=floor.transfer,
-                                    transfer_over_floor=floor.transfer_over_floor)
-            if effect is None:
-                continue
-            truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
-                                                use_cache=options.use_cache).image
-            result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
-            transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
-            pixels = object_pixels(world, effect.on)
-            check.effect.points.append(EffectPoint(
-                index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
-                transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
-                truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
+        with reference_renderer(options.cluster if resolved.quiet_reference else None,
+                                use_cache=options.use_cache, step=step) as (render, parts):
+            for f in verified:
+                i, t = int(f["index"]), float(f["time_s"])
+                step(f"check the exchange: frame {i}")
+                world = oracle.world.at(t)
+                frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
+                alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
+                no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
+                                        alone.real_view_direct)
+                if resolved.quiet_reference:
+                    gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
+                                            render=render, parts=parts)
+                else:
+                    gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
+                cross = cross_transfer_error(frame, no_exchange, gt)
+                check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
+                f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
+                for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
+                    f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
+                    f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
+                if floor_skipped(options) is None:
+                    step(f"fidelity floor: frame {i}")
+                    converged = run_transfer(opened.rig, model, ps, settings, time_s=t, depth=depth)
+                    _frame_floor(oracle, getattr(opened.rig, "inner", opened.rig), converged, gt, settings, f,
+                                 frame - no_exchange)
+                if effect is None:
+                    continue
+                truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
+                                                    use_cache=options.use_cache).image
+                result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
+                transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+                pixels = object_pixels(world, effect.on)
+                check.effect.points.append(EffectPoint(
+                    index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
+                    transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
+                    truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
     finally:
         opened.rig.close()
     values = [v for v in check.cross_errors.values() if v is not None]
@@ -247,7 +247,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
 
 
 def _quiet_frame_truth(oracle, world, frame: np.ndarray, no_exchange: np.ndarray, record: dict, spp: int,
-                       use_cache: bool, step: Callable[[str], None]):
+                       use_cache: bool, step: Callable[[str], None], *, render=None, parts: int = 1):
     """A verified frame's ground truth rendered until its noise on the frame's cross term is at most a third of
     the error (:mod:`lftransfer.sim.reference`); the frame's PSNRs are taken again against it, and what it reached
     goes to the frame's ``reference``."""
@@ -258,11 +258,22 @@ def _quiet_frame_truth(oracle, world, frame: np.ndarray, no_exchange: np.ndarray
         return c.error, c.gt_noise
 
     gt, reference = oracle.quiet_ground_truth(judge, spp=spp, world=world, multiple=metric_factor(frame.shape[1]),
-                                              use_cache=use_cache, progress=step)
+                                              use_cache=use_cache, parts=parts, render=render, progress=step)
     record["reference"] = reference.to_json()
     record["metrics"].update(frame_metrics(frame, gt), reference_spp=reference.spp,
                              reference_noise_over_error=reference.ratio)
     return gt
+
+
+def _frame_floor(oracle, rig, converged, gt, settings: TransferSettings, record: dict, cross: np.ndarray) -> None:
+    """A verified frame's fidelity floor at its moment (the real side's search started from ``converged``, the
+    frame's own ``cross`` term scored), into its record: the whole as ``fidelity_floor``, the numbers in its
+    metrics."""
+    floor = oracle.fidelity_floor(rig, converged, gt, settings, time_s=float(record["time_s"]), cross=cross)
+    record["fidelity_floor"] = floor.to_json()
+    record["metrics"].update(real_floor=floor.real_floor, synthetic_floor=floor.synthetic_floor,
+                             fidelity_floor=floor.floor, floor_transfer=floor.transfer,
+                             transfer_over_floor=floor.transfer_over_floor)
 
 
 _LABELS = {"added_radiance": ("radiance added to {on} by {by}", "W m$^{{-2}}$ sr$^{{-1}}$", 1.0),

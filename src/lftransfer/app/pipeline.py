@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from lftransfer import choices
+from lftransfer.app.cluster import ClusterSpec
 from lftransfer.app.report import emitter_ceiling, write_outputs
 from lftransfer.app.rigs import (NOMINAL, CalibrationFailedError, Knowledge, OpenedRig, RigSpec, calibrate,
                                  knowledge, open_rig, write_calibration)
@@ -69,6 +70,8 @@ class RunOptions:
             ``negative_control``; :func:`negative_control_skipped` says when it cannot run). ``lft demo`` sets it.
         floor: on the simulated rig, verified: find the fidelity floor (:mod:`lftransfer.sim.floor`: the best any
             algorithm could do through this rig, each side) and report the error against it.
+        cluster: a Ray cluster (:class:`~lftransfer.app.cluster.ClusterSpec`) to spread a quiet reference's rounds
+            over (:mod:`lftransfer.app.reference_pool`); None: this process.
     """
 
     settings: Overrides = Overrides()
@@ -82,6 +85,7 @@ class RunOptions:
     verify: bool = True
     negative_control: bool = False
     floor: bool = True
+    cluster: ClusterSpec | None = None
 
     def __post_init__(self) -> None:
         problems = []
@@ -95,6 +99,9 @@ class RunOptions:
             choices.check_choice("rig_model", self.rig_model, choices.RigModel)
         except ValueError as exc:
             problems.append(str(exc))
+        if self.cluster is not None and not self.settings.quiet_reference:
+            problems.append("cluster spreads a quiet reference's rounds: ask for one (quiet_reference, "
+                            "--quiet-reference)")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -448,6 +455,7 @@ class _Run:
         """The ground truth rendered until its noise on the cross term is at most a third of the run's error
         (:mod:`lftransfer.sim.reference`); what it reached goes to the report's ``reference``."""
         from lftransfer.sim.metrics import composites, cross_transfer_error, metric_factor
+        from lftransfer.app.reference_pool import reference_renderer
         from lftransfer.sim.reference import MAX_ROUNDS
 
         comp_n, comp_0 = composites(result)
@@ -456,9 +464,11 @@ class _Run:
             check = cross_transfer_error(comp_n, comp_0, gt)
             return check.error, check.gt_noise
 
-        gt, self.reference = self.opened.oracle.quiet_ground_truth(
-            judge, spp=self.settings.gt_spp, multiple=metric_factor(comp_n.shape[1]),
-            use_cache=self.options.use_cache, progress=self.step, warn=self.warning)
+        with reference_renderer(self.options.cluster, use_cache=self.options.use_cache, step=self.step) as (
+                render, parts):
+            gt, self.reference = self.opened.oracle.quiet_ground_truth(
+                judge, spp=self.settings.gt_spp, multiple=metric_factor(comp_n.shape[1]),
+                use_cache=self.options.use_cache, parts=parts, render=render, progress=self.step, warn=self.warning)
         for _ in range(1 + MAX_ROUNDS - self.reference.rounds):
             self.step("ground truth: quiet enough")
         if not self.reference.met:

@@ -474,7 +474,8 @@ def sequence_tables(s: StoredRun) -> list[str]:
                         "cross_transfer_rel_error_min", "cross_transfer_rel_error_max", "cross_gt_noise_rel_max",
                         "fidelity_floor_min", "fidelity_floor_max", "transfer_over_floor_min",
                         "transfer_over_floor_max", "reference_spp_min", "reference_spp_max",
-                        "reference_noise_over_error_max", "references_met", "references", "stale_captures", "captures_used", "capture_behind_s_median", "capture_behind_s_max",
+                        "reference_noise_over_error_max", "references_met", "references", "stale_captures",
+                        "captures_used", "capture_behind_s_median", "capture_behind_s_max",
                         "capture_age_s_median") if k in summary]
     settings = ", ".join(f"{k} {report[k]}" for k in ("mode", "loop", "rig_model", "renderer", "projection",
                                                       "variant")

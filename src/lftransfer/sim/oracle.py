@@ -46,14 +46,16 @@ class Oracle:
                                    progress=progress, warn=warn)
 
     def quiet_ground_truth(self, judge, *, spp: int, world=None, multiple: int = 1, use_cache: bool = True,
-                           progress: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None):
+                           parts: int = 1, render=None, progress: Callable[[str], None] | None = None,
+                           warn: Callable[[str], None] | None = None):
         """The ground truth of the world (or of ``world``, one frame of a sequence) rendered in rounds until its
-        noise on the cross term is at most a third of the error ``judge`` measures
-        (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth, ``Reference``)."""
+        noise on the cross term is at most a third of the error ``judge`` measures, each later round in ``parts``
+        renders through ``render`` (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth,
+        ``Reference``)."""
         from lftransfer.sim.reference import quiet_ground_truth
 
         return quiet_ground_truth(self.world if world is None else world, judge, spp=spp, multiple=multiple,
-                                  use_cache=use_cache, progress=progress, warn=warn)
+                                  use_cache=use_cache, parts=parts, render=render, progress=progress, warn=warn)
 
     def fidelity_floor(self, rig, result, gt, settings, *, time_s: float = 0.0, cross=None,
                        progress: Callable[[str], None] | None = None):

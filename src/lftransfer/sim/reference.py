@@ -7,7 +7,13 @@ whole frame (the ordinary :func:`~lftransfer.sim.ground_truth.render_ground_trut
 the box of pixels the objects cover (the film's crop window: the cross term lives there, and the background's
 samples would be wasted), with fresh seeds, and are averaged in weighted by their samples. The union and the objects
 alone keep sharing each round's seeds (correlated sampling: their noise cancels in the cross term). Each round asks
-for the samples that the noise's 1 / sqrt(spp) law says will meet the target, up to a budget.
+for the samples that the noise's 1 / sqrt(spp) law says will meet the target, up to a budget, as renders of a power
+of two samples each (Mitsuba repeats a render bit for bit only then).
+
+A later round may be split into ``parts`` renders of its samples with seeds of their own, averaged in one after
+another in their order: each part is a job (:data:`Job`) that any process can render (:func:`render_jobs` here,
+or the workers of a Ray cluster, ``lftransfer.app.reference_pool``), and the result depends on the number of parts
+only, never on where or in which order they ran.
 """
 
 from __future__ import annotations
@@ -21,12 +27,16 @@ import numpy as np
 
 from lftransfer.sim.ground_truth import GroundTruth, render_ground_truth
 
-__all__ = ["QUIET_RATIO", "MAX_ROUNDS", "Reference", "object_box", "quiet_ground_truth"]
+__all__ = ["QUIET_RATIO", "MAX_ROUNDS", "Job", "Reference", "object_box", "quiet_ground_truth", "render_jobs"]
 
 QUIET_RATIO = 1.0 / 3.0        # the noise on the cross term at most this fraction of the error
 MAX_ROUNDS = 4                 # rounds after the first
 MAX_SPP = 65536                # samples per pixel per render, in all, at most
 HEADROOM = 1.2                 # a round asks for this much more than the 1 / sqrt(spp) law's estimate
+PART_SEED_STEP = 104729        # part j of a round adds j times this to the round's seeds
+
+Job = tuple[int, tuple[int, int], "tuple[int, int, int, int] | None"]
+"""One render of a quiet reference: (samples per pixel, the two seeds, the crop box or None: the whole frame)."""
 
 
 @dataclass(frozen=True)
@@ -45,6 +55,7 @@ class Reference:
         box: (x, y, width, height) of the pixels the later rounds rendered.
         samples: camera samples spent, all renders (6 per round: union, real, synthetic, two seeds each).
         seconds: wall time.
+        parts: renders each later round was split into (the workers it was spread over).
     """
 
     spp: int
@@ -58,6 +69,7 @@ class Reference:
     box: tuple[int, int, int, int]
     samples: int
     seconds: float
+    parts: int = 1
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -93,9 +105,28 @@ def _blend(gt: GroundTruth, n: int, more: GroundTruth, k: int, box: tuple[int, i
     return out
 
 
+def render_jobs(scene, jobs: list[Job], *, use_cache: bool = True,
+                warn: Callable[[str], None] | None = None) -> list[GroundTruth]:
+    """Each job's ground truth of ``scene`` (:func:`~lftransfer.sim.ground_truth.render_ground_truth`), one after
+    another in this process, in the jobs' order."""
+    return [render_ground_truth(scene, spp=n, seeds=seeds, crop=crop, use_cache=use_cache, warn=warn)
+            for n, seeds, crop in jobs]
+
+
+def _share(need: float, parts: int, room: int) -> int:
+    """Samples per pixel of each of a round's ``parts`` renders: a power of two (Mitsuba 3.9 renders the same
+    samples bit for bit only then; at 192, 320 or 1000 samples two renders with the same seed differed by up to
+    1.4e-6), the smallest that brings ``need`` samples in all, or the largest that fits ``room``."""
+    k = 1 << max(0, math.ceil(math.log2(max(1.0, need / parts))))
+    while k > 1 and k * parts > room:
+        k //= 2
+    return k
+
+
 def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None, float | None]], *, spp: int,
                        target: float = QUIET_RATIO, max_spp: int = MAX_SPP, max_rounds: int = MAX_ROUNDS,
                        multiple: int = 1, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
+                       parts: int = 1, render: Callable[[object, list[Job]], list[GroundTruth]] | None = None,
                        progress: Callable[[str], None] | None = None,
                        warn: Callable[[str], None] | None = None) -> tuple[GroundTruth, Reference]:
     """The ground truth, rendered in rounds until its noise on the cross term is at most ``target`` times the error
@@ -112,6 +143,10 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
         multiple: the box is grown to whole blocks of this many pixels (the metrics' downsampling factor).
         seeds: the first round's two seeds; round r uses seeds + 7919 r.
         use_cache: read and write each round's renders in the ground-truth cache.
+        parts: renders each later round is split into (part j adds j * 104729 to the round's seeds); the first
+            round is one render (the ordinary ground truth, shared with the cache's).
+        render: (scene, jobs) -> their ground truths in the jobs' order, e.g. on a cluster's workers (None:
+            :func:`render_jobs` in this process).
         progress: called once per round.
         warn: called with one line when a cache entry is bad.
 
@@ -121,24 +156,30 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
     w, h = scene.view.resolution
+    if render is None:
+        def render(sc, jobs):
+            return render_jobs(sc, jobs, use_cache=use_cache, warn=warn)
+    parts = max(1, int(parts))
     say(f"ground truth: {spp} samples per pixel, the whole frame")
-    gt = render_ground_truth(scene, spp=spp, seeds=seeds, use_cache=use_cache, warn=warn)
+    gt = render(scene, [(spp, seeds, None)])[0]
     box = object_box(gt, multiple)
     total, rounds, samples = spp, 1, 6 * spp * w * h
     error, noise = judge(gt)
     while rounds <= max_rounds and error and noise is not None and noise > target * error and total < max_spp:
         need = total * (noise / (target * error)) ** 2 * HEADROOM
-        more = int(min(max_spp - total, max(spp, math.ceil(need - total))))
+        k = _share(max(spp, need - total), parts, max_spp - total)
+        more = k * parts
         say(f"ground truth: noise {noise:.3g} of the error {error:.3g}; {more} more samples per pixel in the "
-            f"objects' box")
-        r_seeds = (seeds[0] + 7919 * rounds, seeds[1] + 7919 * rounds)
-        extra = render_ground_truth(scene, spp=more, seeds=r_seeds, use_cache=use_cache, warn=warn, crop=box)
-        gt = _blend(gt, total, extra, more, box)
-        total += more
+            f"objects' box" + (f", {parts} parts" if parts > 1 else ""))
+        jobs = [(k, (seeds[0] + 7919 * rounds + PART_SEED_STEP * j, seeds[1] + 7919 * rounds + PART_SEED_STEP * j),
+                 box) for j in range(parts)]
+        for extra in render(scene, jobs):
+            gt = _blend(gt, total, extra, k, box)
+            total += k
         rounds += 1
         samples += 6 * more * box[2] * box[3]
         error, noise = judge(gt)
     ratio = noise / error if error and noise is not None else None
     return gt, Reference(spp=total, first_spp=spp, rounds=rounds, noise=noise, error=error, ratio=ratio,
                          target=target, met=ratio is not None and ratio <= target, box=box, samples=samples,
-                         seconds=time.perf_counter() - t0)
+                         seconds=time.perf_counter() - t0, parts=parts)

@@ -113,7 +113,8 @@ Cluster = Annotated[Optional[str], option(
     "--cluster", metavar="auto|local|ray://HOST:PORT",
     help="Spread the work over a Ray cluster (pip install 'lftransfer[cluster]'): auto (the cluster `ray start` "
          "made here, else a local one) | local (one started for this job) | ray://HOST:PORT. Results are "
-         "bit-identical to one process.")]
+         "bit-identical to one process (a quiet reference, split into one part per worker, to one process that "
+         "splits it alike).")]
 Workers = Annotated[Optional[int], option("--workers", min=1, metavar="N",
                                           help="Cluster workers (default: one per GPU, else per CPU core).")]
 Calibration = Annotated[Optional[Path], option(

@@ -12,11 +12,11 @@ from rich.markup import escape
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import (calibrates, check_before_work, command, load, operator, progress_bar,
-                                       rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, GtSpp, LightingModel, MaxMemory, NoCache, NoFloor,
-                                        OutDir, Projection, Quick, QuietReference, Reconstruction, Renderer, RigArgs,
-                                        SceneArg, TruthArgs, Window, flag, option)
+from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, operator,
+                                       progress_bar, rig_options, row)
+from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, GtSpp, LightingModel, MaxMemory, NoCache,
+                                        NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction, Renderer,
+                                        RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides
 
@@ -165,9 +165,14 @@ def register(app: typer.Typer) -> None:
             gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
             renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
             max_memory: MaxMemory = None, no_floor: NoFloor = False,
-            quiet_reference: QuietReference = False) -> None:
-        """Run light field transfer on any scene file with a rig (calibrating it first)."""
+            quiet_reference: QuietReference = False, cluster: Cluster = None, workers: Workers = None) -> None:
+        """Run light field transfer on any scene file with a rig (calibrating it first); --cluster spreads a quiet
+        reference's rounds over a Ray cluster."""
         from lftransfer.app.pipeline import RunOptions
+
+        spec = cluster_spec(cluster, workers)
+        if spec is not None and not quiet_reference:
+            fail("--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference")
 
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
@@ -175,7 +180,8 @@ def register(app: typer.Typer) -> None:
                      projection=projection, window=window, gt_spp=gt_spp, renderer=renderer,
                      quiet_reference=quiet_reference or None)
         settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
-        options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, **rig_opts)
+        options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,
+                             **rig_opts)
         check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                           bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
         _run(scene, out, options)

@@ -167,12 +167,14 @@ def register(app: typer.Typer) -> None:
             fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
+        spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
         options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
                                                 quiet_reference=quiet_reference or None),
-                             use_cache=not no_cache, floor=not no_floor, **rig_opts)
+                             use_cache=not no_cache, floor=not no_floor,
+                             cluster=spec if quiet_reference else None, **rig_opts)
         try:
             seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
-                                  cluster=cluster_spec(cluster, workers))
+                                  cluster=spec if mode == "converged" or not quiet_reference else None)
         except SequenceError as exc:
             fail(str(exc))
         if resume and not (out / "report.json").is_file():
