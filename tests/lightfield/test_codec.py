@@ -169,3 +169,22 @@ def test_08_validation():
         ProjectorModel(dev, bits=0)
     with pytest.raises(ValueError, match=r"\(12, 2\)"):
         LensletCodec(arr, LensletDevice(200, 150, dev.homography, np.zeros((3, 2))), U, V)
+
+
+@pytest.mark.parametrize("lattice", ["hex", "rect"])
+def test_09_image_to_lightfield_as_a_sparse_matrix(lattice):
+    """image_to_lightfield_matrix() is image_to_lightfield: the same taps and weights (to float32 rounding), masked
+    samples 0, at most 4 taps a sample; a matrix with a tap moved by one pixel is not (the negative control)."""
+    arr, dev = _rig(lattice)
+    codec = LensletCodec(arr, dev, U, V)
+    S = codec.image_to_lightfield_matrix()
+    assert S.shape == (arr.K * V * U, 150 * 200) and np.all(np.diff(S.indptr) <= 4)
+    img = np.random.default_rng(3).random((150, 200, 3)).astype(np.float32)
+    want = codec.image_to_lightfield(img).data.reshape(-1, 3)
+    got = S @ img.reshape(-1, 3)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+    masked = ~np.tile(codec.mask.ravel(), arr.K)
+    assert np.all(got[masked] == 0) and S[masked].nnz == 0
+    shifted = S.copy()
+    shifted.indices = np.minimum(shifted.indices + 1, 150 * 200 - 1)
+    assert np.abs(shifted @ img.reshape(-1, 3) - want).max() > 0.01

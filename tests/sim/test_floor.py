@@ -4,7 +4,8 @@ score.
 
 What each test shows:
 - test_01: the adjoint render is the exact transpose of the forward render (<w, A t> = <A^T w, t> to float
-  precision); with another seed it is not (the negative control: the test can fail).
+  precision); with another seed it is not (the negative control: the test can fail); the projector image's light
+  field through its linear drive (S d E^T) equals the rig's own, and its transpose pairs with it.
 - test_02: on a target the projector can reach (A x0, x0 in the box) the fit drops the loss by orders of
   magnitude from the transfer's own projection; on the real cross term of a tiny run it never rises above the
   start and never goes below the non-negativity lower bound.
@@ -58,6 +59,15 @@ def test_01_the_adjoint_render_is_the_exact_transpose(tiny):
     finally:
         rig._seed -= 1
     assert abs(left - wrong) > 1e-3 * np.sum(np.abs(w) * image)
+    # the projector's pixels -> its light field: a projector image's light field through its linear drive, the
+    # transpose of that map, and the drive quantised back to the same codes
+    codes = rng.integers(0, 256, op.drive_shape).astype(np.uint8)
+    np.testing.assert_allclose(op.lf_of_drive(op.drive_of(codes)), op.of_codes(codes), rtol=0, atol=2e-5)
+    assert np.array_equal(op.codes_of_drive(op.drive_of(codes)), codes)
+    d = rng.random(op.drive_shape).astype(np.float32)
+    g = rng.standard_normal(op.black.shape).astype(np.float32)
+    left, right = np.sum(op.lf_of_drive(d) * g.astype(np.float64)), np.sum(op.drive_adjoint(g) * d.astype(np.float64))
+    assert abs(left - right) <= 1e-5 * np.sum(np.abs(op.lf_of_drive(d) * g))
 
 
 def test_02_box_least_squares_reaches_a_reachable_target_and_keeps_its_bounds(tiny):

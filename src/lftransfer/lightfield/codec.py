@@ -60,6 +60,36 @@ class _Remap:
             # fixed point: m1 = integer top-left pixel (x0, y0), m2 = 1/32-px fraction index (ty * 32 + tx)
             self._m1, self._m2 = cv2.convertMaps(self.map_x, self.map_y, cv2.CV_16SC2)
 
+    def matrix(self):
+        """This resampling as a ``(R * C, H * W)`` ``scipy.sparse.csr_matrix`` (one channel; row-major pixel
+        indices): the same four taps and weights (``cv2.remap``'s 1/32-pixel fixed-point fractions where it is
+        used), taps outside the source dropped, so that ``matrix() @ src`` is the resampling and its transpose
+        scatters back."""
+        from scipy.sparse import csr_matrix
+
+        h, w = self.src_shape
+        if self.use_cv:
+            x0 = self._m1[..., 0].astype(np.int64).ravel()
+            y0 = self._m1[..., 1].astype(np.int64).ravel()
+            frac = self._m2.astype(np.int64).ravel()
+            tx = (frac & 31).astype(np.float32) / np.float32(32)
+            ty = (frac >> 5).astype(np.float32) / np.float32(32)
+        else:
+            mx, my = self.map_x.ravel().astype(np.float64), self.map_y.ravel().astype(np.float64)
+            x0, y0 = np.floor(mx).astype(np.int64), np.floor(my).astype(np.int64)
+            tx, ty = (mx - x0).astype(np.float32), (my - y0).astype(np.float32)
+        rows = np.arange(x0.size)
+        taps = [(x0, y0, (1 - tx) * (1 - ty)), (x0 + 1, y0, tx * (1 - ty)), (x0, y0 + 1, (1 - tx) * ty),
+                (x0 + 1, y0 + 1, tx * ty)]
+        r, c, v = [], [], []
+        for x, y, weight in taps:
+            inside = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (weight != 0)
+            r.append(rows[inside])
+            c.append(y[inside] * w + x[inside])
+            v.append(weight[inside])
+        return csr_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=(x0.size, h * w),
+                          dtype=np.float32)
+
     def __call__(self, src: np.ndarray) -> np.ndarray:
         src = np.ascontiguousarray(src, dtype=np.float32)
         if self.use_cv:
@@ -349,6 +379,15 @@ class LensletCodec:
         out = self._forward(image).reshape(self.array.K, self.V, self.U, 3)
         out *= self._mask3
         return LightField(out, self.array)
+
+    def image_to_lightfield_matrix(self):
+        """:meth:`image_to_lightfield` of one channel as a ``(K * V * U, H * W)`` ``scipy.sparse.csr_matrix`` (the
+        same taps and weights, masked samples 0; light field entries and pixels in row-major order): linear
+        algebra over device images, its transpose scattering a light field back onto the pixels."""
+        from scipy.sparse import diags
+
+        keep = np.tile(self.mask.ravel(), self.array.K).astype(np.float32)
+        return (diags(keep) @ self._forward.matrix()).tocsr()
 
     def lightfield_to_image(self, lf: LightField) -> np.ndarray:
         """Resample a light field onto the device's pixels (bilinear over data samples, 0 off the lenslets).
