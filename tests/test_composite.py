@@ -46,3 +46,60 @@ def test_03_sample_mean_is_the_mean_of_each_group(spp, groups, tail, seed):
     want = values.reshape(groups, spp, *tail).astype(np.float64).mean(axis=1)
     assert got.shape == (groups, *tail) and got.dtype == np.float32
     np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-7)
+
+
+def _two_planes():
+    """An analytic scene seen by a 64 x 48 view camera: a real plane (grey-blue) over the whole frame and a
+    synthetic plane (red) over the right two thirds, tilted against each other so that they cross: left of the
+    crossing the real plane is nearer, right of it the synthetic one. Depths are exact ray distances."""
+    from lftransfer.optics.geometry import backproject, view_camera
+    from lftransfer.scenes.models import ViewConfig
+
+    view = ViewConfig(resolution=(64, 48), origin=(0.0, 0.0, -0.5), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                      fov_deg=40.0)
+    h, w = 48, 64
+    ys, xs = np.mgrid[0:h, 0:w]
+    px = np.stack([xs.ravel(), ys.ravel()], -1).astype(float)
+    _, R, t = view_camera(view)
+    centre = -R.T @ t
+
+    def distance(point, normal):
+        return np.linalg.norm(backproject(view, px, point, normal) - centre, axis=1).reshape(h, w)
+
+    real_depth = distance((0, 0, 0.0), (0.25, 0.0, 1.0))
+    syn_depth = distance((0, 0, 0.0), (-0.25, 0.0, 1.0))
+    alpha = (xs >= w // 3).astype(np.float32)
+    real = np.broadcast_to(np.float32([0.2, 0.3, 0.6]), (h, w, 3)).astype(np.float32)
+    syn = (np.float32([0.9, 0.1, 0.1]) * alpha[..., None]).astype(np.float32)
+    syn_depth = np.where(alpha > 0, syn_depth, np.inf)
+    return syn, alpha, syn_depth, real, real_depth
+
+
+def test_03_depth_composite_of_two_crossing_planes():
+    """Away from the planes' crossing (depths more than 5 sigma apart) the depth composite is exact: the nearer
+    surface's colour; across it, every pixel is a blend of the two colours (a soft edge, no halo); unknown real
+    depth falls back to the over operator. Negative control: the over operator is wrong wherever the real plane is
+    nearer."""
+    from lftransfer.composite import composite_depth, front_weight
+
+    syn, alpha, syn_depth, real, real_depth = _two_planes()
+    sigma = 0.002
+    out = composite_depth(syn, alpha, syn_depth, real, real_depth, sigma)
+    gap = real_depth - syn_depth
+    covered = alpha > 0
+    front, behind = covered & (gap > 5 * np.hypot(sigma, 0.001)), covered & (gap < -5 * np.hypot(sigma, 0.001))
+    assert front.sum() > 200 and behind.sum() > 200          # both orders occur
+    np.testing.assert_allclose(out[front], syn[front], atol=1e-5)
+    np.testing.assert_allclose(out[behind], real[behind], atol=1e-5)
+    np.testing.assert_array_equal(out[~covered], real[~covered])
+    w = front_weight(syn_depth, real_depth, sigma)
+    edge = covered & ~front & ~behind
+    assert edge.any() and np.all((w[edge] > 0) & (w[edge] < 1))
+    np.testing.assert_allclose(out[edge], w[edge][:, None] * syn[edge] + (1 - w[edge][:, None]) * real[edge],
+                               atol=1e-6)
+    # unknown real depth: the over operator
+    unknown = composite_depth(syn, alpha, syn_depth, real, np.full_like(real_depth, np.nan), sigma)
+    np.testing.assert_allclose(unknown, composite(syn, alpha, real), atol=1e-6)
+    # negative control: the over operator shows the synthetic plane where the real one hides it
+    over = composite(syn, alpha, real)
+    assert np.abs(over[behind] - real[behind]).max() > 0.5
