@@ -36,6 +36,12 @@ RigModel = Literal["calibrated", "nominal", "oracle"]
 """What the pipeline knows of the rig: ``"calibrated"`` (calibrate through the rig first), ``"nominal"`` (the rig
 file's values) or ``"oracle"`` (the simulated rig's hidden truth: a verification baseline)."""
 
+Composite = Literal["over", "depth"]
+"""How the view camera's final frame is put together: ``"over"`` (the synthetic render over the real view: real
+objects never hide synthetic ones, the paper's composite) or ``"depth"`` (the nearer surface per pixel, from the
+synthetic render's depth and the real scene's depth measured by the rig; :func:`lftransfer.composite.composite_depth`).
+"""
+
 LiveLoop = Literal["decoupled", "sync"]
 """The live loop: ``"decoupled"`` (captures on their own thread at the devices' rate, frames at the renderer's
 rate with the newest capture) or ``"sync"`` (one capture inside every frame; :mod:`lftransfer.transfer.live`)."""
@@ -47,12 +53,14 @@ WINDOWS: tuple[str, ...] = get_args(Window)
 RENDERERS: tuple[str, ...] = get_args(Renderer)
 RIG_MODELS: tuple[str, ...] = get_args(RigModel)
 LIVE_LOOPS: tuple[str, ...] = get_args(LiveLoop)
+COMPOSITES: tuple[str, ...] = get_args(Composite)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
 DEFAULT_PROJECTION: Projection = "depth"
 DEFAULT_WINDOW: Window = "edge"
 DEFAULT_RENDERER: Renderer = "auto"
+DEFAULT_COMPOSITE: Composite = "over"
 DEFAULT_RIG_MODEL: RigModel = "calibrated"
 """Runs calibrate by default; a study defaults to it too (its ``rig_model``)."""
 DEFAULT_LIVE_LOOP: LiveLoop = "decoupled"

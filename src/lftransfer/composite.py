@@ -71,12 +71,13 @@ def front_weight(synthetic_depth: np.ndarray, real_depth: np.ndarray, real_sigma
 
     d_syn = np.asarray(synthetic_depth, np.float64)
     d_real = np.asarray(real_depth, np.float64)
-    sigma = np.sqrt(np.square(np.asarray(real_sigma, np.float64)) + float(synthetic_sigma) ** 2)
-    if np.any(~(sigma > 0)):
-        raise ValueError("front_weight: the depths' standard deviations must be positive")
+    sigma = np.broadcast_to(np.sqrt(np.square(np.asarray(real_sigma, np.float64)) + float(synthetic_sigma) ** 2),
+                            d_real.shape)
     known = np.isfinite(d_real) & np.isfinite(d_syn)
-    gap = np.where(known, d_real - np.where(known, d_syn, 0.0), np.inf)
-    return np.where(known, ndtr(gap / sigma), 1.0).astype(np.float32)
+    if np.any(~(sigma[known] > 0)):
+        raise ValueError("front_weight: the depths' standard deviations must be positive where both are known")
+    gap = np.where(known, d_real - np.where(known, d_syn, 0.0), 0.0)
+    return np.where(known, ndtr(gap / np.where(known, sigma, 1.0)), 1.0).astype(np.float32)
 
 
 def composite_depth(synthetic_rgb: np.ndarray, alpha: np.ndarray, synthetic_depth: np.ndarray,

@@ -31,8 +31,8 @@ class Overrides:
 
     Attributes:
         bounces: N, light field exchanges after the direct frame (0 .. :data:`lftransfer.choices.MAX_BOUNCES`).
-        lighting_model, reconstruction, projection, window, renderer: one value of the choice's ``Literal``
-            (:mod:`lftransfer.choices`).
+        lighting_model, reconstruction, projection, window, renderer, composite: one value of the choice's
+            ``Literal`` (:mod:`lftransfer.choices`).
         gt_spp: samples per pixel of each ground-truth render (>= 1).
         quiet_reference: render the ground truth in rounds until its noise on the cross term is at most a third
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
@@ -47,6 +47,7 @@ class Overrides:
     projection: choices.Projection | None = None
     window: choices.Window | None = None
     renderer: choices.Renderer | None = None
+    composite: choices.Composite | None = None
     gt_spp: int | None = None
     quiet_reference: bool | None = None
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
@@ -59,7 +60,8 @@ class Overrides:
         if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
-                 "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer}
+                 "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer,
+                 "composite": choices.Composite}
         for name, kind in kinds.items():
             try:
                 choices.check_choice(name, getattr(self, name), kind)
@@ -148,8 +150,9 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
     values = dict(bounces=choices.DEFAULT_BOUNCES, angular_samples=scene.rig.angular_samples,
                   lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
                   reconstruction=render.reconstruction, projection=render.projection, window=render.window,
-                  lf_spp=render.lf_spp or render.spp, view_spp=render.spp, renderer=choices.DEFAULT_RENDERER)
-    for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer"):
+                  lf_spp=render.lf_spp or render.spp, view_spp=render.spp, renderer=choices.DEFAULT_RENDERER,
+                  composite=render.composite)
+    for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer", "composite"):
         if getattr(overrides, name) is not None:
             values[name] = getattr(overrides, name)
     area = values["lighting_model"] == "area"

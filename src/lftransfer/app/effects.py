@@ -33,7 +33,6 @@ import numpy as np
 from lftransfer.app.pipeline import RunOptions, floor_skipped, open_rig
 from lftransfer.app.reference_pool import reference_renderer
 from lftransfer.app.sequence import frame_metrics, sequence_summary
-from lftransfer.composite import composite
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 
@@ -201,8 +200,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
                 world = oracle.world.at(t)
                 frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
                 alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
-                no_exchange = composite(alone.bounces[0].synthetic_view.rgb, alone.synthetic_view.alpha,
-                                        alone.real_view_direct)
+                no_exchange = alone.composite_direct()
                 if resolved.quiet_reference:
                     gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
                                             render=render, parts=parts)
@@ -224,7 +222,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
                 truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
                                                     use_cache=options.use_cache).image
                 result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
-                transfer_without = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+                transfer_without = result.composite()
                 pixels = object_pixels(world, effect.on)
                 check.effect.points.append(EffectPoint(
                     index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),

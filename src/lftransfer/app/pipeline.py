@@ -23,7 +23,6 @@ from lftransfer.app.rigs import (NOMINAL, CalibrationFailedError, Knowledge, Ope
                                  knowledge, open_rig, write_calibration)
 from lftransfer.app.run_folder import clear_run_folder, tracked_run, write_status
 from lftransfer.calibration.rig import count_calibration_steps, load_calibration
-from lftransfer.composite import composite
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
@@ -375,7 +374,7 @@ class _Run:
         self.timings["total"] = time.perf_counter() - t0
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor)
         self.step("write outputs")
-        comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+        comp = result.composite()
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
                       captured_raw=result.captured_raw, camera_bits=self.scene.rig.lf_camera_bits,
                       ceiling=emitter_ceiling(known.scene))
@@ -529,6 +528,20 @@ class _Run:
             self.warning(control.result.message())
         return control
 
+    def real_depth(self, result) -> dict | None:
+        """What the depth composite knew of the real scene's depth in the view camera: its source and the pixels
+        it covers, and (verified runs) its error against the true depth (:func:`lftransfer.sim.metrics.depth_errors`);
+        None with the over composite."""
+        vd = result.view_depth
+        if vd is None:
+            return None
+        out = {"source": vd.source, "known_fraction": float(vd.known.mean())}
+        if self.verified:
+            from lftransfer.sim.metrics import depth_errors
+
+            out.update(depth_errors(vd, self.opened.oracle.real_view_depth()))
+        return out
+
     def report(self, known: Knowledge, label: str, errors, result, metrics, tables: dict,
                control: ControlRun | None, gt_spp_needed, floor=None) -> dict:
         """Stage 6: the report (``report.json``): metrics, comparisons, settings, energies, timings, provenance."""
@@ -549,6 +562,8 @@ class _Run:
             "by_projection": tables["by_projection"],
             "window": s.window,
             "by_window": tables["by_window"],
+            "composite": s.composite,
+            "real_depth": self.real_depth(result),
             "negative_control": control.result.to_json() if control is not None else None,
             "real_floor": floor.real_floor if floor is not None else None,
             "synthetic_floor": floor.synthetic_floor if floor is not None else None,

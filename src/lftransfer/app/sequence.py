@@ -33,7 +33,6 @@ from lftransfer.app.rigs import Knowledge, OpenedRig, knowledge, open_rig, write
 from lftransfer.app.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
-from lftransfer.composite import composite
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, run_transfer
@@ -436,7 +435,7 @@ class _FrameWriter:
         for f in frames:
             t0 = time.perf_counter()
             result, gt = f.result, f.ground_truth
-            comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+            comp = result.composite()
             if f.index == 0 and self.scale is None:
                 self.report["display_scale"] = display_scale(comp, ceiling=self.ceiling)
             panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=self.ceiling)

@@ -18,12 +18,14 @@ from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, Validatio
 from lftransfer.choices import (
     DEFAULT_ANGULAR_SAMPLES,
     DEFAULT_APERTURE_SAMPLES,
+    DEFAULT_COMPOSITE,
     DEFAULT_GT_SPP,
     DEFAULT_LIGHTING_MODEL,
     DEFAULT_PROJECTION,
     DEFAULT_RECONSTRUCTION,
     DEFAULT_SPP,
     DEFAULT_WINDOW,
+    Composite,
     LightingModel,
     Projection,
     Reconstruction,
@@ -203,6 +205,8 @@ class RenderConfig(_Model):
         window: area model: what the synthetic scene receives from beyond the lenslets' window (light steeper than
             about 26.6 degrees, which no lenslet records), ``"edge"`` (the captured light field read at the
             window's edge: diffuse real surfaces look much the same from there) or ``"cut"`` (nothing).
+        composite: how the final frame is put together, ``"over"`` (the synthetic render over the real view) or
+            ``"depth"`` (the nearer surface per pixel, the real scene's depth measured through the rig).
         spp: samples per pixel of view renders and per light field sample.
         lf_spp: rays per entry of the outgoing light field render (points over the entry's lenslet aperture), which
             the depth prefilter also uses to model where each entry's light lands; None: ``spp``. More rays let the
@@ -216,6 +220,7 @@ class RenderConfig(_Model):
     reconstruction: Reconstruction = DEFAULT_RECONSTRUCTION
     projection: Projection = DEFAULT_PROJECTION
     window: Window = DEFAULT_WINDOW
+    composite: Composite = DEFAULT_COMPOSITE
     spp: PosInt = DEFAULT_SPP
     lf_spp: PosInt | None = None
     max_depth: PosInt = 3

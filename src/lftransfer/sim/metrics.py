@@ -225,10 +225,7 @@ def cross_by_side(c_lft: np.ndarray, c_gt_pair: list[np.ndarray], covered: np.nd
 def composites(result) -> tuple[np.ndarray, np.ndarray]:
     """(the composite after the exchange, the composite without it) of a transfer result: what the cross term of
     :func:`cross_transfer_error` is the difference of, (H, W, 3) each."""
-    alpha = result.synthetic_view.alpha
-    comp_n = composite(result.synthetic_view.rgb, alpha, result.real_view)
-    comp_0 = composite(result.bounces[0].synthetic_view.rgb, alpha, result.real_view_direct)
-    return comp_n, comp_0
+    return result.composite(), result.composite_direct()
 
 
 def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
@@ -410,3 +407,28 @@ def negative_control(result, control, gt: GroundTruth, rig_model: str, *, target
                            psnr_objects_margin_db=psnr_margin, cross_error_margin=cross_margin,
                            psnr_objects_margin_db_per_gt=(per_gt[0][0], per_gt[1][0]),
                            cross_error_margin_per_gt=(per_gt[0][1], per_gt[1][1]), measurably_worse=bool(worse))
+
+
+def depth_errors(estimate, truth: np.ndarray) -> dict:
+    """A real depth map in the view camera (:class:`lftransfer.real_depth.ViewDepth`) against the true one.
+
+    Args:
+        estimate: the measured depth (NaN: unknown) and its sigma.
+        truth: (H, W) true distance to the real objects, metres (inf: none seen).
+
+    Returns:
+        ``error_mm_median`` and ``error_mm_p95`` (|estimate - truth| where both are known, mm), ``within_3_sigma``
+        (the fraction of those within three of the estimate's sigmas), ``coverage`` (of the pixels that see a real
+        object, the fraction with an estimate), ``false_fraction`` (of the pixels with an estimate, the fraction
+        that see no real object) and ``pixels`` (both known); None where undefined.
+    """
+    real = np.isfinite(truth)
+    known = np.isfinite(estimate.depth)
+    both = real & known
+    err = np.abs(estimate.depth[both].astype(np.float64) - truth[both])
+    return {"error_mm_median": float(np.median(err) * 1000) if both.any() else None,
+            "error_mm_p95": float(np.percentile(err, 95) * 1000) if both.any() else None,
+            "within_3_sigma": float(np.mean(err <= 3 * estimate.sigma[both])) if both.any() else None,
+            "coverage": float(both.sum() / real.sum()) if real.any() else None,
+            "false_fraction": float((known & ~real).sum() / known.sum()) if known.any() else None,
+            "pixels": int(both.sum())}

@@ -74,6 +74,20 @@ class Oracle:
         return fidelity_floor(rig, self.world, result, gt, settings, time_s=time_s, cross=cross,
                               progress=progress)
 
+    def real_view_depth(self, *, time_s: float = 0.0, spp: int = 16):
+        """(H, W) float32 the distance from the view camera's centre to the real objects as they stand at
+        ``time_s``, along each pixel's ray (the mean over ``spp`` rays of those that hit), metres; inf where no real
+        object is seen."""
+        from lftransfer.backend import mitsuba
+        from lftransfer.render.camera import sensor_dict
+        from lftransfer.render.renderer import HalfSpaceRenderer
+
+        world = self.world.at(time_s)
+        view = world.view
+        w, h = view.resolution
+        sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp))
+        return HalfSpaceRenderer(list(world.real), max_depth=1).render_view(sensor, w, h, [], spp=spp).depth
+
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built
         (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`)."""

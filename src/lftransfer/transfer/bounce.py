@@ -21,7 +21,9 @@ from typing import Callable
 import numpy as np
 
 from lftransfer import choices
+from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
+from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
 from lftransfer.render.renderer import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
@@ -51,6 +53,9 @@ class TransferSettings:
             one extra frame; area model; :mod:`lftransfer.transfer.projection`).
         window: what the synthetic scene receives from beyond the lenslets' window: "edge" (the captured light
             field read at the window's edge) or "cut" (nothing; area model; :mod:`lftransfer.render.lights`).
+        composite: how the final frame is put together: "over" (the synthetic render over the real view) or
+            "depth" (the nearer surface per pixel: the real scene's depth, measured through the rig as the depth
+            projection measures it, carried into the view camera; :mod:`lftransfer.real_depth`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -68,12 +73,19 @@ class TransferSettings:
     reconstruction: choices.Reconstruction = choices.DEFAULT_RECONSTRUCTION
     projection: choices.Projection = choices.DEFAULT_PROJECTION
     window: choices.Window = choices.DEFAULT_WINDOW
+    composite: choices.Composite = choices.DEFAULT_COMPOSITE
     lf_spp: int = choices.DEFAULT_SPP
     view_spp: int = choices.DEFAULT_SPP
     projector_fill: float = choices.DEFAULT_PROJECTOR_FILL
     bounce_views: bool = True
     renderer: choices.Renderer = choices.DEFAULT_RENDERER
     seed: int = 0
+
+    @property
+    def measures_depth(self) -> bool:
+        """Whether a transfer measures the real scene's depth: for the projection prefilter or the depth
+        composite."""
+        return self.prefilters or self.composite == "depth"
 
     @property
     def prefilters(self) -> bool:
@@ -130,8 +142,9 @@ class TransferResult:
         saturated_fraction: fraction of the direct frame's LF camera codes at full scale (light clipped there
             is lost to the synthetic side).
         timings_s: seconds per stage.
-        depth: (K, V, U) the real scene's depth the projection prefilter used (measured, or given to
-            :func:`run_transfer`), metres (NaN where none was found), or None (``projection == "box"``).
+        depth: (K, V, U) the real scene's depth the projection prefilter or the depth composite used (measured,
+            or given to :func:`run_transfer`), metres (NaN where none was found), or None (neither needs one).
+        view_depth: the real scene's depth in the view camera (``composite == "depth"``), else None.
     """
 
     bounces: list[Bounce]
@@ -145,6 +158,28 @@ class TransferResult:
     saturated_fraction: float = 0.0
     timings_s: dict[str, float] = field(default_factory=dict)
     depth: np.ndarray | None = None
+    view_depth: ViewDepth | None = None
+
+    def composite(self) -> np.ndarray:
+        """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over
+        operator, or the nearer surface where :attr:`view_depth` is given)."""
+        return composite_view(self.synthetic_view, self.real_view, self.view_depth)
+
+    def composite_direct(self) -> np.ndarray:
+        """(H, W, 3) the frame without any exchange (bounce 0 on both sides), composited alike."""
+        s0 = self.bounces[0].synthetic_view
+        return composite_view(ViewImage(rgb=s0.rgb, alpha=self.synthetic_view.alpha, depth=self.synthetic_view.depth),
+                              self.real_view_direct, self.view_depth)
+
+
+def composite_view(synthetic: ViewImage, real_view: np.ndarray, view_depth: ViewDepth | None) -> np.ndarray:
+    """The synthetic render ``synthetic`` and the real view: the over operator
+    (:func:`~lftransfer.composite.composite`), or, with the real scene's depth in the view camera, the depth-aware
+    composite (:func:`~lftransfer.composite.composite_depth`)."""
+    if view_depth is None:
+        return composite(synthetic.rgb, synthetic.alpha, real_view)
+    return composite_depth(synthetic.rgb, synthetic.alpha, synthetic.depth, real_view, view_depth.depth,
+                           view_depth.sigma)
 
 
 def projector_gain(lf: LightField, max_radiance: float, fill: float = 0.95) -> float:
@@ -201,7 +236,7 @@ def final_projection(bounces: list[Bounce]) -> LightField:
 def count_steps(settings: TransferSettings) -> int:
     """Number of progress callbacks :func:`run_transfer` makes (for progress bars)."""
     per_bounce = 3 + (1 if settings.bounce_views else 0)
-    return 4 + int(settings.prefilters) + settings.bounces * per_bounce + 2
+    return 4 + int(settings.measures_depth) + settings.bounces * per_bounce + 2
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
@@ -246,15 +281,16 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
-    if not settings.prefilters:
-        depth = None                        # nothing prefilters: the result carries no depth
+    if not settings.measures_depth:
+        depth = None                        # nothing needs it: the result carries no depth
     else:
         if depth is None:
             step("measure the real scene's depth (projector white)")
             with timer("measure_depth"):
                 depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
                                       settings.angular_samples, r0)
-        side.set_depth(depth)
+        if settings.prefilters:
+            side.set_depth(depth)
     step("render synthetic direct")
     ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
@@ -297,8 +333,12 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
+    view_depth = None
+    if settings.composite == "depth":
+        with timer("view_depth"):
+            view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
     return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
                           clipped_fraction=clipped, captured_raw=raw0,
                           saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
-                          timings_s=timer.totals, depth=depth)
+                          timings_s=timer.totals, depth=depth, view_depth=view_depth)

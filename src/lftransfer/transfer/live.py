@@ -11,7 +11,7 @@ Frame t, with the projector showing the synthetic light field of frame t - 1 (bl
 4. render the synthetic scene lit by its own light (the virtual point light, emitting objects) and by R_t: its
    outgoing light field Ls_t (shown in frame t + 1; prefiltered from the real scene's depth where the settings ask
    for it, the depth measured once before the first frame: :mod:`lftransfer.transfer.projection`) and its view S_t;
-5. composite S_t over the real view.
+5. composite S_t with the real view (over it, or by depth: ``settings.composite``).
 
 Each frame carries one more exchange than the one before, so for a still scene the frames converge to the
 all-bounce fixed point of the bounce loop (:mod:`lftransfer.transfer.bounce`); when something moves the light
@@ -38,14 +38,14 @@ from typing import Iterator
 import numpy as np
 
 from lftransfer import choices
-from lftransfer.composite import composite
 from lftransfer.lightfield import LightField
+from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
 from lftransfer.render.renderer import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
-from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
 from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
@@ -160,8 +160,10 @@ class LiveTransfer:
         self._captures = 0
         self._used: tuple[int, int, float] | None = None   # (capture index, version, time) of the last frame
         self._worker: CaptureWorker | None = None
-        if depth is not None and settings.prefilters:
-            self.side.set_depth(depth)
+        self._depth: np.ndarray | None = None
+        self.view_depth: ViewDepth | None = None     # the real depth in the view camera (the depth composite)
+        if depth is not None and settings.measures_depth:
+            self._set_depth(depth)
 
     @property
     def projected(self) -> LightField:
@@ -170,9 +172,18 @@ class LiveTransfer:
 
     @property
     def depth(self) -> np.ndarray | None:
-        """(K, V, U) the real scene's depth the projection prefilter uses, metres (NaN: unknown); None before it is
-        measured or when the settings do not prefilter."""
-        return None if self.side.prefilter is None else self.side.prefilter.depth
+        """(K, V, U) the real scene's depth the projection prefilter or the depth composite uses, metres (NaN:
+        unknown); None before it is measured or when the settings need none."""
+        return self._depth
+
+    def _set_depth(self, depth: np.ndarray) -> None:
+        """Use ``depth`` ((K, V, U) metres): for the prefilter, and carried into the view camera for the depth
+        composite."""
+        self._depth = depth
+        self.side.set_depth(depth)                   # prefilters only where the settings ask for it
+        if self.settings.composite == "depth":
+            grid = self._black.lf
+            self.view_depth = view_depth_from_lightfield(depth, grid.u, grid.v, self.model, self.side.scene.view)
 
     @property
     def capture_rate_hz(self) -> float | None:
@@ -246,17 +257,17 @@ class LiveTransfer:
         self.close()
 
     def _measure_depth(self) -> None:
-        """The real scene's depth for the projection prefilter (``projection == "depth"``): two extra frames,
-        projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`). Measured once, at the
-        first step: the real objects are taken to stand still (a sequence whose real objects move projects the
-        box light field and says so)."""
+        """The real scene's depth for the projection prefilter (``projection == "depth"``) or the depth composite:
+        two extra frames, projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`).
+        Measured once, at the first step: the real objects are taken to stand still (a sequence whose real objects
+        move projects the box light field and says so)."""
         side = self.side
         with self.holding_rig() as rig:
             rig.project(rig.info.black())
             direct = side.decoder(rig.capture_lf().codes)
             U = self.settings.angular_samples
-            side.set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
-                                         direct))
+            self._set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
+                                          direct))
 
     def _capture(self, time_s: float, timer: StageTimer) -> Capture:
         side = self.side
@@ -286,7 +297,7 @@ class LiveTransfer:
             self._changed(t0)
         if self.loop == "sync":
             self.rig.setup(RealScene(time_s=time_s))
-        if side.prefilter is None and s.prefilters:
+        if self._depth is None and s.measures_depth:
             with timer("measure_depth"):
                 self._measure_depth()
         cap = self._capture(time_s, timer)
@@ -295,7 +306,7 @@ class LiveTransfer:
             lights = [*side.direct_lights, side.incident_light(cap.captured_lf, s.seed)]
         synthetic_lf, view = side.render(lights, s.seed, timer)
         with timer("composite"):
-            comp = composite(view.rgb, view.alpha, cap.real_view)
+            comp = composite_view(view, cap.real_view, self.view_depth)
         self.projection = Projection(synthetic_lf, self.version)
         if self._worker is not None:
             self._worker.show(self.projection)

@@ -109,6 +109,11 @@ Window = Annotated[Optional[str], option(
     help=f"Area model: what the synthetic objects receive from beyond the lenslets' window: the captured light "
          f"field read at the window's edge, or nothing (default: the scene's, {choices.DEFAULT_WINDOW} unless the "
          f"scene says).")]
+Composite = Annotated[Optional[str], option(
+    "--composite", metavar=metavar(choices.Composite), callback=choice_check("--composite", choices.Composite),
+    help=f"How the final frame is put together: the synthetic render over the real view, or the nearer surface per "
+         f"pixel (the real scene's depth measured through the rig, carried into the view camera; default: the "
+         f"scene's, {choices.DEFAULT_COMPOSITE} unless the scene says).")]
 Cluster = Annotated[Optional[str], option(
     "--cluster", metavar="auto|local|ray://HOST:PORT",
     help="Spread the work over a Ray cluster (pip install 'lftransfer[cluster]'): auto (the cluster `ray start` "

@@ -14,9 +14,9 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, operator,
                                        progress_bar, rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, GtSpp, LightingModel, MaxMemory, NoCache,
-                                        NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction, Renderer,
-                                        RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
+from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, GtSpp, LightingModel, MaxMemory,
+                                        NoCache, NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction,
+                                        Renderer, RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides
 
@@ -157,7 +157,7 @@ def register(app: typer.Typer) -> None:
     @command(app)
     def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
             lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
-            projection: Projection = None, window: Window = None,
+            projection: Projection = None, window: Window = None, composite: Composite = None,
             compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
                                                               "point), the other reconstruction, the other "
                                                               "projection and the other window, each a full "
@@ -177,7 +177,7 @@ def register(app: typer.Typer) -> None:
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
         asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                     projection=projection, window=window, gt_spp=gt_spp, renderer=renderer,
+                     projection=projection, window=window, composite=composite, gt_spp=gt_spp, renderer=renderer,
                      quiet_reference=quiet_reference or None)
         settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
         options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,

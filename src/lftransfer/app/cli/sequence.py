@@ -14,8 +14,8 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
                                        rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Cluster, GtSpp, MaxMemory, NoCache, NoFloor, OutDir, Quick,
-                                            QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
+from lftransfer.app.cli.options import (Bounces, Cluster, Composite, GtSpp, MaxMemory, NoCache, NoFloor, OutDir,
+                                            Quick, QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
                                             choice_check, flag, metavar, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
 from lftransfer.settings import Overrides
@@ -151,7 +151,8 @@ def register(app: typer.Typer) -> None:
                    gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
                    renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
                    cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
-                   no_floor: NoFloor = False, quiet_reference: QuietReference = False) -> None:
+                   no_floor: NoFloor = False, quiet_reference: QuietReference = False,
+                   composite: Composite = None) -> None:
         """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
         report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
         error and fidelity floor)."""
@@ -169,7 +170,7 @@ def register(app: typer.Typer) -> None:
         rig_opts = rig_options(scene, truth, rig)
         spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
         options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
-                                                quiet_reference=quiet_reference or None),
+                                                composite=composite, quiet_reference=quiet_reference or None),
                              use_cache=not no_cache, floor=not no_floor,
                              cluster=spec if quiet_reference else None, **rig_opts)
         try:

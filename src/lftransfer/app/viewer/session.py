@@ -33,7 +33,6 @@ from lftransfer.app.viewer.compare import GT_SPP, GroundTruthCompare
 from lftransfer.app.viewer.recorder import Recorder
 from lftransfer.app.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
-from lftransfer.composite import composite
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.scenes import SceneError, with_overrides
 from lftransfer.settings import Overrides, resolve_settings
@@ -475,7 +474,7 @@ class LiveSession:
             progress("starting")
             with self.live.holding_rig() as rig:         # a decoupled loop's captures wait meanwhile
                 result = run_transfer(rig, self.live.model, self.synthetic(), settings, progress=progress, time_s=t)
-            comp = composite(result.synthetic_view.rgb, result.synthetic_view.alpha, result.real_view)
+            comp = result.composite()
             layers = bounce_layers(result, comp, ceiling=emitter_ceiling(self.scene))
             base = layers[0].scale                        # the direct images' display scale
             gt = self._gt                                 # the ground truth at hand, if it shows this very state
