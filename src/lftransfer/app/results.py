@@ -24,7 +24,6 @@ generator with one error naming the file and the field (:class:`ResultsError`).
 from __future__ import annotations
 
 import json
-import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path

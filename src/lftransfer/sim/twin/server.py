@@ -120,7 +120,6 @@ class TwinServer:
                  exposure: dict[str, tuple[Callable[[], float], Callable[[float], float]]],
                  arrange: Callable[[object], None], status: Callable[[], dict], host: str = "127.0.0.1",
                  port: int = 0) -> None:
-        twin = self
 
         class Handler(BaseHTTPRequestHandler):
             protocol_version = "HTTP/1.0"
