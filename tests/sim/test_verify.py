@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from lftransfer.composite import composite
 from lftransfer.imageio_utils import strict_json
 from lftransfer.sim.ground_truth import GroundTruth
 from lftransfer.sim.metrics import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, Evaluation, evaluate, gt_noise_verdict,
@@ -17,10 +18,20 @@ from lftransfer.sim.metrics import (IDENTICAL, NO_CROSS, NO_LIGHT, NO_PIXELS, Ev
 H, W = 12, 16
 
 
+class _Views(SimpleNamespace):
+    """A transfer result's views, composited with the over operator (what evaluate reads of a result)."""
+
+    def composite(self):
+        return composite(self.synthetic_view.rgb, self.synthetic_view.alpha, self.real_view)
+
+    def composite_direct(self):
+        return composite(self.bounces[0].synthetic_view.rgb, self.synthetic_view.alpha, self.real_view_direct)
+
+
 def _result(real, synthetic, alpha):
     view = SimpleNamespace(rgb=synthetic, alpha=alpha)
-    return SimpleNamespace(real_view=real, real_view_direct=real, synthetic_view=view,
-                           bounces=[SimpleNamespace(synthetic_view=view)])
+    return _Views(real_view=real, real_view_direct=real, synthetic_view=view,
+                  bounces=[SimpleNamespace(synthetic_view=view)])
 
 
 def _gt(union, real, synthetic, alpha_real, alpha_synthetic):
@@ -122,8 +133,8 @@ def test_06_negative_control_margins_and_verdict():
     def run(k: float):
         """A transfer that recovers k times the cross term."""
         view = SimpleNamespace(rgb=syn, alpha=a_syn)
-        return SimpleNamespace(real_view=real + k * cross, real_view_direct=real, synthetic_view=view,
-                               bounces=[SimpleNamespace(synthetic_view=view)])
+        return _Views(real_view=real + k * cross, real_view_direct=real, synthetic_view=view,
+                      bounces=[SimpleNamespace(synthetic_view=view)])
 
     worse = negative_control(run(0.9), run(0.4), gt, "nominal (rig file)")
     assert worse.measurably_worse
@@ -145,7 +156,6 @@ def test_06_negative_control_margins_and_verdict():
 def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
     """The cross error of two composites (a live frame and the no-exchange composite) is evaluate's figure for
     the same images, 0 for a transfer that adds exactly the ground truth's cross term; None without one."""
-    from lftransfer.composite import composite
     from lftransfer.sim.metrics import cross_transfer_error
 
     rng = np.random.default_rng(3)
@@ -157,8 +167,8 @@ def test_07_cross_transfer_error_of_any_composite_agrees_with_evaluate():
     gt = _gt(none + extra, real, syn, 1 - alpha, alpha)
     lit = real + 0.8 * extra
     view = SimpleNamespace(rgb=syn, alpha=alpha)
-    result = SimpleNamespace(real_view=lit, real_view_direct=real, synthetic_view=view,
-                             bounces=[SimpleNamespace(synthetic_view=view)])
+    result = _Views(real_view=lit, real_view_direct=real, synthetic_view=view,
+                    bounces=[SimpleNamespace(synthetic_view=view)])
     expected = evaluate(result, gt)
     check = cross_transfer_error(composite(syn, alpha, lit), none, gt)
     assert check.error == pytest.approx(expected.cross_transfer_rel_error, rel=1e-6) and check.error > 0.1

@@ -318,12 +318,14 @@ VIEWS_FILE = "views.npz"
 def write_views(path: Path, result) -> Path:
     """The view images a run's metrics are computed from, for scoring it later against a truth the run did not
     know (``lft twin score``): ``real_view``, ``real_view_direct``, ``synthetic_rgb``, ``synthetic_alpha`` and
-    ``synthetic_direct_rgb`` ((H, W, 3) / (H, W) float32 radiance and coverage)."""
+    ``synthetic_direct_rgb`` ((H, W, 3) / (H, W) float32 radiance and coverage), and the run's own frames after
+    and without the exchange, ``composite`` and ``composite_direct`` (by the run's composite)."""
     from lftransfer.imageio_utils import write_npz
 
     return write_npz(path, real_view=result.real_view, real_view_direct=result.real_view_direct,
                      synthetic_rgb=result.synthetic_view.rgb, synthetic_alpha=result.synthetic_view.alpha,
-                     synthetic_direct_rgb=result.bounces[0].synthetic_view.rgb)
+                     synthetic_direct_rgb=result.bounces[0].synthetic_view.rgb, composite=result.composite(),
+                     composite_direct=result.composite_direct())
 
 
 

@@ -16,6 +16,8 @@ from typing import Callable
 
 import numpy as np
 
+from lftransfer.composite import composite
+
 __all__ = ["SavedViews", "TwinScore", "score_views"]
 
 
@@ -39,6 +41,19 @@ class SavedViews:
     real_view_direct: np.ndarray
     synthetic_view: _View
     bounces: tuple
+    frames: tuple[np.ndarray, np.ndarray] | None = None     # the run's own composite and composite_direct
+
+    def composite(self) -> np.ndarray:
+        """The run's final frame (its own composite; a file without it: the over operator of its views)."""
+        if self.frames is not None:
+            return self.frames[0]
+        return composite(self.synthetic_view.rgb, self.synthetic_view.alpha, self.real_view)
+
+    def composite_direct(self) -> np.ndarray:
+        """The run's frame without the exchange, as :meth:`composite`."""
+        if self.frames is not None:
+            return self.frames[1]
+        return composite(self.bounces[0].synthetic_view.rgb, self.synthetic_view.alpha, self.real_view_direct)
 
     @classmethod
     def read(cls, path: str | Path) -> "SavedViews":
@@ -53,9 +68,11 @@ class SavedViews:
             if missing:
                 raise ValueError(f"{path}: {', '.join(missing)}: missing (expected the arrays {', '.join(names)})")
             a = {n: np.asarray(z[n], np.float32) for n in names}
+            frames = (tuple(np.asarray(z[n], np.float32) for n in ("composite", "composite_direct"))
+                      if "composite" in z.files and "composite_direct" in z.files else None)
         return cls(real_view=a["real_view"], real_view_direct=a["real_view_direct"],
                    synthetic_view=_View(a["synthetic_rgb"], a["synthetic_alpha"]),
-                   bounces=(_Bounce(_View(a["synthetic_direct_rgb"])),))
+                   bounces=(_Bounce(_View(a["synthetic_direct_rgb"])),), frames=frames)
 
 
 @dataclass(frozen=True)
