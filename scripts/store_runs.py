@@ -103,7 +103,8 @@ def execute(run: Run) -> Path:
     log = LOGS / f"{run.name}.log"
     started = datetime.now(timezone.utc)
     provenance = {"commands": [" ".join(c) for c in run.commands], "commit": git("rev-parse", "HEAD"),
-                  "dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
+                  "dirty": bool(git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs/runs",
+                                     ":!docs/results.md")),   # what this script writes itself does not count
                   "date": started.strftime("%Y-%m-%d %H:%M UTC"), "machine": machine()}
     t0 = time.perf_counter()
     with log.open("w") as f:
