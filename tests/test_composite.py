@@ -52,7 +52,7 @@ def _two_planes():
     """An analytic scene seen by a 64 x 48 view camera: a real plane (grey-blue) over the whole frame and a
     synthetic plane (red) over the right two thirds, tilted against each other so that they cross: left of the
     crossing the real plane is nearer, right of it the synthetic one. Depths are exact ray distances."""
-    from lftransfer.optics.geometry import backproject, view_camera
+    from lftransfer.optics.geometry import backproject, pixel_rays
     from lftransfer.scenes.models import ViewConfig
 
     view = ViewConfig(resolution=(64, 48), origin=(0.0, 0.0, -0.5), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
@@ -60,8 +60,7 @@ def _two_planes():
     h, w = 48, 64
     ys, xs = np.mgrid[0:h, 0:w]
     px = np.stack([xs.ravel(), ys.ravel()], -1).astype(float)
-    _, R, t = view_camera(view)
-    centre = -R.T @ t
+    centre = pixel_rays(view, px)[0]
 
     def distance(point, normal):
         return np.linalg.norm(backproject(view, px, point, normal) - centre, axis=1).reshape(h, w)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from lftransfer.lightfield import LightField
-from lftransfer.optics.geometry import backproject, view_camera
+from lftransfer.optics.geometry import backproject, pixel_rays
 from lftransfer.real_depth import lightfield_points, splat_depth, view_depth_from_lightfield
 from lftransfer.rig.model import nominal_rig
 from lftransfer.scenes import builtin_scene, load_scene
@@ -44,10 +44,9 @@ def _truth(view, plane):
     w, h = view.resolution
     ys, xs = np.mgrid[0:h, 0:w]
     px = np.stack([xs.ravel(), ys.ravel()], -1).astype(float)
-    _, R, t = view_camera(view)
     a, b, c = plane
     normal = np.array([-b, -c, 1.0])
-    return np.linalg.norm(backproject(view, px, (0, 0, a), normal) - (-R.T @ t), axis=1).reshape(h, w)
+    return np.linalg.norm(backproject(view, px, (0, 0, a), normal) - pixel_rays(view, px)[0], axis=1).reshape(h, w)
 
 
 @pytest.mark.parametrize("origin", [(0.25, 0.10, 0.40), (0.55, 0.22, 0.0)])
@@ -65,12 +64,9 @@ def test_02_no_depth_where_the_ray_looks_past_the_real_side(model):
     view = _view((0.55, 0.22, 0.0), target=(0.0, 0.0, 0.0))     # in the array's plane: half the rays go behind it
     depth, lf = _plane_depth(model, 8, (0.004, 0.0, 0.0))        # a surface 4 mm from the array
     vd = view_depth_from_lightfield(depth, lf.u, lf.v, model, view)
-    _, R, _ = view_camera(view)
     w, h = view.resolution
     ys, xs = np.mgrid[0:h, 0:w]
-    K = view_camera(view)[0]
-    rays = np.stack([xs, ys, np.ones_like(xs)], -1).reshape(-1, 3) @ np.linalg.inv(K).T @ R
-    behind = (rays[:, 2] < 0).reshape(h, w)
+    behind = (pixel_rays(view, np.stack([xs.ravel(), ys.ravel()], -1))[1][:, 2] < 0).reshape(h, w)
     assert behind.any() and vd.known.any() and not np.any(vd.known & behind)
     points, sigma = lightfield_points(depth, lf.u, lf.v, model)
     unchecked = splat_depth(points, sigma, view)              # the negative control: no half-space check

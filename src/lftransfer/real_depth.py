@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from lftransfer.lightfield.depth import SWEEP_DEPTHS
-from lftransfer.optics.geometry import view_camera
+from lftransfer.optics.geometry import pixel_rays, view_camera
 
 __all__ = ["ViewDepth", "lightfield_points", "splat_depth", "view_depth_from_lightfield"]
 
@@ -119,7 +119,7 @@ def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int |
     dist = np.linalg.norm(P - centre, axis=1)
     inside = (px[:, 0] > -0.5 - MAX_RADIUS_PX) & (px[:, 0] < w - 0.5 + MAX_RADIUS_PX) \
         & (px[:, 1] > -0.5 - MAX_RADIUS_PX) & (px[:, 1] < h - 0.5 + MAX_RADIUS_PX)
-    px, dist, s = px[inside], dist[inside], s[inside]
+    P, px, dist, s = P[inside], px[inside], dist[inside], s[inside]
     depth = np.full(h * w, np.inf)
     point_sigma = np.full(h * w, np.nan)
     if len(px) == 0:
@@ -132,10 +132,10 @@ def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int |
     offsets = [(dx, dy) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if dx * dx + dy * dy <= r * r + r]
     ix, iy = np.rint(px[:, 0]).astype(np.int64), np.rint(px[:, 1]).astype(np.int64)
     # each disc is a patch of the surface: the plane through the point fitted to its nearest points
-    P = P[inside]
     normal = _normals(P)
     offset = np.einsum("ij,ij->i", P - centre, normal)       # (P - c) . n
-    rays = _pixel_rays(view).reshape(-1, 3)
+    ys, xs = np.mgrid[0:h, 0:w]
+    rays = pixel_rays(view, np.stack([xs.ravel(), ys.ravel()], -1))[1]
     hits = []
     for dx, dy in offsets:                                   # a few dozen offsets, every point at once
         x, y = ix + dx, iy + dy
@@ -155,8 +155,9 @@ def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int |
     depth = np.where(known, depth, np.nan)
     spread = _local_spread(depth)
     sig = np.sqrt(np.square(point_sigma.reshape(h, w)) + np.square(spread))
-    if world_to_array is not None:
-        z = _array_z(view, depth, world_to_array)
+    if world_to_array is not None:                           # the array-frame z of each pixel's depth
+        m = np.asarray(world_to_array, float)
+        z = ((centre + rays * depth.reshape(-1, 1)) @ m[2, :3] + m[2, 3]).reshape(h, w)
         known &= ~(z < -point_sigma.reshape(h, w))
         depth = np.where(known, depth, np.nan)
     return ViewDepth(depth.astype(np.float32), np.where(known, sig, np.nan).astype(np.float32), source)
@@ -172,23 +173,6 @@ def _normals(P: np.ndarray, k: int = NORMAL_NEIGHBOURS) -> np.ndarray:
     nb = P[idx] - P[idx].mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", nb, nb)
     return np.linalg.eigh(cov)[1][:, :, 0]
-
-
-def _pixel_rays(view) -> np.ndarray:
-    """(H, W, 3) unit world directions of the view camera's pixel centres."""
-    w, h = view.resolution
-    K, R, _ = view_camera(view)
-    ys, xs = np.mgrid[0:h, 0:w]
-    rays = np.stack([xs, ys, np.ones_like(xs)], -1).reshape(-1, 3).astype(float) @ np.linalg.inv(K).T @ R
-    return (rays / np.linalg.norm(rays, axis=1, keepdims=True)).reshape(h, w, 3)
-
-
-def _array_z(view, distance: np.ndarray, world_to_array: np.ndarray) -> np.ndarray:
-    """(H, W) the array-frame z of the point ``distance`` along each view pixel's ray (NaN where NaN)."""
-    _, R, t = view_camera(view)
-    X = -R.T @ t + _pixel_rays(view) * distance[..., None]
-    m = np.asarray(world_to_array, float)
-    return X @ m[2, :3] + m[2, 3]
 
 
 def _local_spread(depth: np.ndarray) -> np.ndarray:

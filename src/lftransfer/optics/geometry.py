@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["apply_homography", "backproject", "plane_axes", "project", "rectangle_to_world", "rotation_2d",
+__all__ = ["apply_homography", "backproject", "pixel_rays", "plane_axes", "project", "rectangle_to_world", "rotation_2d",
            "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
 
 
@@ -108,12 +108,17 @@ def project(view, X: np.ndarray) -> np.ndarray:
     return apply_homography(K, x[:, :2] / x[:, 2:3])
 
 
+def pixel_rays(view, px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) view camera pixels -> ((3,) the camera's centre, (N, 3) unit world directions of their rays)."""
+    K, R, t = view_camera(view)
+    px = np.asarray(px, np.float64).reshape(-1, 2)
+    rays = np.concatenate([px, np.ones((len(px), 1))], 1) @ np.linalg.inv(K).T @ R
+    return -R.T @ t, rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
 def backproject(view, px: np.ndarray, point, normal) -> np.ndarray:
     """(N, 2) view camera pixels -> (N, 3) world points where their rays meet the plane (point, normal)."""
-    K, R, t = view_camera(view)
-    rays = np.concatenate([np.asarray(px, np.float64).reshape(-1, 2), np.ones((len(px), 1))], 1) \
-        @ np.linalg.inv(K).T @ R                                           # world directions
-    centre = -R.T @ t
+    centre, rays = pixel_rays(view, px)
     point, normal = np.asarray(point, np.float64), np.asarray(normal, np.float64)
     lam = ((point - centre) @ normal) / (rays @ normal)
     return centre + lam[:, None] * rays
