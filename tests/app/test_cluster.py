@@ -105,24 +105,11 @@ def test_04_quiet_reference_on_a_cluster_equals_one_process(tmp_path):
     itself."""
     pytest.importorskip("ray")
     from lftransfer.app.reference_pool import reference_renderer
-    from lftransfer.scenes import load_scene
-    from lftransfer.settings import resolve_settings
-    from lftransfer.sim.metrics import composites, cross_transfer_error
-    from lftransfer.sim.oracle import open_simulated_rig
     from lftransfer.sim.reference import quiet_ground_truth
-    from lftransfer.transfer.bounce import run_transfer
 
-    from tests.app.small import write_tiny_scene
+    from tests.sim.test_reference import tiny_run
 
-    scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(64, 48)))
-    rig, oracle = open_simulated_rig(scene, 3)
-    result = run_transfer(rig, oracle.model, scene.synthetic_part(), resolve_settings(scene, Overrides()).transfer)
-    comp_n, comp_0 = composites(result)
-
-    def judge(gt):
-        check = cross_transfer_error(comp_n, comp_0, gt)
-        return check.error, check.gt_noise
-
+    oracle, judge = tiny_run(tmp_path)
     local, ref_local = quiet_ground_truth(oracle.world, judge, spp=16, max_rounds=1, use_cache=False, parts=2)
     with reference_renderer(ClusterSpec("local", workers=2), use_cache=False) as (render, parts):
         assert parts == 2

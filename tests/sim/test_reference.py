@@ -17,23 +17,26 @@ import pytest
 from tests.app.small import write_tiny_scene
 
 
-def test_01_rounds_meet_the_noise_target(tmp_path):
+def tiny_run(tmp_path):
+    """A tiny scene's transfer on its simulated rig: (the oracle, the judge of a quiet reference of its frame)."""
     from lftransfer.scenes import load_scene
     from lftransfer.settings import Overrides, resolve_settings
-    from lftransfer.sim.metrics import composites, cross_transfer_error, metric_factor
+    from lftransfer.sim.metrics import composites
     from lftransfer.sim.oracle import open_simulated_rig
-    from lftransfer.sim.reference import quiet_ground_truth
+    from lftransfer.sim.reference import cross_term_judge
     from lftransfer.transfer.bounce import run_transfer
 
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(64, 48)))
     rig, oracle = open_simulated_rig(scene, 3)
     result = run_transfer(rig, oracle.model, scene.synthetic_part(), resolve_settings(scene, Overrides()).transfer)
-    comp_n, comp_0 = composites(result)
+    return oracle, cross_term_judge(*composites(result))
 
-    def judge(gt):
-        check = cross_transfer_error(comp_n, comp_0, gt)
-        return check.error, check.gt_noise
 
+def test_01_rounds_meet_the_noise_target(tmp_path):
+    from lftransfer.sim.metrics import metric_factor
+    from lftransfer.sim.reference import quiet_ground_truth
+
+    oracle, judge = tiny_run(tmp_path)
     first = oracle.ground_truth(spp=16, use_cache=False)
     error0, noise0 = judge(first)
     assert noise0 > error0 / 3                              # the first round alone is too noisy to judge

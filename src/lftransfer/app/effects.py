@@ -249,13 +249,10 @@ def _quiet_frame_truth(oracle, world, frame: np.ndarray, no_exchange: np.ndarray
     """A verified frame's ground truth rendered until its noise on the frame's cross term is at most a third of
     the error (:mod:`lftransfer.sim.reference`); the frame's PSNRs are taken again against it, and what it reached
     goes to the frame's ``reference``."""
-    from lftransfer.sim.metrics import cross_transfer_error, metric_factor
+    from lftransfer.sim.metrics import metric_factor
+    from lftransfer.sim.reference import cross_term_judge
 
-    def judge(gt):
-        c = cross_transfer_error(frame, no_exchange, gt)
-        return c.error, c.gt_noise
-
-    gt, reference = oracle.quiet_ground_truth(judge, spp=spp, world=world, multiple=metric_factor(frame.shape[1]),
+    gt, reference = oracle.quiet_ground_truth(cross_term_judge(frame, no_exchange), spp=spp, world=world, multiple=metric_factor(frame.shape[1]),
                                               use_cache=use_cache, parts=parts, render=render, progress=step)
     record["reference"] = reference.to_json()
     record["metrics"].update(frame_metrics(frame, gt), reference_spp=reference.spp,

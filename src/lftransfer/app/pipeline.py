@@ -455,16 +455,12 @@ class _Run:
     def quiet_ground_truth(self, result):
         """The ground truth rendered until its noise on the cross term is at most a third of the run's error
         (:mod:`lftransfer.sim.reference`); what it reached goes to the report's ``reference``."""
-        from lftransfer.sim.metrics import composites, cross_transfer_error, metric_factor
         from lftransfer.app.reference_pool import reference_renderer
-        from lftransfer.sim.reference import MAX_ROUNDS
+        from lftransfer.sim.metrics import composites, metric_factor
+        from lftransfer.sim.reference import MAX_ROUNDS, cross_term_judge
 
         comp_n, comp_0 = composites(result)
-
-        def judge(gt):
-            check = cross_transfer_error(comp_n, comp_0, gt)
-            return check.error, check.gt_noise
-
+        judge = cross_term_judge(comp_n, comp_0)
         with reference_renderer(self.options.cluster, use_cache=self.options.use_cache, step=self.step) as (
                 render, parts):
             gt, self.reference = self.opened.oracle.quiet_ground_truth(

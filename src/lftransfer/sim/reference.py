@@ -27,7 +27,8 @@ import numpy as np
 
 from lftransfer.sim.ground_truth import GroundTruth, render_ground_truth
 
-__all__ = ["QUIET_RATIO", "MAX_ROUNDS", "Job", "Reference", "object_box", "quiet_ground_truth", "render_jobs"]
+__all__ = ["QUIET_RATIO", "MAX_ROUNDS", "Job", "Reference", "cross_term_judge", "object_box", "quiet_ground_truth",
+           "render_jobs"]
 
 QUIET_RATIO = 1.0 / 3.0        # the noise on the cross term at most this fraction of the error
 MAX_ROUNDS = 4                 # rounds after the first
@@ -75,6 +76,20 @@ class Reference:
         d = asdict(self)
         d["box"] = list(self.box)
         return d
+
+
+def cross_term_judge(composite_n: np.ndarray, composite_0: np.ndarray
+                     ) -> Callable[[GroundTruth], tuple[float | None, float | None]]:
+    """The ``judge`` of :func:`quiet_ground_truth` for a frame: ground truth -> (the cross-transfer error of the
+    frame ``composite_n`` against the frame without exchange ``composite_0``, the ground truth's noise on it)
+    (:func:`~lftransfer.sim.metrics.cross_transfer_error`)."""
+    from lftransfer.sim.metrics import cross_transfer_error
+
+    def judge(gt: GroundTruth) -> tuple[float | None, float | None]:
+        check = cross_transfer_error(composite_n, composite_0, gt)
+        return check.error, check.gt_noise
+
+    return judge
 
 
 def object_box(gt: GroundTruth, multiple: int = 1) -> tuple[int, int, int, int]:
