@@ -214,6 +214,16 @@ class _Metric:
     synthetic: np.ndarray  # (h, w) bool, a synthetic object is seen
     norm: float           # ||C_gt|| (mean of the pair) over the covered pixels
 
+    @property
+    def real_pixels(self) -> np.ndarray:
+        """(h, w) bool: the real side's pixels (covered, no synthetic object seen)."""
+        return self.covered & ~self.synthetic
+
+    @property
+    def synthetic_pixels(self) -> np.ndarray:
+        """(h, w) bool: the synthetic side's pixels (a synthetic object seen)."""
+        return self.covered & self.synthetic
+
     @classmethod
     def of(cls, gt, width: int, target_width: int) -> "_Metric":
         f = metric_factor(width, target_width)
@@ -342,7 +352,7 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     t0 = time.perf_counter()
     h, w = result.real_view.shape[:2]
     m = _Metric.of(gt, w, target_width)
-    where = m.covered & ~m.synthetic
+    where = m.real_pixels
     if not where.any() or not m.norm > 0:
         return None
     alpha = result.synthetic_view.alpha.astype(np.float32)[..., None]
@@ -420,7 +430,7 @@ def synthetic_floor(rig, world, result, gt, settings, *, target_width: int = 256
     t0 = time.perf_counter()
     h, w = result.real_view.shape[:2]
     m = _Metric.of(gt, w, target_width)
-    where = m.covered & m.synthetic
+    where = m.synthetic_pixels
     if not where.any() or not m.norm > 0:
         return None
     true_lf = true_incident_lightfield(rig, world, settings.angular_samples, spp=spp, time_s=time_s,
@@ -454,7 +464,7 @@ def score_cross(gt, cross: np.ndarray, *, target_width: int = 256) -> tuple[floa
     if not m.norm > 0:
         return None, None
     c = downsample(cross, m.factor)
-    real, syn = m.covered & ~m.synthetic, m.covered & m.synthetic
+    real, syn = m.real_pixels, m.synthetic_pixels
     return (m.score(c, real) if real.any() else None), (m.score(c, syn) if syn.any() else None)
 
 
