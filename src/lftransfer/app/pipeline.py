@@ -375,6 +375,7 @@ class _Run:
         control = self.negative_control(result, gt)
         self.timings["total"] = time.perf_counter() - t0
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor)
+        report["occlusion"] = self.occlusion(result, gt)
         self.step("write outputs")
         comp = result.composite()
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
@@ -526,6 +527,15 @@ class _Run:
             self.warning(control.result.message())
         return control
 
+    def occlusion(self, result, gt) -> dict | None:
+        """Where a real object hides a synthetic one: the over and the depth-aware composites of this run scored
+        there (:func:`lftransfer.sim.metrics.occlusion_metrics`); None unverified or where nothing is hidden."""
+        if gt is None:
+            return None
+        from lftransfer.sim.metrics import occlusion_metrics
+
+        return occlusion_metrics(result, gt)
+
     def real_depth(self, result) -> dict | None:
         """What the depth composite knew of the real scene's depth in the view camera: its source and the pixels
         it covers, and (verified runs) its error against the true depth (:func:`lftransfer.sim.metrics.depth_errors`);
@@ -533,11 +543,24 @@ class _Run:
         vd = result.view_depth
         if vd is None:
             return None
+        import numpy as np
+
         out = {"source": vd.source, "known_fraction": float(vd.known.mean())}
+        truth = None
         if self.verified:
             from lftransfer.sim.metrics import depth_errors
 
-            out.update(depth_errors(vd, self.opened.oracle.real_view_depth()))
+            truth = self.opened.oracle.real_view_depth()
+            out.update(depth_errors(vd, truth))
+        if len(result.depth_sources) > 1:                 # each source alone, and where the fused map took it
+            out["sources"] = {}
+            for d in result.depth_sources:
+                entry = {"known_fraction": float(d.known.mean()),
+                         "chosen_fraction": float(np.mean(d.known & (d.depth == vd.depth)) / max(vd.known.mean(),
+                                                                                                 1e-12))}
+                if truth is not None:
+                    entry.update(depth_errors(d, truth))
+                out["sources"][d.source] = entry
         return out
 
     def report(self, known: Knowledge, label: str, errors, result, metrics, tables: dict,

@@ -153,7 +153,7 @@ def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
     ref = downsample(gt.image, f)
     img = downsample(image, f)
     mask = object_mask(gt, f)
-    real = (downsample(gt.alpha_real, f) > 0.5) & (downsample(gt.alpha_synthetic, f) < 0.5)
+    real = (downsample(gt.alpha_real, f) > 0.5) & (downsample(gt.synthetic_seen, f) < 0.5)
     peak = float(ref.max())
     real_peak = float(ref[real].max()) if real.any() else 0.0
     values = {"psnr_db": psnr(img, ref, peak), "psnr_objects_db": psnr(img, ref, peak, mask=mask),
@@ -232,6 +232,26 @@ def _projection(scene, seq: SequenceOptions, settings: TransferSettings) -> tupl
             "and the live loop measures the depth once"]
     return settings, ["projection: prefiltered from the real scene's depth, measured once before the first frame "
                       "(two extra frames; the real objects stand still)"]
+
+
+def _depth_every_frame(scene, settings: TransferSettings) -> bool:
+    """Whether a live loop measures the real scene's depth in every frame: for the depth composite, where the
+    scene's real objects move (a real object crossing in front of a synthetic one)."""
+    return settings.composite == "depth" and any(o.moves for o in scene.real)
+
+
+def _composite_note(scene, seq: SequenceOptions, settings: TransferSettings) -> list[str]:
+    """What the sequence's report says of the depth composite's depth (one sentence), or nothing."""
+    if settings.composite != "depth":
+        return []
+    if seq.mode != "live":
+        return ["composite: by depth, the real scene's depth measured in every frame from the LF camera and by "
+                "structured light (24 extra view photographs)"]
+    if _depth_every_frame(scene, settings):
+        return ["composite: by depth, the real scene's depth measured by the LF camera in every frame (two extra "
+                "frames each: the real objects move); no structured light, which takes 24 photographs"]
+    return ["composite: by depth, the real scene's depth measured by the LF camera once, before the first frame "
+            "(the real objects stand still); no structured light, which takes 24 photographs"]
 
 
 def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float
@@ -359,7 +379,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                       "renderer": resolve_renderer(ps, settings.renderer), "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "projection": settings.projection,
-                      "approximations": approximations(ps, settings.renderer) + projection_note}
+                      "approximations": approximations(ps, settings.renderer) + projection_note
+                      + _composite_note(scene, seq, settings)}
             writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
             verify = seq.verify_every > 0 and opened.oracle is not None
             gt_spp = resolved.gt_spp
@@ -482,7 +503,8 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
         raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
     depth = read_depth(out) if done else None
     with LiveTransfer(opened.rig, model, ps, settings, projected=projected,
-                      time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop) as live:
+                      time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop,
+                      depth_every_frame=_depth_every_frame(scene, settings)) as live:
         live.index = len(done)
         for i in range(len(done), n):
             t0 = time.perf_counter()

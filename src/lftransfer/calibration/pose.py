@@ -35,6 +35,7 @@ from lftransfer.rig.requests import Board, ViewCapture
 
 __all__ = ["CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose",
            "BoardPattern", "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose",
+           "sees_lit_side",
            "chart_pose", "corner_landing", "decode_fringes", "fringe_lightfields", "solve_array_pose", "view_camera"]
 
 
@@ -74,16 +75,44 @@ class BoardPattern:
         return np.stack([i.ravel(), j.ravel(), np.zeros(i.size)], 1) * self.square_m
 
 
-def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.045) -> BoardPattern:
+BOARD_MAX_OBLIQUITY_DEG = 50.0   # an opaque board turned halfway between the array and the view camera is seen at
+                                 # most this obliquely (else the calibration asks for a translucent one)
+BOARD_CLEARANCE_M = 0.02         # a translucent board keeps its nearest corner this far in front of the array
+
+
+def sees_lit_side(view, depth: float = 0.1) -> bool:
+    """Whether the view camera sees the face of a board ``depth`` in front of the array's centre that the array
+    lights, turned halfway between them, at most :data:`BOARD_MAX_OBLIQUITY_DEG` obliquely. A camera beside the
+    array (the paper's) does; one in front of the board, looking back at the array, does not: it sees such a board
+    through a translucent screen (:func:`board_pattern`'s ``translucent``)."""
+    to_cam = np.asarray(view.origin, np.float64) - np.array([0.0, 0.0, float(depth)])
+    cos = -to_cam[2] / np.linalg.norm(to_cam)                       # against the array's light, (0, 0, -1)
+    return bool(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) <= 2 * BOARD_MAX_OBLIQUITY_DEG)
+
+
+def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.045, *, translucent: bool = False,
+                  extent: tuple[float, float] | None = None) -> BoardPattern:
     """The board plane: centred on the array's axis at ``depth``, turned halfway towards the view camera.
 
     Facing both the array (which lights it) and the view camera (which photographs it) keeps the board well lit
-    and not too foreshortened.
+    and not too foreshortened. A ``translucent`` board (a rear-projection screen, for a view camera in front of it:
+    :func:`sees_lit_side`) is seen from behind: it faces halfway between the array and the direction away from the
+    camera, stands on the camera's line of sight to its target (in the middle of its view), and moves away from
+    the array until a board of ``extent`` (width, height, metres) keeps :data:`BOARD_CLEARANCE_M` from it.
     """
     centre = np.array([0.0, 0.0, float(depth)])
     to_cam = np.asarray(view.origin, np.float64) - centre
-    normal = to_cam / np.linalg.norm(to_cam) + np.array([0.0, 0.0, -1.0])
-    ex, ey, normal = plane_axes(normal)
+    to_cam = to_cam / np.linalg.norm(to_cam)
+    if not translucent:
+        ex, ey, normal = plane_axes(to_cam + np.array([0.0, 0.0, -1.0]))
+        return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
+    ex, ey, normal = plane_axes(np.array([0.0, 0.0, -1.0]) - to_cam)
+    if extent is not None:
+        reach = 0.5 * (abs(ex[2]) * float(extent[0]) + abs(ey[2]) * float(extent[1]))
+        centre[2] = max(centre[2], BOARD_CLEARANCE_M + reach)
+    origin, target = np.asarray(view.origin, np.float64), np.asarray(view.target, np.float64)
+    if abs(origin[2] - target[2]) > 1e-9:
+        centre[:2] = (target + (origin - target) * (centre[2] - target[2]) / (origin[2] - target[2]))[:2]
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
 
 
@@ -485,13 +514,18 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
     size = ((chart[0] + 2) * chart[2], (chart[1] + 2) * chart[2])
     pose: ArrayPose | None = None
     history = []
+    # a view camera in front of the boards sees them through translucent screens, which may have to move away from
+    # the array (board_pattern); every board moves as far as the nearest one, so the depths keep their parallax
+    screen = not sees_lit_side(scene.view, min(depths))
+    shift = board_pattern(scene.view, min(depths), translucent=screen, extent=size).centre[2] - min(depths)
     for r in range(rounds):
         boards = []
         for depth in depths:
-            asked = board_pattern(scene.view, depth)
-            rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart)))
-            tag = f"pose round {r + 1}: board at {100 * depth:.0f} cm" if rounds > 1 else \
-                f"pose: board at {100 * depth:.0f} cm"
+            asked = board_pattern(scene.view, depth + shift, translucent=screen, extent=size)
+            rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart),
+                            translucent=screen))
+            tag = f"pose round {r + 1}: board at {100 * asked.centre[2]:.0f} cm" if rounds > 1 else \
+                f"pose: board at {100 * asked.centre[2]:.0f} cm"
             images = {}
             if progress:
                 progress(f"{tag} photographed with the flood light field")
@@ -512,7 +546,7 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
             dec = decode_fringes(shots, board, size, scene.view, None if pose is None else pose.model_to_world)
             px, coords = _sample_valid(dec)
             if len(px) < 50:
-                raise PoseError(f"board at {100 * depth:.0f} cm: only {len(px)} view camera pixels saw the "
+                raise PoseError(f"board at {100 * asked.centre[2]:.0f} cm: only {len(px)} view camera pixels saw the "
                                 "projected fringes clearly; is the board in view and lit?")
             found, norm = dec.valid, dec.wrapped                  # (H, W) bool, (H, W) cos(phase) for the report
             drawn = board.centre + coords[:, :1] * board.ex + coords[:, 1:] * board.ey

@@ -302,7 +302,11 @@ def lens_array_absorber(array) -> dict:
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}
 
 
-def board_shapes(to_world: np.ndarray, albedo: float, chart: tuple[int, int, float] | None = None) -> dict:
+SCREEN_TEXELS = 16          # texels per chessboard square of a translucent board's printed chart
+
+
+def board_shapes(to_world: np.ndarray, albedo: float, chart: tuple[int, int, float] | None = None,
+                 transmission: float = 0.0) -> dict:
     """Mitsuba shape dicts of a flat diffuse calibration board, with an optional printed chessboard.
 
     Args:
@@ -310,12 +314,25 @@ def board_shapes(to_world: np.ndarray, albedo: float, chart: tuple[int, int, flo
         albedo: the board's diffuse reflectance.
         chart: (columns, rows, square metres) of a chessboard printed at its true size on the board's centre
             (dark squares of reflectance ``albedo / 4``), or None.
+        transmission: 0 for an opaque board; else a rear-projection screen that passes this share of the light it
+            scatters to its other side and reflects the rest, both diffusely, so that a camera behind it sees what is
+            drawn on its front; the chart is then printed into the screen (one rectangle, a texture).
 
     Returns:
-        ``{"board": ..., "chart": ...}`` shape dicts.
+        ``{"board": ..., "chart": ...}`` shape dicts (``{"board": ...}`` only for a translucent board).
     """
     mi = mitsuba()
     to_world = np.asarray(to_world, np.float64)
+    if transmission > 0:
+        tex = {"type": "rgb", "value": [albedo] * 3}
+        if chart is not None:
+            tex = {"type": "bitmap", "bitmap": mi.Bitmap(_screen_texture(to_world, albedo, chart)),
+                   "filter_type": "nearest", "wrap_mode": "clamp", "raw": True}
+        # Mitsuba 3.9 has no plain diffuse transmitter; its thin principled BSDF with no specular lobe (eta 1) and
+        # full roughness is one: diffuse reflection and transmission, diff_trans / 2 of the light passing through
+        bsdf = {"type": "principledthin", "base_color": tex, "diff_trans": 2.0 * float(transmission),
+                "spec_trans": 0.0, "eta": 1.0001, "roughness": 1.0}
+        return {"board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()), "bsdf": bsdf}}
     shapes = {"board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(to_world.tolist()),
                         "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [albedo] * 3}}}}
     if chart is not None:
@@ -331,3 +348,21 @@ def board_shapes(to_world: np.ndarray, albedo: float, chart: tuple[int, int, flo
         shapes["chart"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f(m.tolist()),
                            "bsdf": {"type": "diffuse", "reflectance": texture}}
     return shapes
+
+
+def _screen_texture(to_world: np.ndarray, albedo: float, chart: tuple[int, int, float]) -> np.ndarray:
+    """(H, W, 3) float32 texture of a board of ``to_world``'s size with the chessboard ``chart`` printed on its
+    centre, as :func:`board_shapes` prints it on an opaque board (the dark squares at ``albedo / 4``, the top-left
+    square dark); :data:`SCREEN_TEXELS` texels per square."""
+    cols, rows, square = chart
+    width, height = (2 * np.linalg.norm(to_world[:3, i]) for i in range(2))
+    texel = square / SCREEN_TEXELS
+    w, h = max(1, int(round(width / texel))), max(1, int(round(height / texel)))
+    u = (np.arange(w) + 0.5) * texel - width / 2                # metres from the centre, along the board's x
+    v = (np.arange(h) + 0.5) * texel - height / 2
+    i = np.floor(u / square + cols / 2)
+    j = np.floor(v / square + rows / 2)
+    inside = ((i >= 0) & (i < cols))[None, :] & ((j >= 0) & (j < rows))[:, None]
+    dark = ((i[None, :] + j[:, None]) % 2 == 0) & inside
+    img = np.where(dark, albedo / 4, albedo).astype(np.float32)
+    return np.repeat(img[::-1, :, None], 3, axis=2)            # row 0 of a bitmap is the top (v = 1)

@@ -24,7 +24,7 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["Board", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "RealScene", "RigInfo", "Setup",
+__all__ = ["SCREEN_TRANSMISSION", "Board", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "RealScene", "RigInfo", "Setup",
            "SETUPS", "ViewCapture", "ViewFrame", "WhiteField", "describe", "image_digest", "request_key",
            "setup_from_json"]
 
@@ -34,6 +34,11 @@ def _vec3(value, name: str) -> tuple[float, float, float]:
     if len(v) != 3 or not all(np.isfinite(v)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
     return v
+
+
+#: A translucent calibration board (a rear-projection screen, :class:`Board`'s ``translucent``) passes this share of
+#: the light it scatters to its other side and reflects the rest, both diffusely (nominal, the screen's datasheet).
+SCREEN_TRANSMISSION = 0.5
 
 
 # -- set-ups: what the rig shows the array -------------------------------------------------------------------
@@ -131,6 +136,9 @@ class Board:
             out while it is off, so recordings made before it existed replay unchanged.
         light: with ``point_light``, which of the scene's point lights is on (0-based, in the scene file's order;
             the others off), or None: all of them. :func:`describe` leaves it out while it is None.
+        translucent: a rear-projection screen (the chessboard printed into it) instead of an opaque board: what the
+            array draws on the side facing it (``normal``) is seen from the other side too, by a view camera in
+            front of the board. :func:`describe` leaves it out while it is False.
     """
 
     centre: tuple[float, float, float]
@@ -140,6 +148,7 @@ class Board:
     chart: tuple[int, int, float] | None = None
     point_light: bool = False
     light: int | None = None
+    translucent: bool = False
     kind: str = field(default="board", init=False)
 
     def __post_init__(self) -> None:
@@ -158,6 +167,9 @@ class Board:
         if not isinstance(self.point_light, (bool, np.bool_)):
             raise ValueError(f"Board.point_light must be True or False, got {self.point_light!r}")
         object.__setattr__(self, "point_light", bool(self.point_light))
+        if not isinstance(self.translucent, (bool, np.bool_)):
+            raise ValueError(f"Board.translucent must be True or False, got {self.translucent!r}")
+        object.__setattr__(self, "translucent", bool(self.translucent))
         if self.light is not None:
             if isinstance(self.light, (bool, np.bool_)) or not isinstance(self.light, (int, np.integer)) \
                     or self.light < 0:
@@ -168,8 +180,9 @@ class Board:
 
     def prompt(self) -> str:
         c = self.centre
-        what = f"the board with the printed {self.chart[0]} x {self.chart[1]} chessboard" if self.chart else \
-            "the plain grey board"
+        board = "translucent screen" if self.translucent else "board"
+        what = f"the {board} with the printed {self.chart[0]} x {self.chart[1]} chessboard" if self.chart else \
+            f"the plain grey {board}"
         where = (f"Hold {what} with its centre about {100 * c[2]:.0f} cm in front of the array "
                  f"(x {100 * c[0]:+.0f} cm, y {100 * c[1]:+.0f} cm), facing ({self.normal[0]:+.2f}, "
                  f"{self.normal[1]:+.2f}, {self.normal[2]:+.2f})")
@@ -325,6 +338,8 @@ def describe(request) -> dict:
         del data["point_light"]           # as before the field existed: older recordings keep their keys
     if isinstance(request, Board) and request.light is None:
         del data["light"]
+    if isinstance(request, Board) and not request.translucent:
+        del data["translucent"]
     if isinstance(request, LFCapture):
         data["kind"] = "lf_capture"
     elif isinstance(request, ViewCapture):

@@ -230,7 +230,7 @@ class _Metric:
         pair = cross_term_truth(gt, f)
         covered = object_mask(gt, f)
         c_gt = 0.5 * (pair[0] + pair[1])
-        return cls(f, pair, covered, downsample(gt.alpha_synthetic, f) > 0.5,
+        return cls(f, pair, covered, downsample(gt.synthetic_seen, f) > 0.5,
                    float(np.sqrt(np.sum(c_gt[covered] ** 2))))
 
     def score(self, c: np.ndarray, where: np.ndarray) -> float:

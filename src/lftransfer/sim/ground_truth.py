@@ -10,6 +10,7 @@ checksum (:mod:`lftransfer.sim.gt_cache`). It renders the hidden world: the face
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, read_entry, write_entry
 
-__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed"]
+__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed", "true_depths", "views_overlap"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -36,6 +37,9 @@ class GroundTruth:
         real: (2, H, W, 3) float32, real objects alone.
         synthetic: (2, H, W, 3) float32, synthetic objects alone.
         alpha_real, alpha_synthetic: (H, W) float32 coverage of each set of objects.
+        depth_real, depth_synthetic: (H, W) float32 distance from the view camera's centre to each set of objects
+            along each pixel's ray (the mean over the rays that hit), metres, inf where none; None where the view
+            camera cannot see one set in front of the other (:func:`views_overlap`).
     """
 
     union: np.ndarray
@@ -43,11 +47,40 @@ class GroundTruth:
     synthetic: np.ndarray
     alpha_real: np.ndarray
     alpha_synthetic: np.ndarray
+    depth_real: np.ndarray | None = None
+    depth_synthetic: np.ndarray | None = None
 
     @property
     def image(self) -> np.ndarray:
         """(H, W, 3) the ground truth: the mean of the two union renders."""
         return self.union.mean(axis=0)
+
+    @property
+    def real_in_front(self) -> np.ndarray:
+        """(H, W) bool: pixels where a real object hides a synthetic one (both seen, the real one nearer)."""
+        if self.depth_real is None or self.depth_synthetic is None:
+            return np.zeros(self.alpha_real.shape, bool)
+        return np.isfinite(self.depth_real) & np.isfinite(self.depth_synthetic) \
+            & (self.depth_real < self.depth_synthetic)
+
+    @property
+    def synthetic_seen(self) -> np.ndarray:
+        """(H, W) float32 how much of each pixel shows a synthetic object: its coverage, 0 where a real object
+        hides it."""
+        return np.where(self.real_in_front, 0.0, self.alpha_synthetic).astype(np.float32)
+
+    def composite_alone(self, i: int) -> np.ndarray:
+        """(H, W, 3) seed ``i``'s real-alone and synthetic-alone renders put together as the view camera would see
+        both without any light between them: the nearer in front of the farther, each seen through the part of the
+        pixel it leaves uncovered (exact but where both cover part of a pixel in different orders)."""
+        from lftransfer.composite import composite
+
+        over = composite(self.synthetic[i], self.alpha_synthetic, self.real[i])
+        front = self.real_in_front
+        if not front.any():
+            return over
+        under = composite(self.real[i], self.alpha_real, self.synthetic[i])       # the real objects in front
+        return np.where(front[..., None], under, over).astype(np.float32)
 
 
 def _inputs_hash(scene, spp: int, seeds: tuple[int, ...], crop: tuple[int, int, int, int] | None = None) -> str:
@@ -107,10 +140,11 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
     w, h = scene.view.resolution
     inputs = _inputs_hash(scene, spp, seeds, crop)
     shape = (h, w) if crop is None else (crop[3], crop[2])
+    depths = true_depths(scene, crop) if views_overlap(scene) else None
     if use_cache:
         cached = read_entry(inputs, (*shape, STACK_CHANNELS))
         if isinstance(cached, np.ndarray):
-            return _unpack(cached)
+            return _unpack(cached, depths)
         if isinstance(cached, CacheProblem) and warn is not None:
             warn(cached.message())
     mi = mitsuba()
@@ -140,17 +174,49 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
                            + [images["real"][0][..., 3:4], images["synthetic"][0][..., 3:4]], axis=-1)
     if use_cache:
         write_entry(inputs, stack)
-    return _unpack(stack)
+    return _unpack(stack, depths)
 
 
-def _unpack(stack: np.ndarray) -> GroundTruth:
+DEPTH_SPP = 16     # rays per pixel of the true depths
+
+
+def views_overlap(scene) -> bool:
+    """Whether the view camera can see a real object in front of a synthetic one, or the reverse: only from off the
+    array's plane (a ray from a camera in the plane stays on one side of it; the built-in paper scenes' cameras
+    stand there)."""
+    return bool(scene.real) and bool(scene.synthetic) and abs(float(scene.view.origin[2])) > 1e-9
+
+
+def true_depths(scene, crop: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) float32 distances from the view camera's centre to the real objects and to the synthetic objects,
+    along each pixel's ray (the mean over :data:`DEPTH_SPP` rays of those that hit), metres, inf where none; of the
+    ``crop`` (x, y, width, height) only where given."""
+    from lftransfer.backend import mitsuba
+    from lftransfer.render.camera import sensor_dict
+    from lftransfer.render.renderer import HalfSpaceRenderer
+
+    view = scene.view
+    w, h = view.resolution
+    sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=DEPTH_SPP))
+    out = []
+    for objs in (scene.real, scene.synthetic):
+        d = HalfSpaceRenderer(list(objs), max_depth=1).render_view(sensor, w, h, [], spp=DEPTH_SPP).depth
+        if crop is not None:
+            x, y, cw, ch = map(int, crop)
+            d = d[y:y + ch, x:x + cw]
+        out.append(np.asarray(d, np.float32))
+    return out[0], out[1]
+
+
+def _unpack(stack: np.ndarray, depths: tuple[np.ndarray, np.ndarray] | None = None) -> GroundTruth:
     parts = [stack[..., 3 * i:3 * i + 3] for i in range(6)]
     return GroundTruth(union=np.stack(parts[0:2]), real=np.stack(parts[2:4]), synthetic=np.stack(parts[4:6]),
-                       alpha_real=stack[..., 18], alpha_synthetic=stack[..., 19])
+                       alpha_real=stack[..., 18], alpha_synthetic=stack[..., 19],
+                       depth_real=None if depths is None else depths[0],
+                       depth_synthetic=None if depths is None else depths[1])
 
 
 def single_seed(gt: GroundTruth, i: int) -> GroundTruth:
     """The ground truth of seed ``i`` (0 or 1) alone, in both slots (its own noise then reads as 0)."""
     pick = lambda x: np.stack([x[i], x[i]])  # noqa: E731
-    return GroundTruth(union=pick(gt.union), real=pick(gt.real), synthetic=pick(gt.synthetic),
-                       alpha_real=gt.alpha_real, alpha_synthetic=gt.alpha_synthetic)
+    return dataclasses.replace(gt, union=pick(gt.union), real=pick(gt.real), synthetic=pick(gt.synthetic))

@@ -7,15 +7,14 @@ that a scene leaves undefined (no light, no cross term) is None, with the reason
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
-from lftransfer.composite import composite
 from lftransfer.sim.ground_truth import GroundTruth, single_seed
 
 __all__ = ["CrossCheck", "CrossSide", "Evaluation", "IDENTICAL", "NO_CROSS", "NO_LIGHT", "NO_PIXELS",
-           "NegativeControl", "NoiseVerdict", "composites", "cross_by_side", "cross_term_truth",
+           "NegativeControl", "NoiseVerdict", "composites", "occlusion_metrics", "cross_by_side", "cross_term_truth",
            "cross_transfer_error", "downsample", "evaluate", "gt_noise_verdict", "metric_factor", "negative_control",
            "object_mask", "psnr"]
 
@@ -77,7 +76,7 @@ IDENTICAL = "the images are identical (PSNR is infinite)"
 def cross_term_truth(gt: GroundTruth, factor: int) -> list[np.ndarray]:
     """The ground truth's cross term of each seed, C = union - composite(real alone, synthetic alone): what the
     objects add to each other's appearance; two (h, w, 3) images box-downsampled by ``factor``."""
-    return [downsample(gt.union[i] - composite(gt.synthetic[i], gt.alpha_synthetic, gt.real[i]), factor)
+    return [downsample(gt.union[i] - gt.composite_alone(i), factor)
             for i in range(2)]
 
 
@@ -127,7 +126,7 @@ def cross_transfer_error(composite_n: np.ndarray, composite_0: np.ndarray, gt: G
         return CrossCheck(None, None, truth_norm=c_norm)
     c_lft = downsample(composite_n - composite_0, f)
     return CrossCheck(norm(c_lft - c_gt) / c_norm, norm(pair[0] - pair[1]) / c_norm,
-                      cross_by_side(c_lft, pair, mask, downsample(gt.alpha_synthetic, f) > 0.5), c_norm)
+                      cross_by_side(c_lft, pair, mask, downsample(gt.synthetic_seen, f) > 0.5), c_norm)
 
 
 @dataclass(frozen=True)
@@ -432,3 +431,51 @@ def depth_errors(estimate, truth: np.ndarray) -> dict:
             "coverage": float(both.sum() / real.sum()) if real.any() else None,
             "false_fraction": float((known & ~real).sum() / known.sum()) if known.any() else None,
             "pixels": int(both.sum())}
+
+
+def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> dict | None:
+    """How each composite fares where a real object hides a synthetic one (docs/architecture.md, "Occlusion").
+
+    The same transfer is put together by the over operator (the paper's composite, which draws every synthetic
+    object in front) and, where the run measured the real scene's depth in the view camera, by the depth-aware
+    composite; each is scored against the ground truth.
+
+    Args:
+        result: ``lftransfer.transfer.TransferResult`` (its ``view_depth`` set by ``composite = "depth"``).
+        gt: :class:`GroundTruth` with the true depths (``depth_real``, ``depth_synthetic``).
+        target_width: the metrics' resolution (:func:`metric_factor`).
+
+    Returns:
+        None where no real object hides a synthetic one in the ground truth; else ``hidden_pixels`` (pixels at the
+        metrics' resolution any part of which shows a real object in front of a synthetic one) and, for ``over``
+        and (where measured) ``depth``: ``psnr_hidden_db`` (over those pixels), ``psnr_objects_db``,
+        ``psnr_objects_unhidden_db`` (over the objects' other pixels: the scene as if nothing were hidden) and
+        ``cross_transfer_rel_error``; ``depth_gain_hidden_db``: depth minus over on the hidden pixels.
+    """
+    front = gt.real_in_front
+    if not front.any():
+        return None
+    f = metric_factor(result.real_view.shape[1], target_width)
+    hidden = downsample(front.astype(np.float32), f) > 0
+    union = downsample(gt.image, f)
+    peak = float(union.max())
+    unhidden = object_mask(gt, f) & ~hidden
+    runs = {"over": replace(result, view_depth=None)}
+    if result.view_depth is not None:
+        runs["depth"] = result
+    out: dict = {"hidden_pixels": int(hidden.sum())}
+    for name, run in runs.items():
+        frame = downsample(run.composite(), f)
+        m = evaluate(run, gt, target_width=target_width)
+        out[name] = {"psnr_hidden_db": _finite(psnr(frame, union, peak, mask=hidden)),
+                     "psnr_objects_db": m.psnr_objects_db,
+                     "psnr_objects_unhidden_db": _finite(psnr(frame, union, peak, mask=unhidden))
+                     if unhidden.any() else None,
+                     "cross_transfer_rel_error": m.cross_transfer_rel_error}
+    if "depth" in out and out["depth"]["psnr_hidden_db"] is not None and out["over"]["psnr_hidden_db"] is not None:
+        out["depth_gain_hidden_db"] = out["depth"]["psnr_hidden_db"] - out["over"]["psnr_hidden_db"]
+    return out
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None

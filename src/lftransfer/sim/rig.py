@@ -33,8 +33,8 @@ from lftransfer.render.lights import LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.model import RigModel, nominal_rig
-from lftransfer.rig.requests import (Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame, RealScene, RigInfo,
-                                     Setup, ViewCapture, ViewFrame, WhiteField)
+from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,
+                                     RealScene, RigInfo, Setup, ViewCapture, ViewFrame, WhiteField)
 from lftransfer.scenes.frame import scene_in_frame
 
 
@@ -383,7 +383,8 @@ class SimRig:
         held = self._held(request)
         self.boards_held.append(held)                            # rig frame (verification only)
         to_world = self._world_to_array @ held
-        shapes = {"lens_array_absorber": self._absorber, **board_shapes(to_world, request.albedo, request.chart)}
+        shapes = {"lens_array_absorber": self._absorber, **board_shapes(
+            to_world, request.albedo, request.chart, SCREEN_TRANSMISSION if request.translucent else 0.0)}
         return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)
 
     # -- for verification only (never used by the pipeline) ------------------------------------------------

@@ -23,7 +23,7 @@ import numpy as np
 from lftransfer import choices
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
-from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
+from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light, view_depth_from_lightfield
 from lftransfer.render.renderer import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
@@ -145,6 +145,8 @@ class TransferResult:
         depth: (K, V, U) the real scene's depth the projection prefilter or the depth composite used (measured,
             or given to :func:`run_transfer`), metres (NaN where none was found), or None (neither needs one).
         view_depth: the real scene's depth in the view camera (``composite == "depth"``), else None.
+        depth_sources: the depths it was fused from (the LF camera's carried into the view, then structured
+            light's where measured), for the report; empty with the over composite.
     """
 
     bounces: list[Bounce]
@@ -159,6 +161,7 @@ class TransferResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     depth: np.ndarray | None = None
     view_depth: ViewDepth | None = None
+    depth_sources: tuple[ViewDepth, ...] = ()
 
     def composite(self) -> np.ndarray:
         """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over
@@ -236,7 +239,7 @@ def final_projection(bounces: list[Bounce]) -> LightField:
 def count_steps(settings: TransferSettings) -> int:
     """Number of progress callbacks :func:`run_transfer` makes (for progress bars)."""
     per_bounce = 3 + (1 if settings.bounce_views else 0)
-    return 4 + int(settings.measures_depth) + settings.bounces * per_bounce + 2
+    return 4 + 2 * int(settings.measures_depth) + settings.bounces * per_bounce + 2
 
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
@@ -255,8 +258,10 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         time_s: the moment of an animated scene: the synthetic objects and (through
             :class:`~lftransfer.rig.requests.RealScene`) the simulated rig's real objects are posed there.
         depth: (K, V, U) the real scene's depth for the projection prefilter, metres (NaN: unknown), measured
-            earlier (a live sequence's, so that a check of its frames prefilters as the frames did); None: measured
-            here with one extra frame.
+            earlier (a live sequence's, so that a check of its frames prefilters and composites as the frames did);
+            None: measured here with one extra frame, and, for the depth composite, the view camera's depth by
+            structured light too (:func:`~lftransfer.real_depth.measure_structured_light`, 24 extra photographs),
+            the better of the two per pixel.
 
     Returns:
         TransferResult with every bounce kept.
@@ -281,9 +286,16 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
+    structured = None
     if not settings.measures_depth:
         depth = None                        # nothing needs it: the result carries no depth
     else:
+        if depth is None and settings.composite == "depth":
+            step("measure the real scene's depth in the view camera (structured light)")
+            with timer("structured_light"):
+                structured = measure_structured_light(rig, model, scene.view, encoder, settings.angular_samples)
+        else:
+            step("the real scene's depth in the view camera: from the LF camera alone")
         if depth is None:
             step("measure the real scene's depth (projector white)")
             with timer("measure_depth"):
@@ -333,12 +345,15 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
-    view_depth = None
+    view_depth, sources = None, ()
     if settings.composite == "depth":
         with timer("view_depth"):
             view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
+            sources = (view_depth,) if structured is None else (view_depth, structured)
+            view_depth = fuse_depths(*sources) if structured is not None else view_depth
     return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
                           clipped_fraction=clipped, captured_raw=raw0,
                           saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
-                          timings_s=timer.totals, depth=depth, view_depth=view_depth)
+                          timings_s=timer.totals, depth=depth, view_depth=view_depth,
+                          depth_sources=sources)

@@ -132,6 +132,8 @@ class LiveTransfer:
             by the projection prefilter instead of measuring it at the first step; None: measured there.
         loop: "sync" (a capture inside every step) or "decoupled" (captures on their own thread; module
             docstring). A decoupled loop holds a thread: :meth:`close` it (or use it in a ``with``).
+        depth_every_frame: measure the real scene's depth at every step, not once (two extra frames each), for
+            the depth composite of real objects that move.
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP
@@ -140,12 +142,14 @@ class LiveTransfer:
 
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
                  *, projected: LightField | None = None, time_s: float = 0.0,
-                 depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync") -> None:
+                 depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync",
+                 depth_every_frame: bool = False) -> None:
         choices.check_choice("loop", loop, choices.LiveLoop)
         self.rig = rig
         self.model = model
         self.settings = settings
         self.loop = loop
+        self.depth_every_frame = bool(depth_every_frame)
         self.side = SyntheticSide(model, scene, settings, time_s=time_s)
         U = V = settings.angular_samples
         self._black = Projection(LightField.zeros(model.array, U, V), version=-1, black=True)
@@ -260,7 +264,7 @@ class LiveTransfer:
         """The real scene's depth for the projection prefilter (``projection == "depth"``) or the depth composite:
         two extra frames, projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`).
         Measured once, at the first step: the real objects are taken to stand still (a sequence whose real objects
-        move projects the box light field and says so)."""
+        move projects the box light field and says so), or at every step with ``depth_every_frame``."""
         side = self.side
         with self.holding_rig() as rig:
             rig.project(rig.info.black())
@@ -297,7 +301,7 @@ class LiveTransfer:
             self._changed(t0)
         if self.loop == "sync":
             self.rig.setup(RealScene(time_s=time_s))
-        if self._depth is None and s.measures_depth:
+        if s.measures_depth and (self._depth is None or self.depth_every_frame):
             with timer("measure_depth"):
                 self._measure_depth()
         cap = self._capture(time_s, timer)
