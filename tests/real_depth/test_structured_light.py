@@ -6,10 +6,11 @@ What each test shows:
   so the phasor has modulus 1 and the plane's own coordinate as its phase (analytic); off the plane the beams'
   phases spread and the contrast falls.
 - test_02: on the simulated rig, a grey board 9 cm in front of the array, photographed under the 24 fringe images
-  by the view camera, decodes to its true distance along every pixel's ray: median error under 1.5 mm, 90 % of the
-  pixels under 7 mm (0.84 and 5.8 measured), on at least 60 % of the pixels that see the board, and hardly any
-  depth off it. Decoded with the fine fringes' drawing planes swapped (a model that is wrong about the patterns),
-  the median error is several times larger (5.4 mm: the negative control).
+  by the view camera, decodes to its true distance along every pixel's ray: median error under 1.2 mm, 95 % of the
+  pixels under 4 mm (0.72 and 2.6 measured), on at least 70 % of the pixels that see the board (79 %), and hardly
+  any depth off it. Decoded with the fine fringes' drawing planes swapped (a model that is wrong about the
+  patterns), the model explains the fringes of a sixth as many pixels and the decode refuses the rest; made to
+  answer anyway, its median error is several times larger (5.4 mm): the negative controls.
 - test_03: fusion takes each pixel's depth from the source with the smaller sigma, and the only one where one
   source has none.
 """
@@ -84,17 +85,21 @@ def _errors_mm(vd: ViewDepth, truth: np.ndarray) -> tuple[np.ndarray, float]:
     return 1000 * np.abs(vd.depth[both] - truth[both]), float(both.sum() / np.isfinite(truth).sum())
 
 
-def test_02_a_board_decodes_to_its_distance(board_shots):
+def test_02_a_board_decodes_to_its_distance(board_shots, monkeypatch):
     images, model, view, truth = board_shots
     vd = decode_structured_light(images, model, view)
     err, coverage = _errors_mm(vd, truth)
-    assert coverage >= 0.6, coverage
-    assert np.median(err) < 1.5, np.median(err)
-    assert np.percentile(err, 90) < 7.0, np.percentile(err, 90)
+    assert coverage >= 0.7, coverage
+    assert np.median(err) < 1.2, np.median(err)
+    assert np.percentile(err, 95) < 4.0, np.percentile(err, 95)
     assert np.mean(~np.isfinite(truth[vd.known])) < 0.05      # almost no depth where no board is seen
-    # negative control: the fine fringes' planes swapped in the decode
+    # negative control: the fine fringes' planes swapped in the decode. The model then explains few pixels'
+    # fringes and the decode refuses the others; made to answer anyway, it is several times farther off
     swapped = tuple(FringeSet({0.06: 0.12, 0.12: 0.06}.get(s.plane_m, s.plane_m), s.axis, s.period_m)
                     for s in FRINGE_SETS)
+    _, refused = _errors_mm(decode_structured_light(images, model, view, swapped), truth)
+    assert refused < 0.25 * coverage, (refused, coverage)
+    monkeypatch.setattr("lftransfer.real_depth.structured_light.MIN_FIT", -1.0)
     bad, _ = _errors_mm(decode_structured_light(images, model, view, swapped), truth)
     assert np.median(bad) > 3 * max(np.median(err), 1.0), (np.median(bad), np.median(err))
 

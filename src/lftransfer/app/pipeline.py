@@ -371,7 +371,7 @@ class _Run:
         result = self.transfer(known)
         gt, metrics, tables, gt_spp_needed = self.verify(result)
         floor = self.floor(result, gt)
-        self.compare(known, gt, tables)
+        self.compare(known, gt, tables, result)
         control = self.negative_control(result, gt)
         self.timings["total"] = time.perf_counter() - t0
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor)
@@ -491,12 +491,15 @@ class _Run:
         self.timings["fidelity_floor"] = time.perf_counter() - t
         return floor
 
-    def compare(self, known: Knowledge, gt, tables: dict) -> None:
-        """Stage 4: the same run with one setting changed, for each comparison the settings ask for, measured."""
+    def compare(self, known: Knowledge, gt, tables: dict, result) -> None:
+        """Stage 4: the same run with one setting changed, for each comparison the settings ask for, measured (with
+        the run's own measurement of the real scene's depth for the depth composite, which takes 24 photographs of
+        structured light: the same rig, model and scene)."""
+        reuse = {"depth": result.depth, "view_depth": result.view_depth} if result.view_depth is not None else {}
         for name, value in self.settings.comparisons:
             t = time.perf_counter()
             alt = run_transfer(self.opened.rig, known.model, known.scene, self.settings.rerun(name, value),
-                               progress=self.step)
+                               progress=self.step, **reuse)
             if gt is not None:
                 from lftransfer.sim.metrics import evaluate
 

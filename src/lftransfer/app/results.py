@@ -30,6 +30,7 @@ from pathlib import Path
 
 from lftransfer.app.results_format import db, fixed, median_p95, num, table
 from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
+from lftransfer.app.results_occlusion import occlusion_tables
 from lftransfer.app.results_study import study_tables
 
 __all__ = ["Run", "RUNS", "ResultsError", "StoredRun", "load_run", "load_store", "render_results", "main"]
@@ -87,6 +88,13 @@ RUNS: tuple[Run, ...] = (
         "--quiet-reference`)",
         (("lft", "run", "fig4", "--quick", "--quiet-reference", "--out", "out/runs/demo_quick_quiet"),),
         (("", "out/runs/demo_quick_quiet/report.json"),), quick=True),
+    Run("occlusion_quick", "occlusion", "A real post in front of a synthetic cube, quarter resolution "
+        "(`lft run occlusion --quick --composite depth`)",
+        (("lft", "run", "occlusion", "--quick", "--composite", "depth", "--out", "out/runs/occlusion_quick"),),
+        (("", "out/runs/occlusion_quick/report.json"),), quick=True),
+    _seq("occlusion_crossing_quick", "A real post crossing in front of a synthetic cube, quarter resolution",
+         "occlusion_crossing", quick=True, calibrate=None, calibration=None,
+         render=("--composite", "depth", "--verify-every", "6")),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
         (("", "out/runs/oracle/report.json"),)),
@@ -582,7 +590,8 @@ def twin_tables(s: StoredRun) -> list[str]:
 TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_tables,
           "calibration_seeds": calibration_seeds_tables, "twin_compare": twin_tables,
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
-          "study": lambda s: study_tables(s.data)}
+          "study": lambda s: study_tables(s.data),
+          "occlusion": lambda s: demo_tables(s) + occlusion_tables(s)}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
@@ -590,6 +599,7 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracl
                                           "profile")),
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig6_quick_quiet",
                                             "fig1b_quick", "fig5", "fig6", "fig1b")),
+          ("Occlusion: real objects in front of synthetic ones", ("occlusion_quick", "occlusion_crossing_quick")),
           ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))

@@ -35,7 +35,7 @@ from lftransfer.app.run_folder import tracked_run, write_status
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
-from lftransfer.transfer.bounce import TransferResult, TransferSettings, run_transfer
+from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view, run_transfer
 from lftransfer.transfer.live import LiveTransfer
 from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
 from lftransfer.validation import read_json
@@ -138,14 +138,21 @@ def sequence_times(scene, options: SequenceOptions) -> np.ndarray:
     return np.concatenate([times, extra])[: options.frames]
 
 
-def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
+def frame_metrics(image: np.ndarray, gt, over: np.ndarray | None = None) -> dict[str, float | None]:
     """A composite against its ground truth, on images box-downsampled as :func:`evaluate` does.
+
+    Args:
+        image: (H, W, 3) the frame's composite.
+        gt: its ground truth.
+        over: (H, W, 3) the same frame put together by the over operator, where the frame's own composite is the
+            depth-aware one (for the comparison on the hidden pixels), or None.
 
     Returns:
         psnr_db (every pixel) and psnr_objects_db (the objects' pixels), both with the ground truth's peak, and
         psnr_real_db: over the pixels where only real objects are seen, with their own peak (dB). A bright
         emitter in view sets the first two's peak and hides errors on dimmer objects; the third does not.
-        None where undefined.
+        Where a real object hides a synthetic one (the ground truth's depths), psnr_hidden_db over those pixels,
+        and psnr_hidden_over_db, the over operator's there. None where undefined.
     """
     from lftransfer.sim.metrics import downsample, metric_factor, object_mask, psnr
 
@@ -158,6 +165,11 @@ def frame_metrics(image: np.ndarray, gt) -> dict[str, float | None]:
     real_peak = float(ref[real].max()) if real.any() else 0.0
     values = {"psnr_db": psnr(img, ref, peak), "psnr_objects_db": psnr(img, ref, peak, mask=mask),
               "psnr_real_db": psnr(img, ref, real_peak, mask=real) if real.any() else float("nan")}
+    hidden = downsample(gt.real_in_front.astype(np.float32), f) > 0
+    if hidden.any():
+        values["psnr_hidden_db"] = psnr(img, ref, peak, mask=hidden)
+        if over is not None:
+            values["psnr_hidden_over_db"] = psnr(downsample(over, f), ref, peak, mask=hidden)
     return {k: (v if np.isfinite(v) else None) for k, v in values.items()}
 
 
@@ -464,8 +476,8 @@ class _FrameWriter:
                        f.seconds + time.perf_counter() - t0)
 
     def frame(self, index: int, time_s: float, comp: np.ndarray, panel: np.ndarray, timings: dict, clipped: float,
-              gt, seconds: float, capture: dict | None = None) -> None:
-        """Write one frame and its record."""
+              gt, seconds: float, capture: dict | None = None, over: np.ndarray | None = None) -> None:
+        """Write one frame and its record (``over``: the frame by the over operator, for :func:`frame_metrics`)."""
         frames = self.out / "frames"
         write_exr(frames / f"{index:04d}.exr", comp)
         write_png(frames / f"panel_{index:04d}.png", panel)
@@ -475,7 +487,7 @@ class _FrameWriter:
                 write_png(frames / f"{i:04d}.png", to_display(held, self.scale))
             self.held.clear()
         record = FrameRecord(index=index, time_s=time_s, seconds=seconds, timings_s=dict(timings),
-                             clipped_fraction=clipped, metrics=frame_metrics(comp, gt) if gt is not None else None,
+                             clipped_fraction=clipped, metrics=frame_metrics(comp, gt, over) if gt is not None else None,
                              capture=capture)
         self.report["frames"].append(record.to_json())
         self.report["frames"].sort(key=lambda r: r["index"])
@@ -522,8 +534,10 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
                 _write_state(state, data=live.projected.data)
                 if live.depth is not None and not depth_file.is_file():
                     _write_state(depth_file, depth=live.depth)
+                over = composite_view(frame.synthetic_view, frame.real_view, None) \
+                    if gt is not None and live.view_depth is not None else None
                 writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
-                             time.perf_counter() - t0, capture=capture_record(frame))
+                             time.perf_counter() - t0, capture=capture_record(frame), over=over)
 
 
 def capture_record(frame) -> dict:

@@ -23,12 +23,16 @@ from scipy.spatial import cKDTree
 from lftransfer.lightfield.depth import SWEEP_DEPTHS
 from lftransfer.optics.geometry import pixel_rays, view_camera
 
-__all__ = ["ViewDepth", "lightfield_points", "splat_depth", "view_depth_from_lightfield"]
+__all__ = ["ViewDepth", "lightfield_points", "splat_depth", "view_depth_from_lightfield", "whole_aperture"]
 
 MIN_SIGMA_M = 0.001            # no depth is known better than this, metres
 MAX_RADIUS_PX = 6              # a point's disc, at most, pixels
+MIN_RADIUS_PX = 2              # ... and at least (the points whole_aperture keeps are sparse near silhouettes)
 NORMAL_NEIGHBOURS = 9          # points that fit a disc's plane
 GRAZING_COS = 0.05             # a patch seen more grazing than this keeps its point's own distance
+APERTURE_SHARE = 1.0           # of a lenslet's aperture that a kept sample's neighbours must cover (whole_aperture): 1
+                               # keeps almost no point beside a silhouette, 0 leaves a halo (the occlusion scene's
+                               # false and missed real pixels are fewest near 0.75)
 
 
 @dataclass(frozen=True)
@@ -71,19 +75,56 @@ def lightfield_points(depth: np.ndarray, u: np.ndarray, v: np.ndarray, model) ->
 
     Returns:
         ((N, 3) world points, metres; (N,) their depth's standard deviation, metres: half the sweep's step there),
-        for the N samples with a depth.
+        for the N samples with a depth whose whole aperture sees the surface (:func:`whole_aperture`).
     """
     depth = np.asarray(depth, float)
     K, V, U = depth.shape
     if model.array.K != K or len(u) != U or len(v) != V:
         raise ValueError(f"depth has shape {depth.shape}, expected ({model.array.K}, {len(v)}, {len(u)})")
-    k, j, i = np.nonzero(np.isfinite(depth))
+    from lftransfer.lightfield import LightField
+
+    data = LightField.zeros(model.array, U, V).mask()
+    k, j, i = np.nonzero(whole_aperture(depth, u, model.array.pitch, data))
     z = depth[k, j, i]
     c = model.array.centres[k]
     local = np.stack([c[:, 0] + z * np.asarray(u, float)[i], c[:, 1] + z * np.asarray(v, float)[j], z], -1)
     to_world = np.linalg.inv(model.world_to_array())
     world = local @ to_world[:3, :3].T + to_world[:3, 3]
     return world, np.maximum(0.5 * _sweep_step(z), MIN_SIGMA_M)
+
+
+def whole_aperture(depth: np.ndarray, u: np.ndarray, pitch: float, data: np.ndarray | None = None) -> np.ndarray:
+    """(K, V, U) bool: the samples with a depth whose whole lenslet aperture sees the surface.
+
+    A sample averages the rays through its lenslet's whole aperture, a pitch wide. Beside a silhouette some of them
+    miss the object, and the sample still finds the object's depth; but its centre ray, along which
+    :func:`lightfield_points` places the point, may miss the object by up to half a pitch, and such points land
+    beside the object in the view camera (a halo of false real depth around every real object). A sample is kept
+    where no data sample of its lenslet within :data:`APERTURE_SHARE` of the aperture's half width at its depth
+    (``pitch / 2 / z``, in directions) lacks a depth.
+
+    Args:
+        depth: (K, V, U) metres, NaN where none.
+        u: (U,) the direction grid (its spacing; v is taken alike).
+        pitch: the lenslets' pitch, metres.
+        data: (V, U) bool, the samples that are data (``LightField.mask``); None: all. Samples outside it never
+            count as missing.
+    """
+    from scipy.ndimage import binary_dilation
+
+    known = np.isfinite(depth)
+    missing = ~known if data is None else ~known & np.asarray(data, bool)[None]
+    step = float(np.abs(np.diff(np.asarray(u, float))).mean()) if len(u) > 1 else 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half = APERTURE_SHARE * 0.5 * pitch / np.where(known, depth, 1.0)       # the aperture's half width, in u
+        reach = np.where(known, np.ceil(half / step - 0.5), 0).astype(int)
+    reach = np.clip(reach, 0, max(depth.shape[1:]))
+    keep = known & (reach == 0)
+    for r in np.unique(reach[known & (reach > 0)]):
+        size = 2 * int(r) + 1
+        near_missing = binary_dilation(missing, structure=np.ones((1, size, size), bool))
+        keep |= known & (reach == r) & ~near_missing
+    return keep
 
 
 def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int | None = None,
@@ -95,7 +136,7 @@ def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int |
         sigma: (N,) each point's depth standard deviation, metres.
         view: the view camera (``lftransfer.scenes.ViewConfig``).
         radius_px: each point's disc radius, pixels (None: the projected points' median spacing, so that the
-            discs close the gaps between them; at most :data:`MAX_RADIUS_PX`).
+            discs close the gaps between them; at least :data:`MIN_RADIUS_PX`, at most :data:`MAX_RADIUS_PX`).
         world_to_array: (4, 4) the array's frame (``RigModel.world_to_array``): a pixel whose ray, at the distance
             a disc gives it, would be behind the array plane (z below minus its point's sigma in the array's frame)
             gets no depth. The real objects are all in front of the array, so such a depth is a disc spilt over a
@@ -127,7 +168,7 @@ def splat_depth(points: np.ndarray, sigma: np.ndarray, view, *, radius_px: int |
         return ViewDepth(nan, nan.copy(), source)
     if radius_px is None:
         spacing = cKDTree(px).query(px, 2)[0][:, 1] if len(px) > 1 else np.array([1.0])
-        radius_px = int(min(MAX_RADIUS_PX, max(1, np.ceil(np.median(spacing)))))
+        radius_px = int(min(MAX_RADIUS_PX, max(MIN_RADIUS_PX, np.ceil(np.median(spacing)))))
     r = int(radius_px)
     offsets = [(dx, dy) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if dx * dx + dy * dy <= r * r + r]
     ix, iy = np.rint(px[:, 0]).astype(np.int64), np.rint(px[:, 1]).astype(np.int64)

@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from lftransfer.lightfield import LightField
@@ -63,6 +64,9 @@ COARSE_SEARCH_M = 0.012        # the first sweep's step along the ray (the coars
 COARSE_STEP_M = 0.003          # the second sweep's step (every set), metres; then refined
 FINE_STEPS = 9                 # samples across two coarse steps around the best, then a parabola
 MIN_MODULATION = 0.08          # a pixel whose coarse fringes modulate less than this (over their mean) has no depth
+MIN_SNR = 5.0                  # ... or whose coarse fringes' amplitude is below this many times its images' noise
+MIN_FIT = 0.9                  # ... or whose fringes the model's best distance explains worse than this (a cosine)
+NOISE_WINDOW = 5               # pixels: the images' noise is estimated over this neighbourhood
 MODEL_SIGMA_M = 0.002          # what the rig model's prediction is trusted to, metres (added to the noise's part)
 CHUNK = 200_000                # candidate points per batch (memory: CHUNK x lenslets complex values)
 
@@ -162,6 +166,7 @@ def _observed(images: np.ndarray, n_sets: int) -> tuple[np.ndarray, np.ndarray, 
     # four steps fit a + b cos(phi + step) with one degree of freedom left: I0 - I1 + I2 - I3 = 0 but for noise
     resid = (I[:, 0] - I[:, 1] + I[:, 2] - I[:, 3]) / SHIFTS
     noise = 2.0 * np.sqrt(np.mean(np.square(resid), axis=0))  # per image: std(resid) = sigma / 2
+    noise = np.sqrt(np.maximum(cv2.blur(np.square(noise), (NOISE_WINDOW, NOISE_WINDOW)), 0.0))   # steadier, locally
     return np.nan_to_num(phasor), mean, noise
 
 
@@ -184,8 +189,9 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
 
     Returns:
         :class:`~lftransfer.real_depth.lightfield.ViewDepth` (source ``"structured_light"``): distance along each
-        pixel's ray, NaN where the coarse fringes modulate less than :data:`MIN_MODULATION` or the best match is
-        at the end of the searched range; sigma from the fringes' noise through the phase's rate along the ray,
+        pixel's ray, NaN where the coarse fringes modulate less than :data:`MIN_MODULATION` or less than
+        :data:`MIN_SNR` times the images' noise (estimated from the four steps' residual), or the best match is at
+        the end of the searched range; sigma from the fringes' noise through the phase's rate along the ray,
         combined with :data:`MODEL_SIGMA_M`.
     """
     n = len(sets)
@@ -195,7 +201,8 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
     obs, mean, noise = _observed(images, n)
     coarse = [i for i, s in enumerate(sets) if s.period_m == max(t.period_m for t in sets)]
     modulation = np.abs(obs[coarse]).min(0)
-    valid = (modulation > MIN_MODULATION) & (mean.min(0) > 0)
+    amplitude = (np.abs(obs[coarse]) * mean[coarse]).min(0)                   # b of a + b cos, radiance
+    valid = (modulation > MIN_MODULATION) & (mean.min(0) > 0) & (amplitude > MIN_SNR * noise)
     ys, xs = np.nonzero(valid)
     depth = np.full((h, w), np.nan, np.float32)
     sigma = np.full((h, w), np.nan, np.float32)
@@ -255,6 +262,12 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
         info = np.nansum(np.where(np.isfinite(sig_phase) & (sig_phase > 0), np.square(rate / sig_phase), 0.0), 0)
         sig = np.where(info > 0, 1.0 / np.sqrt(info), np.inf)
     sig = np.sqrt(np.square(sig) + MODEL_SIGMA_M ** 2 + MIN_SIGMA_M ** 2)
+    # how well the model explains the pixel's fringes at its best distance (cosine of the phasors, 1: exactly):
+    # light that reaches a surface after a bounce off another carries the coarse fringes but blurs the fine ones
+    mid = o + s_best[:, None] * d
+    best_pred = predicted_phasors(mid, model, sets)
+    fit = _score(best_pred, ob) / np.maximum(np.sqrt(np.square(np.abs(ob)).sum(0)), 1e-12)
+    inside &= fit >= MIN_FIT
     depth[ys[inside], xs[inside]] = s_best[inside]
     sigma[ys[inside], xs[inside]] = sig[inside]
     return ViewDepth(depth, sigma, "structured_light")

@@ -244,7 +244,7 @@ def count_steps(settings: TransferSettings) -> int:
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
                  progress: Progress | None = None, time_s: float = 0.0,
-                 depth: np.ndarray | None = None) -> TransferResult:
+                 depth: np.ndarray | None = None, view_depth: ViewDepth | None = None) -> TransferResult:
     """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
 
     Args:
@@ -262,6 +262,9 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
             None: measured here with one extra frame, and, for the depth composite, the view camera's depth by
             structured light too (:func:`~lftransfer.real_depth.measure_structured_light`, 24 extra photographs),
             the better of the two per pixel.
+        view_depth: with ``depth``, the real scene's depth in the view camera measured with it (another run's on
+            the same rig and model, :attr:`TransferResult.view_depth`), for the depth composite; None: carried
+            from ``depth`` here.
 
     Returns:
         TransferResult with every bounce kept.
@@ -345,8 +348,10 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
-    view_depth, sources = None, ()
-    if settings.composite == "depth":
+    given, view_depth, sources = view_depth, None, ()
+    if settings.composite == "depth" and given is not None:
+        view_depth, sources = given, (given,)
+    elif settings.composite == "depth":
         with timer("view_depth"):
             view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
             sources = (view_depth,) if structured is None else (view_depth, structured)
