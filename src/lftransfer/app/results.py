@@ -481,7 +481,8 @@ def sequence_tables(s: StoredRun) -> list[str]:
     out: list[str] = []
     keys = [k for k in ("frames", "median_frame_s", "transfer_fps", "psnr_objects_db_min", "psnr_objects_db_max",
                         "cross_transfer_rel_error_min", "cross_transfer_rel_error_max", "cross_gt_noise_rel_max",
-                        "fidelity_floor_min", "fidelity_floor_max", "transfer_over_floor_min",
+                        "psnr_hidden_db_min", "psnr_hidden_db_max", "psnr_hidden_over_db_min",
+                        "psnr_hidden_over_db_max", "fidelity_floor_min", "fidelity_floor_max", "transfer_over_floor_min",
                         "transfer_over_floor_max", "reference_spp_min", "reference_spp_max",
                         "reference_noise_over_error_max", "references_met", "references", "stale_captures",
                         "captures_used", "capture_behind_s_median", "capture_behind_s_max",
@@ -495,7 +496,7 @@ def sequence_tables(s: StoredRun) -> list[str]:
         out += table(["quantity", "value"], [[f"`{k}`", num(summary[k])] for k in keys])
     verified = [f for f in frames if isinstance(f, dict) and f.get("metrics")]
     if verified:
-        cols = ("psnr_objects_db", "cross_transfer_rel_error", "cross_gt_noise_rel", "cross_synthetic_rel_error",
+        cols = ("psnr_objects_db", "psnr_hidden_db", "psnr_hidden_over_db", "cross_transfer_rel_error", "cross_gt_noise_rel", "cross_synthetic_rel_error",
                 "cross_synthetic_gt_noise_rel", "cross_real_rel_error", "cross_real_gt_noise_rel", "real_floor",
                 "synthetic_floor", "floor_transfer", "transfer_over_floor", "reference_spp",
                 "reference_noise_over_error")
@@ -503,7 +504,8 @@ def sequence_tables(s: StoredRun) -> list[str]:
         out += ["Verified frames (each against its own path-traced ground truth; `..._gt_noise_rel` is the ground "
                 "truth's own noise on the same term; the floors and `floor_transfer`, the frame scored as they are, "
                 "are noise-corrected, docs/architecture.md \"The fidelity floor\"; `reference_...`: the quiet "
-                "reference's samples per pixel and its noise over the error):", ""]
+                "reference's samples per pixel and its noise over the error; `psnr_hidden_...`: over the pixels "
+                "where a real object hides a synthetic one, the frame's composite and the over operator's):", ""]
         out += table(["frame", "t, s", *(f"`{c}`" for c in present)],
                      [[num(f.get("index")), fixed(f.get("time_s"), 2),
                        *((db if c.endswith("_db") else num)(f["metrics"].get(c)) for c in present)]

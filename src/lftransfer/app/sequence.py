@@ -557,8 +557,9 @@ def _fps(scene) -> float:
     return float(scene.animation.fps) if scene.animation is not None else 24.0
 
 
-RANGED = ("psnr_db", "psnr_objects_db", "psnr_real_db", "real_floor", "synthetic_floor", "fidelity_floor",
-          "transfer_over_floor", "reference_spp", "reference_noise_over_error")   # the summary's ``KEY_min``, ``_max``
+RANGED = ("psnr_db", "psnr_objects_db", "psnr_real_db", "psnr_hidden_db", "psnr_hidden_over_db", "real_floor",
+          "synthetic_floor", "fidelity_floor", "transfer_over_floor", "reference_spp",
+          "reference_noise_over_error")   # the summary's ``KEY_min``, ``_max``
 
 
 def sequence_summary(frames: list[dict]) -> dict:
