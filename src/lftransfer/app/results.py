@@ -94,7 +94,7 @@ RUNS: tuple[Run, ...] = (
         (("", "out/runs/occlusion_quick/report.json"),), quick=True),
     _seq("occlusion_crossing_quick", "A real post crossing in front of a synthetic cube, quarter resolution",
          "occlusion_crossing", quick=True, calibrate=None, calibration=None,
-         render=("--composite", "depth", "--verify-every", "6")),
+         render=("--composite", "depth", "--verify-every", "6", "--no-floor")),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
         (("", "out/runs/oracle/report.json"),)),
