@@ -19,6 +19,7 @@ import typer
 from rich.markup import escape
 
 from lftransfer import choices
+from lftransfer.scenes import builtin_scenes
 
 __all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache", "NoFloor",
            "OutDir", "Projection", "Quick", "QuietReference", "Reconstruction", "Renderer", "RigArgs", "SceneArg",
@@ -63,7 +64,7 @@ def _memory_check(value: Optional[str]) -> Optional[str]:
 
 
 SceneArg = Annotated[Path, typer.Argument(metavar="SCENE.toml", help=escape(
-    "Scene TOML file, or a built-in scene by name (fig4, fig5, fig6, fig1b)."))]
+    f"Scene TOML file, or a built-in scene by name ({', '.join(builtin_scenes())})."))]
 OutDir = Annotated[Path, option("--out", metavar="DIR", help="Output folder (made if missing).")]
 Quick = Annotated[bool, flag("--quick", "Quarter resolution: every device at a quarter of its size, a third of the "
                                         "angular samples (at least 8), a quarter of the ground-truth samples (at "
