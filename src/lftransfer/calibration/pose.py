@@ -33,10 +33,10 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose",
-           "BoardPattern", "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose",
-           "sees_lit_side",
-           "chart_pose", "corner_landing", "decode_fringes", "fringe_lightfields", "solve_array_pose", "view_camera"]
+__all__ = ["BOARD_CLEARANCE_M", "BOARD_MAX_OBLIQUITY_DEG", "CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M",
+           "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "FringeDecoding", "PoseError",
+           "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose", "corner_landing",
+           "decode_fringes", "fringe_lightfields", "sees_lit_side", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):

@@ -190,9 +190,10 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
     Returns:
         :class:`~lftransfer.real_depth.lightfield.ViewDepth` (source ``"structured_light"``): distance along each
         pixel's ray, NaN where the coarse fringes modulate less than :data:`MIN_MODULATION` or less than
-        :data:`MIN_SNR` times the images' noise (estimated from the four steps' residual), or the best match is at
-        the end of the searched range; sigma from the fringes' noise through the phase's rate along the ray,
-        combined with :data:`MODEL_SIGMA_M`.
+        :data:`MIN_SNR` times the images' noise (estimated from the four steps' residual), where the best match is
+        at the end of the searched range, or where the model explains the pixel's fringes there worse than
+        :data:`MIN_FIT` (light that reached the surface after a bounce off another); sigma from the fringes' noise
+        through the phase's rate along the ray, combined with :data:`MODEL_SIGMA_M`.
     """
     n = len(sets)
     if images.shape[0] != n * SHIFTS:

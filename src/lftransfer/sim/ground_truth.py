@@ -23,7 +23,8 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, read_entry, write_entry
 
-__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed", "true_depths", "views_overlap"]
+__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed", "true_depths", "view_distances",
+           "views_overlap"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -187,24 +188,29 @@ def views_overlap(scene) -> bool:
     return bool(scene.real) and bool(scene.synthetic) and abs(float(scene.view.origin[2])) > 1e-9
 
 
-def true_depths(scene, crop: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) float32 distances from the view camera's centre to the real objects and to the synthetic objects,
-    along each pixel's ray (the mean over :data:`DEPTH_SPP` rays of those that hit), metres, inf where none; of the
-    ``crop`` (x, y, width, height) only where given."""
+def view_distances(objects, view, spp: int = DEPTH_SPP) -> np.ndarray:
+    """(H, W) float32 distance from the view camera's centre to ``objects`` along each pixel's ray (the mean over
+    ``spp`` rays of those that hit), metres; inf where none hits."""
     from lftransfer.backend import mitsuba
     from lftransfer.render.camera import sensor_dict
     from lftransfer.render.renderer import HalfSpaceRenderer
 
-    view = scene.view
     w, h = view.resolution
-    sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=DEPTH_SPP))
+    sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp))
+    return np.asarray(HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=spp).depth,
+                      np.float32)
+
+
+def true_depths(scene, crop: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) float32 distances from the view camera's centre to the real objects and to the synthetic objects
+    (:func:`view_distances`); of the ``crop`` (x, y, width, height) only where given."""
     out = []
     for objs in (scene.real, scene.synthetic):
-        d = HalfSpaceRenderer(list(objs), max_depth=1).render_view(sensor, w, h, [], spp=DEPTH_SPP).depth
+        d = view_distances(objs, scene.view)
         if crop is not None:
             x, y, cw, ch = map(int, crop)
             d = d[y:y + ch, x:x + cw]
-        out.append(np.asarray(d, np.float32))
+        out.append(d)
     return out[0], out[1]
 
 

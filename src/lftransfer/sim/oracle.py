@@ -78,15 +78,10 @@ class Oracle:
         """(H, W) float32 the distance from the view camera's centre to the real objects as they stand at
         ``time_s``, along each pixel's ray (the mean over ``spp`` rays of those that hit), metres; inf where no real
         object is seen."""
-        from lftransfer.backend import mitsuba
-        from lftransfer.render.camera import sensor_dict
-        from lftransfer.render.renderer import HalfSpaceRenderer
+        from lftransfer.sim.ground_truth import view_distances
 
         world = self.world.at(time_s)
-        view = world.view
-        w, h = view.resolution
-        sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp))
-        return HalfSpaceRenderer(list(world.real), max_depth=1).render_view(sensor, w, h, [], spp=spp).depth
+        return view_distances(world.real, world.view, spp)
 
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built
