@@ -12,7 +12,7 @@ What each test shows:
   patterns), the model explains the fringes of a sixth as many pixels and the decode refuses the rest; made to
   answer anyway, its median error is several times larger (5.4 mm): the negative controls.
 - test_03: fusion takes each pixel's depth from the source with the smaller sigma, and the only one where one
-  source has none.
+  source has none; the report's share taken from each source counts them.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from lftransfer.app.pipeline import quick_scene
 from lftransfer.calibration.pose import board_pattern
 from lftransfer.optics.geometry import pixel_rays
 from lftransfer.real_depth import ViewDepth, decode_structured_light, fuse_depths
+from lftransfer.real_depth.fusion import share_taken
 from lftransfer.real_depth.structured_light import FRINGE_SETS, FringeSet, predicted_phasors, \
     structured_light_patterns
 from lftransfer.rig.model import nominal_rig
@@ -112,3 +113,4 @@ def test_03_fusion_takes_the_surer_depth():
     assert f.source == "a+b"
     assert np.allclose(f.depth[0, :3], [1.0, 2.5, 3.0]) and np.isnan(f.depth[0, 3])
     assert np.allclose(f.sigma[0, :3], [0.01, 0.01, 0.03]) and np.isnan(f.sigma[0, 3])
+    assert np.isclose(share_taken(f, a), 1 / 3) and np.isclose(share_taken(f, b), 2 / 3)

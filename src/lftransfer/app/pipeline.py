@@ -546,7 +546,7 @@ class _Run:
         vd = result.view_depth
         if vd is None:
             return None
-        import numpy as np
+        from lftransfer.real_depth.fusion import share_taken
 
         out = {"source": vd.source, "known_fraction": float(vd.known.mean())}
         truth = None
@@ -558,9 +558,7 @@ class _Run:
         if len(result.depth_sources) > 1:                 # each source alone, and where the fused map took it
             out["sources"] = {}
             for d in result.depth_sources:
-                entry = {"known_fraction": float(d.known.mean()),
-                         "chosen_fraction": float(np.mean(d.known & (d.depth == vd.depth)) / max(vd.known.mean(),
-                                                                                                 1e-12))}
+                entry = {"known_fraction": float(d.known.mean()), "chosen_fraction": share_taken(vd, d)}
                 if truth is not None:
                     entry.update(depth_errors(d, truth))
                 out["sources"][d.source] = entry

@@ -6,7 +6,7 @@ import numpy as np
 
 from lftransfer.real_depth.lightfield import ViewDepth
 
-__all__ = ["fuse_depths"]
+__all__ = ["fuse_depths", "share_taken"]
 
 
 def fuse_depths(*depths: ViewDepth) -> ViewDepth:
@@ -30,3 +30,9 @@ def fuse_depths(*depths: ViewDepth) -> ViewDepth:
     known = np.isfinite(sig)
     return ViewDepth(np.where(known, depth, np.nan).astype(np.float32), np.where(known, sig, np.nan).astype(np.float32),
                      "+".join(d.source for d in depths))
+
+
+def share_taken(fused: ViewDepth, source: ViewDepth) -> float:
+    """Of the pixels with a fused depth, the share whose depth came from ``source`` (one of those fused)."""
+    known = fused.known
+    return float(np.mean(source.known & known & (source.depth == fused.depth)) / max(float(known.mean()), 1e-12))
