@@ -199,7 +199,8 @@ class StoredRun:
 
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
-KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study")
+KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
+         "occlusion")
 
 
 def load_run(path: str | Path) -> StoredRun:
