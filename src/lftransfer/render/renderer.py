@@ -134,9 +134,10 @@ class SampleMeans:
 
 
 def mean_depth(distance_sum: np.ndarray, hits: np.ndarray) -> np.ndarray:
-    """Mean hit distance (G,) float32 from the sum of hit distances and the hit count; inf where nothing hit."""
+    """Mean hit distance (G,) float32 from the sum of hit distances and the hit count (or both over the same number
+    of rays: their means); inf where nothing hit."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(hits > 0, distance_sum / np.maximum(hits, 1), np.inf).astype(np.float32)
+        return np.where(hits > 0, distance_sum / np.where(hits > 0, hits, 1), np.inf).astype(np.float32)
 
 
 class HalfSpaceRenderer:

@@ -66,9 +66,10 @@ class GroundTruth:
 
     @property
     def synthetic_seen(self) -> np.ndarray:
-        """(H, W) float32 how much of each pixel shows a synthetic object: its coverage, 0 where a real object
-        hides it."""
-        return np.where(self.real_in_front, 0.0, self.alpha_synthetic).astype(np.float32)
+        """(H, W) float32 how much of each pixel shows a synthetic object: its coverage, less the part a real object
+        in front of it covers."""
+        hidden = np.where(self.real_in_front, np.clip(self.alpha_real, 0.0, 1.0), 0.0)
+        return (self.alpha_synthetic * (1.0 - hidden)).astype(np.float32)
 
     def composite_alone(self, i: int) -> np.ndarray:
         """(H, W, 3) seed ``i``'s real-alone and synthetic-alone renders put together as the view camera would see
