@@ -96,6 +96,30 @@ def test_03_frame_metrics_see_a_dark_real_object(variant):
     assert good["psnr_db"] - dark["psnr_db"] < good["psnr_real_db"] - dark["psnr_real_db"]
 
 
+def test_03b_frame_metrics_score_the_hidden_pixels():
+    """Where the ground truth has a real object in front of a synthetic one, a frame's metrics score those pixels,
+    for the frame and for the same frame by the over operator; a frame with nothing hidden has neither."""
+    from lftransfer.app.sequence import frame_metrics
+    from lftransfer.sim.ground_truth import GroundTruth
+
+    h, w = 48, 64
+    syn = np.zeros((h, w), np.float32)
+    syn[10:30, 10:40] = 1
+    real = np.zeros((h, w), np.float32)
+    real[:, 20:26] = 1
+    d_syn = np.where(syn > 0, 1.0, np.inf).astype(np.float32)
+    d_real = np.where(real > 0, 0.5, np.inf).astype(np.float32)
+    image = np.where(real[..., None] > 0, 0.3, syn[..., None] * np.array([0.1, 0.6, 0.1])).astype(np.float32)
+    union = np.stack([image, image + np.float32(1e-4)])
+    gt = GroundTruth(union=union, real=union, synthetic=union, alpha_real=real, alpha_synthetic=syn,
+                     depth_real=d_real, depth_synthetic=d_syn)
+    over = np.where(syn[..., None] > 0, syn[..., None] * np.array([0.1, 0.6, 0.1]), image).astype(np.float32)
+    m = frame_metrics(image + np.float32(1e-3), gt, over)
+    assert m["psnr_hidden_db"] > 40 and m["psnr_hidden_over_db"] < 20
+    flat = GroundTruth(union=union, real=union, synthetic=union, alpha_real=real, alpha_synthetic=syn)
+    assert "psnr_hidden_db" not in frame_metrics(image, flat, over)
+
+
 def test_04_converged_resume_fills_gaps(variant, tmp_path):
     """Converged frames are independent: a resumed sequence renders exactly the frames that are missing (a cluster
     finishes them in any order), and they come out bit-identical to the first run's."""
