@@ -24,7 +24,7 @@ calibration-table: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/lint-imports
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --durations=15 tests
 
 # Measured results: `make runs` runs the commands behind docs/results.md (the lft commands a user types) and
 # stores their JSON with provenance in docs/runs/ (hours on 2 cores for all of them; RUNS="--quick" for the
