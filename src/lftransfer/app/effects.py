@@ -168,7 +168,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     Returns:
         The :class:`ExchangeCheck`, or None when no frame was verified (or the rig has no ground truth).
     """
-    from lftransfer.app.sequence import acquire_model, read_depth
+    from lftransfer.app.sequence import acquire_model, read_depth, read_frame_depth
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
     from lftransfer.sim.metrics import cross_transfer_error
 
@@ -199,7 +199,10 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
                 step(f"check the exchange: frame {i}")
                 world = oracle.world.at(t)
                 frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
-                alone = run_transfer(opened.rig, model, ps, direct, time_s=t)
+                # a depth composite: the frame's own depth, so that both composites hide the same pixels
+                kept = read_frame_depth(out, i)
+                same = {} if kept is None else {"depth": kept[0], "view_depth": kept[1]}
+                alone = run_transfer(opened.rig, model, ps, direct, time_s=t, **same)
                 no_exchange = alone.composite_direct()
                 if resolved.quiet_reference:
                     gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
@@ -214,14 +217,16 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
                     f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
                 if floor_skipped(options) is None:
                     step(f"fidelity floor: frame {i}")
-                    converged = run_transfer(opened.rig, model, ps, settings, time_s=t, depth=depth)
+                    converged = run_transfer(opened.rig, model, ps, settings, time_s=t,
+                                             **(same or {"depth": depth}))
                     _frame_floor(oracle, getattr(opened.rig, "inner", opened.rig), converged, gt, settings, f,
                                  frame - no_exchange)
                 if effect is None:
                     continue
                 truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
                                                     use_cache=options.use_cache).image
-                result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t, depth=depth)
+                result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t,
+                                      **(same or {"depth": depth}))
                 transfer_without = result.composite()
                 pixels = object_pixels(world, effect.on)
                 check.effect.points.append(EffectPoint(

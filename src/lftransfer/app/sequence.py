@@ -472,8 +472,12 @@ class _FrameWriter:
             if f.index == 0 and self.scale is None:
                 self.report["display_scale"] = display_scale(comp, ceiling=self.ceiling)
             panel = bounce_panel(result, gt.image if gt is not None else None, comp, ceiling=self.ceiling)
+            over = None
+            if gt is not None and result.view_depth is not None:
+                write_frame_depth(self.out, f.index, result.depth, result.view_depth)
+                over = replace(result, view_depth=None).composite()
             self.frame(f.index, f.time_s, comp, panel, result.timings_s, result.clipped_fraction, gt,
-                       f.seconds + time.perf_counter() - t0)
+                       f.seconds + time.perf_counter() - t0, over=over)
 
     def frame(self, index: int, time_s: float, comp: np.ndarray, panel: np.ndarray, timings: dict, clipped: float,
               gt, seconds: float, capture: dict | None = None, over: np.ndarray | None = None) -> None:
@@ -534,6 +538,8 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
                 _write_state(state, data=live.projected.data)
                 if live.depth is not None and not depth_file.is_file():
                     _write_state(depth_file, depth=live.depth)
+                if verified(i) and live.view_depth is not None:
+                    write_frame_depth(out, i, live.depth, live.view_depth)
                 over = composite_view(frame.synthetic_view, frame.real_view, None) \
                     if gt is not None and live.view_depth is not None else None
                 writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
@@ -595,6 +601,29 @@ def read_depth(out: str | Path) -> np.ndarray | None:
         return None
     with np.load(path) as z:
         return z["depth"]
+
+
+FRAME_DEPTH = "state/depth_{:04d}.npz"
+
+
+def write_frame_depth(out: Path, index: int, depth: np.ndarray, view_depth) -> None:
+    """The real scene's depth a verified live frame was composited with: the LF camera's ((K, V, U) metres) and
+    in the view camera (:class:`~lftransfer.real_depth.ViewDepth`), so that its check composites the frame
+    without exchange alike (:func:`read_frame_depth`)."""
+    _write_state(Path(out) / FRAME_DEPTH.format(index), depth=depth, view_depth=view_depth.depth,
+                 view_sigma=view_depth.sigma, source=np.array(view_depth.source))
+
+
+def read_frame_depth(out: str | Path, index: int):
+    """(depth, view depth) of a verified live frame (:func:`write_frame_depth`), or None where it was not kept
+    (the over composite, or a folder from before)."""
+    from lftransfer.real_depth import ViewDepth
+
+    path = Path(out) / FRAME_DEPTH.format(index)
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        return z["depth"], ViewDepth(z["view_depth"], z["view_sigma"], str(z["source"]))
 
 
 def _write_state(path: Path, **arrays: np.ndarray) -> None:
