@@ -120,6 +120,22 @@ def test_03b_frame_metrics_score_the_hidden_pixels():
     assert "psnr_hidden_db" not in frame_metrics(image, flat, over)
 
 
+def test_03c_a_verified_frame_keeps_its_depth(tmp_path):
+    """A verified frame's depth (the LF camera's and in the view camera) reads back as it was written, for its
+    check to composite the frame without exchange alike; a frame that kept none reads as None."""
+    from lftransfer.app.sequence import read_frame_depth, write_frame_depth
+    from lftransfer.real_depth import ViewDepth
+
+    rng = np.random.default_rng(1)
+    depth = rng.random((4, 3, 3)).astype(np.float32)
+    vd = ViewDepth(rng.random((6, 8)).astype(np.float32), rng.random((6, 8)).astype(np.float32), "lightfield")
+    write_frame_depth(tmp_path, 12, depth, vd)
+    back, view = read_frame_depth(tmp_path, 12)
+    assert np.array_equal(back, depth) and np.array_equal(view.depth, vd.depth)
+    assert np.array_equal(view.sigma, vd.sigma) and view.source == "lightfield"
+    assert read_frame_depth(tmp_path, 13) is None
+
+
 def test_04_converged_resume_fills_gaps(variant, tmp_path):
     """Converged frames are independent: a resumed sequence renders exactly the frames that are missing (a cluster
     finishes them in any order), and they come out bit-identical to the first run's."""
