@@ -57,6 +57,6 @@ def occlusion_tables(stored) -> list[str]:
                        f"{fixed(None if s.get('false_fraction') is None else 100 * s['false_fraction'], 0)} % | "
                        f"{fixed(s.get('error_mm_median'), 1)} mm | {fixed(s.get('error_mm_p95'), 0)} mm | "
                        f"{fixed(None if s.get('within_3_sigma') is None else 100 * s['within_3_sigma'], 0)} % | "
-                       f"{fixed(None if 'chosen_fraction' not in s else 100 * s['chosen_fraction'], 0)} % |")
+                       f"{'-' if 'chosen_fraction' not in s else fixed(100 * s['chosen_fraction'], 0) + ' %'} |")
         out.append("")
     return out
