@@ -63,8 +63,12 @@ def test_builtin_scene_by_name():
     from lftransfer.app.cli.common import load
 
     assert load(Path("fig6"), quick=True).effect.on == "bowl"
+    from lftransfer.scenes import builtin_scenes
+
     result = runner.invoke(app, ["render", "fig7", "--quick"])
-    assert result.exit_code != 0 and "fig7: no such file (built-in scenes: fig1b, fig4, fig5, fig6)" in _text(result)
+    names = ", ".join(builtin_scenes())
+    assert "occlusion" in names and "fig4" in names
+    assert result.exit_code != 0 and f"fig7: no such file (built-in scenes: {names})" in _text(result)
 
 
 def test_06_cluster_option_errors(tmp_path):
