@@ -115,22 +115,19 @@ def measure_structured_light(rig: Rig, model, view, encoder, U: int, *, spp: int
     return decode_structured_light(np.stack(images), model, view, sets)
 
 
-def predicted_phasors(points: np.ndarray, model, sets: tuple[FringeSet, ...], U: int = 64) -> np.ndarray:
+def predicted_phasors(points: np.ndarray, model, sets: tuple[FringeSet, ...]) -> np.ndarray:
     """What each fringe set draws at ``points``, by the rig model.
 
     Args:
         points: (N, 3) array-frame points (z > 0), metres.
         model: the rig model (its lenslets and their window of directions).
         sets: the fringe sets.
-        U: resolution of the lenslets' window mask looked up.
 
     Returns:
         (S, N) complex: per set, the beams' phasors summed with their irradiance over their total (modulus 1 on the
         drawing plane where all agree; 0 where no lenslet lights the point).
     """
     array = model.array
-    a = array.half_width
-    mask = LightField.zeros(array, U, U).mask()               # (V, U): the window, the same for every lenslet
     c = array.centres                                         # (K, 2)
     out = np.zeros((len(sets), len(points)), np.complex64)
     for lo in range(0, len(points), max(1, CHUNK // len(c))):
@@ -139,11 +136,7 @@ def predicted_phasors(points: np.ndarray, model, sets: tuple[FringeSet, ...], U:
         z = np.where(front, p[:, 2:3], np.float32(1.0))
         rel = p[:, None, :2] - c[None].astype(np.float32)     # (n, K, 2) from each lenslet's centre
         uv = np.where(front[..., None], rel / z[..., None], np.float32(1e3))   # direction from the lenslet / its z
-        i = np.floor((uv[..., 0] + a) / (2 * a) * U).astype(np.int64)
-        j = np.floor((uv[..., 1] + a) / (2 * a) * U).astype(np.int64)
-        inside = (i >= 0) & (i < U) & (j >= 0) & (j < U)
-        lit = np.zeros(inside.shape, bool)
-        lit[inside] = mask[j[inside], i[inside]]
+        lit = array.in_cell(-array.focal_length * uv)         # the lenslet's window (as LightField.mask has it)
         w = lit * (1.0 + np.square(uv).sum(-1)) ** -1.5       # (z / r)^3
         total = w.sum(1)
         for si, s in enumerate(sets):
