@@ -257,8 +257,9 @@ def _quiet_frame_truth(oracle, world, frame: np.ndarray, no_exchange: np.ndarray
     from lftransfer.sim.metrics import metric_factor
     from lftransfer.sim.reference import cross_term_judge
 
-    gt, reference = oracle.quiet_ground_truth(cross_term_judge(frame, no_exchange), spp=spp, world=world, multiple=metric_factor(frame.shape[1]),
-                                              use_cache=use_cache, parts=parts, render=render, progress=step)
+    gt, reference = oracle.quiet_ground_truth(cross_term_judge(frame, no_exchange), spp=spp, world=world,
+                                              multiple=metric_factor(frame.shape[1]), use_cache=use_cache,
+                                              parts=parts, render=render, progress=step)
     record["reference"] = reference.to_json()
     record["metrics"].update(frame_metrics(frame, gt), reference_spp=reference.spp,
                              reference_noise_over_error=reference.ratio)

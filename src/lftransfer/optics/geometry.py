@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["apply_homography", "backproject", "pixel_rays", "plane_axes", "project", "rectangle_to_world", "rotation_2d",
-           "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
+__all__ = ["apply_homography", "backproject", "pixel_rays", "plane_axes", "project", "rectangle_to_world",
+           "rotation_2d", "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
 
 
 def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:

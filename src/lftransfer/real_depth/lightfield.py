@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from lftransfer.lightfield import LightField
 from lftransfer.lightfield.depth import SWEEP_DEPTHS
 from lftransfer.optics.geometry import pixel_rays, view_camera
 
@@ -30,9 +31,9 @@ MAX_RADIUS_PX = 6              # a point's disc, at most, pixels
 MIN_RADIUS_PX = 2              # ... and at least (the points whole_aperture keeps are sparse near silhouettes)
 NORMAL_NEIGHBOURS = 9          # points that fit a disc's plane
 GRAZING_COS = 0.05             # a patch seen more grazing than this keeps its point's own distance
-APERTURE_SHARE = 1.0           # of a lenslet's aperture that a kept sample's neighbours must cover (whole_aperture): 1
-                               # keeps almost no point beside a silhouette, 0 leaves a halo (the occlusion scene's
-                               # false and missed real pixels are fewest near 0.75)
+APERTURE_SHARE = 1.0           # of a lenslet's aperture that a kept sample's neighbours must cover (whole_aperture): 0
+                               # leaves a halo, more than 1 leaves holes (the occlusion scene's false and missed real
+                               # pixels together are fewest at 1, of 0.5, 0.75, 1, 1.5 and 2, with the oracle model)
 
 
 @dataclass(frozen=True)
@@ -81,8 +82,6 @@ def lightfield_points(depth: np.ndarray, u: np.ndarray, v: np.ndarray, model) ->
     K, V, U = depth.shape
     if model.array.K != K or len(u) != U or len(v) != V:
         raise ValueError(f"depth has shape {depth.shape}, expected ({model.array.K}, {len(v)}, {len(u)})")
-    from lftransfer.lightfield import LightField
-
     data = LightField.zeros(model.array, U, V).mask()
     k, j, i = np.nonzero(whole_aperture(depth, u, model.array.pitch, data))
     z = depth[k, j, i]

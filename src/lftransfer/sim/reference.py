@@ -18,11 +18,9 @@ only, never on where or in which order they ran.
 
 from __future__ import annotations
 
-import dataclasses
-
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -110,8 +108,8 @@ def object_box(gt: GroundTruth, multiple: int = 1) -> tuple[int, int, int, int]:
 def _blend(gt: GroundTruth, n: int, more: GroundTruth, k: int, box: tuple[int, int, int, int]) -> GroundTruth:
     """``gt`` (``n`` spp per pixel in the box) and ``more`` (``k`` spp, the box only) averaged in the box."""
     x, y, w, h = box
-    out = dataclasses.replace(gt, union=gt.union.copy(), real=gt.real.copy(), synthetic=gt.synthetic.copy(),
-                              alpha_real=gt.alpha_real.copy(), alpha_synthetic=gt.alpha_synthetic.copy())
+    out = replace(gt, union=gt.union.copy(), real=gt.real.copy(), synthetic=gt.synthetic.copy(),
+                  alpha_real=gt.alpha_real.copy(), alpha_synthetic=gt.alpha_synthetic.copy())
     a, b = np.float32(n / (n + k)), np.float32(k / (n + k))
     for name in ("union", "real", "synthetic"):
         img = getattr(out, name)
