@@ -374,7 +374,7 @@ class _Run:
         self.compare(known, gt, tables, result)
         control = self.negative_control(result, gt)
         self.timings["total"] = time.perf_counter() - t0
-        report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor)
+        report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor, gt)
         report["occlusion"] = self.occlusion(result, gt)
         self.step("write outputs")
         comp = result.composite()
@@ -539,10 +539,10 @@ class _Run:
 
         return occlusion_metrics(result, gt)
 
-    def real_depth(self, result) -> dict | None:
+    def real_depth(self, result, gt=None) -> dict | None:
         """What the depth composite knew of the real scene's depth in the view camera: its source and the pixels
-        it covers, and (verified runs) its error against the true depth (:func:`lftransfer.sim.metrics.depth_errors`);
-        None with the over composite."""
+        it covers, and (verified runs) its error against the true depth (:func:`lftransfer.sim.metrics.depth_errors`:
+        the ground truth's own, where it rendered one); None with the over composite."""
         vd = result.view_depth
         if vd is None:
             return None
@@ -553,7 +553,8 @@ class _Run:
         if self.verified:
             from lftransfer.sim.metrics import depth_errors
 
-            truth = self.opened.oracle.real_view_depth()
+            truth = gt.depth_real if gt is not None and gt.depth_real is not None else \
+                self.opened.oracle.real_view_depth()
             out.update(depth_errors(vd, truth))
         if len(result.depth_sources) > 1:                 # each source alone, and where the fused map took it
             out["sources"] = {}
@@ -565,7 +566,7 @@ class _Run:
         return out
 
     def report(self, known: Knowledge, label: str, errors, result, metrics, tables: dict,
-               control: ControlRun | None, gt_spp_needed, floor=None) -> dict:
+               control: ControlRun | None, gt_spp_needed, floor=None, gt=None) -> dict:
         """Stage 6: the report (``report.json``): metrics, comparisons, settings, energies, timings, provenance."""
         from lftransfer.backend import variant
 
@@ -585,7 +586,7 @@ class _Run:
             "window": s.window,
             "by_window": tables["by_window"],
             "composite": s.composite,
-            "real_depth": self.real_depth(result),
+            "real_depth": self.real_depth(result, gt),
             "negative_control": control.result.to_json() if control is not None else None,
             "real_floor": floor.real_floor if floor is not None else None,
             "synthetic_floor": floor.synthetic_floor if floor is not None else None,
