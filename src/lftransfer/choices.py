@@ -42,6 +42,11 @@ objects never hide synthetic ones, the paper's composite) or ``"depth"`` (the ne
 synthetic render's depth and the real scene's depth measured by the rig; :func:`lftransfer.composite.composite_depth`).
 """
 
+DirectLight = Literal["point", "probe"]
+"""What lights the synthetic objects directly: ``"point"`` (the virtual twins of the scene's point lights; on a
+scene with a light probe, one point light at the probe map's brightest direction, the negative control) or
+``"probe"`` (the environment the light probe's mirror ball shows, ``[light] kind = "probe"``)."""
+
 LiveLoop = Literal["decoupled", "sync"]
 """The live loop: ``"decoupled"`` (captures on their own thread at the devices' rate, frames at the renderer's
 rate with the newest capture) or ``"sync"`` (one capture inside every frame; :mod:`lftransfer.transfer.live`)."""
@@ -54,6 +59,7 @@ RENDERERS: tuple[str, ...] = get_args(Renderer)
 RIG_MODELS: tuple[str, ...] = get_args(RigModel)
 LIVE_LOOPS: tuple[str, ...] = get_args(LiveLoop)
 COMPOSITES: tuple[str, ...] = get_args(Composite)
+DIRECT_LIGHTS: tuple[str, ...] = get_args(DirectLight)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"

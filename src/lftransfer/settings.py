@@ -31,8 +31,8 @@ class Overrides:
 
     Attributes:
         bounces: N, light field exchanges after the direct frame (0 .. :data:`lftransfer.choices.MAX_BOUNCES`).
-        lighting_model, reconstruction, projection, window, renderer, composite: one value of the choice's
-            ``Literal`` (:mod:`lftransfer.choices`).
+        lighting_model, reconstruction, projection, window, renderer, composite, direct_light: one value of the
+            choice's ``Literal`` (:mod:`lftransfer.choices`).
         gt_spp: samples per pixel of each ground-truth render (>= 1).
         quiet_reference: render the ground truth in rounds until its noise on the cross term is at most a third
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
@@ -48,6 +48,7 @@ class Overrides:
     window: choices.Window | None = None
     renderer: choices.Renderer | None = None
     composite: choices.Composite | None = None
+    direct_light: choices.DirectLight | None = None
     gt_spp: int | None = None
     quiet_reference: bool | None = None
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
@@ -61,7 +62,7 @@ class Overrides:
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
                  "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer,
-                 "composite": choices.Composite}
+                 "composite": choices.Composite, "direct_light": choices.DirectLight}
         for name, kind in kinds.items():
             try:
                 choices.check_choice(name, getattr(self, name), kind)
@@ -151,10 +152,13 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
                   lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
                   reconstruction=render.reconstruction, projection=render.projection, window=render.window,
                   lf_spp=render.lf_spp or render.spp, view_spp=render.spp, renderer=choices.DEFAULT_RENDERER,
-                  composite=render.composite)
-    for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer", "composite"):
+                  composite=render.composite, direct_light="probe" if scene.probe is not None else "point")
+    for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer", "composite",
+                 "direct_light"):
         if getattr(overrides, name) is not None:
             values[name] = getattr(overrides, name)
+    if values["direct_light"] == "probe" and scene.probe is None:
+        raise ValueError("direct_light 'probe': the scene has no light probe (a [light] table with kind = 'probe')")
     area = values["lighting_model"] == "area"
     if not area:
         values.update(choices.NON_AREA)

@@ -539,6 +539,29 @@ class _Run:
 
         return occlusion_metrics(result, gt)
 
+    def direct_light(self, known, result) -> dict:
+        """What lit the synthetic objects directly: ``kind`` ("point" or "probe", the settings' ``direct_light``);
+        on a light probe scene the probe's measurement (:meth:`ProbeMeasurement.summary`), the point light that
+        stood in for it where ``kind`` is "point", and (verified runs) the map's errors against the true room."""
+        s = self.settings.transfer
+        out: dict = {"kind": s.direct_light}
+        if result.probe is None:
+            return out
+        out["probe"] = result.probe.summary()
+        if s.direct_light == "point":
+            from lftransfer.scenes.frame import scene_in_frame
+            from lftransfer.transfer.synthetic_side import probe_point_light
+
+            posed = scene_in_frame(known.scene, known.model.world_to_array())
+            light = probe_point_light(result.probe.radiance, posed)
+            out["point_light"] = {"position": [round(float(v), 4) for v in light.position],
+                                  "intensity": [round(float(v), 4) for v in light.intensity]}
+        if self.verified:
+            errors = self.opened.oracle.probe_errors(result.probe, known.model.world_to_array())
+            if errors is not None:
+                out["probe"]["against_truth"] = errors
+        return out
+
     def real_depth(self, result, gt=None) -> dict | None:
         """What the depth composite knew of the real scene's depth in the view camera: its source and the pixels
         it covers, and (verified runs) its error against the true depth (:func:`lftransfer.sim.metrics.depth_errors`:
@@ -587,6 +610,7 @@ class _Run:
             "by_window": tables["by_window"],
             "composite": s.composite,
             "real_depth": self.real_depth(result, gt),
+            "direct_light": self.direct_light(known, result),
             "negative_control": control.result.to_json() if control is not None else None,
             "real_floor": floor.real_floor if floor is not None else None,
             "synthetic_floor": floor.synthetic_floor if floor is not None else None,

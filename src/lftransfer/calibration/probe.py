@@ -11,8 +11,8 @@ show (the cone behind it, hidden by the ball itself, and the edge of the disc, w
 directions) are left out.
 
 The map uses Mitsuba's ``envmap`` convention, so it lights a render as it is: row i, column j is the direction with
-``theta = pi (i + 0.5) / H`` from +y and ``phi = 2 pi (j + 0.5) / W``, ``(sin phi sin theta, cos theta,
--cos phi sin theta)`` (world frame; the scene's y is up).
+``theta = pi i / (H - 1)`` from +y and ``phi = 2 pi (j + 0.5) / W``, ``(sin phi sin theta, cos theta,
+-cos phi sin theta)`` (:func:`~lftransfer.optics.geometry.env_directions`; world frame, the scene's y up).
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lftransfer.optics.geometry import view_camera
+from lftransfer.optics.geometry import env_directions, env_solid_angles, view_camera
 
-__all__ = ["EnvironmentMap", "MirrorBall", "env_directions", "unwrap_mirror_ball"]
+__all__ = ["EnvironmentMap", "MirrorBall", "ProbeMeasurement", "env_directions", "fill_environment", "photograph_probe",
+           "through_array", "unwrap_mirror_ball"]
 
 NEWTON_STEPS = 6           # refinements of each direction's point on the ball
 MIN_FACING = 0.2           # a point of the ball is read where its normal faces the camera at least this much (cosine):
@@ -59,29 +60,31 @@ class EnvironmentMap:
     valid: np.ndarray
 
     def solid_angles(self) -> np.ndarray:
-        """(H, W) steradians of each texel."""
+        """(H, W) steradians of each texel (:func:`~lftransfer.optics.geometry.env_solid_angles`)."""
         h, w = self.valid.shape
-        theta = np.pi * (np.arange(h) + 0.5) / h
-        return np.repeat((np.sin(theta) * (np.pi / h) * (2 * np.pi / w))[:, None], w, axis=1)
+        return env_solid_angles(w, h)
 
     def power(self, where: np.ndarray | None = None) -> np.ndarray:
         """(3,) the radiance integrated over the valid directions (``where``: also within this mask), W m^-2."""
         m = self.valid if where is None else self.valid & where
         return (self.radiance * (self.solid_angles() * m)[..., None]).sum(axis=(0, 1))
 
+    def peak_direction(self, radius_deg: float = 5.0) -> np.ndarray:
+        """(3,) unit direction of the brightest spot, finer than a texel: the mean direction of the valid texels
+        within ``radius_deg`` of the brightest one, weighted by their power (radiance summed over channels times
+        solid angle)."""
+        h, w = self.valid.shape
+        d = env_directions(w, h)
+        near = self.valid & (d @ self.brightest_direction() >= np.cos(np.radians(radius_deg)))
+        weight = self.radiance.sum(-1) * self.solid_angles() * near
+        mean = (d * weight[..., None]).sum(axis=(0, 1))
+        return mean / np.linalg.norm(mean)
+
     def brightest_direction(self) -> np.ndarray:
         """(3,) unit direction of the valid texel with the most radiance (summed over channels)."""
         grey = np.where(self.valid, self.radiance.sum(-1), -np.inf)
         i, j = np.unravel_index(np.argmax(grey), grey.shape)
         return env_directions(*self.valid.shape[::-1])[i, j]
-
-
-def env_directions(width: int, height: int) -> np.ndarray:
-    """(H, W, 3) unit world directions of an equirectangular map's texel centres (the module's convention)."""
-    theta = np.pi * (np.arange(height) + 0.5) / height
-    phi = 2 * np.pi * (np.arange(width) + 0.5) / width
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    return np.stack([np.sin(p) * np.sin(t), np.cos(t), -np.cos(p) * np.sin(t)], axis=-1)
 
 
 def unwrap_mirror_ball(image: np.ndarray, view, ball: MirrorBall, width: int = 128, height: int = 64
@@ -127,3 +130,105 @@ def unwrap_mirror_ball(image: np.ndarray, view, ball: MirrorBall, width: int = 1
     radiance = seen / np.asarray(ball.reflectance, np.float32)
     valid = valid.reshape(height, width)
     return EnvironmentMap(np.where(valid[..., None], radiance, 0.0).astype(np.float32), valid)
+
+
+FILL_MARGIN_TEXELS = 1      # the array's outline in the map widened by this much before the map is filled
+
+
+def through_array(origin, width: int, height: int, extent: tuple[float, float, float, float]) -> np.ndarray:
+    """(H, W) bool: the map's directions that, from ``origin`` (3,) in the lens array's frame (real side), cross the
+    array's rectangle ``extent`` (xmin, xmax, ymin, ymax) in the plane z = 0: what the ball sees of the rig, not
+    of the room."""
+    o = np.asarray(origin, float)
+    d = env_directions(width, height)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -o[2] / d[..., 2]
+        x, y = o[0] + t * d[..., 0], o[1] + t * d[..., 1]
+    xmin, xmax, ymin, ymax = extent
+    return (t > 0) & (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
+
+
+def fill_environment(env: EnvironmentMap) -> np.ndarray:
+    """(H, W, 3) float32 the map with its unmeasured directions filled: each takes the median of the measured
+    texels at its elevation (the median, so that a sun in the same row does not spread into the hole), a row with
+    none the median of all. Rooms change more with elevation than around it (sky, horizon, ground), so the cone
+    behind the ball and the rig's outline become the room around them: a guess, said to be one (the share filled
+    is :attr:`ProbeMeasurement.filled_share`)."""
+    rgb = np.where(env.valid[..., None], env.radiance, np.nan).astype(np.float32)
+    overall = np.nanmedian(rgb.reshape(-1, 3), axis=0) if env.valid.any() else np.zeros(3, np.float32)
+    some = env.valid.any(axis=1)
+    rows = np.full((env.valid.shape[0], 3), overall, np.float32)
+    if some.any():
+        rows[some] = np.nanmedian(rgb[some], axis=1)
+    return np.where(env.valid[..., None], env.radiance, rows[:, None, :]).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ProbeMeasurement:
+    """What the light probe measured (in the lens array's frame, the synthetic side's).
+
+    Attributes:
+        photo: (H, W, 3) float32 the view camera's photograph of the ball, linear radiance.
+        measured: the unwrapped map; valid where the ball showed the room (not the rig, not behind the ball).
+        radiance: (h, w, 3) float32 the map that lights the synthetic objects: ``measured``, its other directions
+            filled (:func:`fill_environment`).
+    """
+
+    photo: np.ndarray
+    measured: EnvironmentMap
+    radiance: np.ndarray
+
+    @property
+    def filled_share(self) -> float:
+        """The share of the sphere of directions (by solid angle) that was filled, not measured."""
+        omega = self.measured.solid_angles()
+        return float((omega * ~self.measured.valid).sum() / omega.sum())
+
+    def brightest_direction(self) -> np.ndarray:
+        """(3,) unit direction (the array's frame) of the filled map's brightest texel."""
+        return EnvironmentMap(self.radiance, np.ones(self.radiance.shape[:2], bool)).brightest_direction()
+
+    def summary(self) -> dict:
+        """JSON: the map's size, the share measured, its power and brightest direction."""
+        full = EnvironmentMap(self.radiance, np.ones(self.radiance.shape[:2], bool))
+        return {"map": [int(self.radiance.shape[1]), int(self.radiance.shape[0])],
+                "measured_share": round(1.0 - self.filled_share, 4),
+                "power_w_m2": [round(float(v), 4) for v in full.power()],
+                "brightest_direction": [round(float(v), 4) for v in self.brightest_direction()]}
+
+
+def photograph_probe(rig, world_centre, ball: MirrorBall, view, extent: tuple[float, float, float, float], *,
+                     width: int = 128, quality: int | None = None) -> ProbeMeasurement:
+    """Photograph the light probe through the rig and recover the room's light from it.
+
+    The rig is asked for the :class:`~lftransfer.rig.requests.MirrorBall` set-up (the ball on its mount where the
+    scene says, ``world_centre`` in the scene's world frame), the view camera photographs it, the photograph is
+    unwrapped (:func:`unwrap_mirror_ball`) with ``ball`` and ``view`` as the pipeline knows them in the lens
+    array's frame, the directions in which the ball sees the rig (:func:`through_array`, widened by
+    :data:`FILL_MARGIN_TEXELS`) are dropped, and the rest filled. The rig is left in the real scene's set-up.
+
+    Args:
+        rig: the rig (its :class:`~lftransfer.rig.base.Rig` methods).
+        world_centre: (3,) the mount's place, world metres.
+        ball: the ball in the lens array's frame (its centre moved there), radius and reflectance.
+        view: the view camera (``ViewConfig``) in the lens array's frame, as calibrated.
+        extent: (xmin, xmax, ymin, ymax) of the lens array in its frame.
+        width: the map's width (its height is half).
+        quality: the view camera's samples per pixel for the photograph (a simulated rig's), None: the rig's.
+
+    Returns:
+        :class:`ProbeMeasurement`.
+    """
+    from lftransfer.rig.requests import MirrorBall as BallOnMount, RealScene, ViewCapture
+
+    rig.setup(BallOnMount(tuple(float(v) for v in world_centre), float(ball.radius)))
+    rig.project(rig.info.black())
+    photo = np.asarray(rig.capture_view(ViewCapture(quality=quality)).radiance, np.float32)
+    rig.setup(RealScene())
+    env = unwrap_mirror_ball(photo, view, ball, width, width // 2)
+    rigged = through_array(ball.centre, width, width // 2, extent)
+    if FILL_MARGIN_TEXELS:
+        k = np.ones((2 * FILL_MARGIN_TEXELS + 1,) * 2, np.uint8)
+        rigged = cv2.dilate(rigged.astype(np.uint8), k).astype(bool)
+    measured = EnvironmentMap(np.where(rigged[..., None], 0.0, env.radiance).astype(np.float32), env.valid & ~rigged)
+    return ProbeMeasurement(photo=photo, measured=measured, radiance=fill_environment(measured))

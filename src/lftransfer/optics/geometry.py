@@ -122,3 +122,24 @@ def backproject(view, px: np.ndarray, point, normal) -> np.ndarray:
     point, normal = np.asarray(point, np.float64), np.asarray(normal, np.float64)
     lam = ((point - centre) @ normal) / (rays @ normal)
     return centre + lam[:, None] * rays
+
+
+def env_directions(width: int, height: int) -> np.ndarray:
+    """(H, W, 3) unit directions of an equirectangular environment map's samples, Mitsuba's ``envmap`` convention
+    (so a map lights a render as it is; Mitsuba reads it bilinearly between these samples): row i, column j is
+    ``theta = pi i / (H - 1)`` from +y (the first row the zenith, the last the nadir) and
+    ``phi = 2 pi (j + 0.5) / W``, ``(sin phi sin theta, cos theta, -cos phi sin theta)``."""
+    theta = np.pi * np.arange(height) / (height - 1)
+    phi = 2 * np.pi * (np.arange(width) + 0.5) / width
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    return np.stack([np.sin(p) * np.sin(t), np.cos(t), -np.cos(p) * np.sin(t)], axis=-1)
+
+
+def env_solid_angles(width: int, height: int) -> np.ndarray:
+    """(H, W) steradians each sample of :func:`env_directions` stands for: the band of theta halfway to the rows
+    beside it (half a row at either pole), a W-th of it around; they sum to 4 pi."""
+    step = np.pi / (height - 1)
+    theta = step * np.arange(height)
+    lo, hi = np.clip(theta - step / 2, 0, np.pi), np.clip(theta + step / 2, 0, np.pi)
+    band = 2 * np.pi * (np.cos(lo) - np.cos(hi)) / width
+    return np.repeat(band[:, None], width, axis=1)

@@ -1,10 +1,11 @@
 """Wavefront path tracing of ray batches in one half-space, with next-event estimation only.
 
-Every light of this package is a delta or an explicitly sampled area light (point light, lenslets, emitting
-objects), so a path gathers light only through ``light.illuminate`` at each vertex (and sees an emitter's own
-radiance only at its first hit, ``light.emitted``); BSDF sampling continues the path for
+Every light of this package is a delta or an explicitly sampled light (point light, lenslets, emitting objects,
+an environment map), so a path gathers light only through ``light.illuminate`` at each vertex (and sees an
+emitter's own radiance only at its first hit, ``light.emitted``); BSDF sampling continues the path for
 interreflections inside the half-space. Rays that miss at the first intersection are compacted away before
-any shading, since most rays of a lenslet camera see the dark background.
+any shading, since most rays of a lenslet camera see the background: dark, or a ``visible`` environment's
+radiance (``light.background``). A perfect mirror (a delta BSDF) therefore reflects no environment here.
 """
 
 from __future__ import annotations
@@ -49,6 +50,11 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
     hit = np.isfinite(t_np)
     idx = np.flatnonzero(hit)
     distance[idx] = t_np[idx]
+    seen = [light for light in lights if getattr(light, "visible", False)]
+    if seen and len(idx) < n:        # rays that leave the scene see a visible environment
+        miss = np.flatnonzero(~hit)
+        for light in seen:
+            radiance[miss] += light.background(o[miss], d[miss])
     if len(idx) == 0:
         return radiance, hit, distance
     radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed)

@@ -24,8 +24,8 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["SCREEN_TRANSMISSION", "Board", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "RealScene", "RigInfo", "Setup",
-           "SETUPS", "ViewCapture", "ViewFrame", "WhiteField", "describe", "image_digest", "request_key",
+__all__ = ["SCREEN_TRANSMISSION", "Board", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "MirrorBall",
+           "RealScene", "RigInfo", "Setup", "SETUPS", "ViewCapture", "ViewFrame", "WhiteField", "describe", "image_digest", "request_key",
            "setup_from_json"]
 
 
@@ -195,9 +195,40 @@ class Board:
         return f"{where}, where the projected image looks sharp; take the real objects away, point light off."
 
 
-Setup = Union[RealScene, Collimator, WhiteField, FocalPlaneDiffuser, Board]
+@dataclass(frozen=True)
+class MirrorBall:
+    """The light probe: a mirror ball on its mount, in the room's own light (projector black, real objects away),
+    for the view camera to photograph.
+
+    Attributes:
+        centre: (3,) where the mount holds the ball's centre, metres (the scene's world frame, as a board's centre;
+            real side, z > 0).
+        radius: metres.
+    """
+
+    centre: tuple[float, float, float]
+    radius: float
+    kind: str = field(default="mirror_ball", init=False)
+
+    def __post_init__(self) -> None:
+        c = _vec3(self.centre, "MirrorBall.centre")
+        if not c[2] > 0:
+            raise ValueError(f"MirrorBall.centre must lie on the real side (z > 0), got {c}")
+        if not (isinstance(self.radius, (int, float, np.floating)) and np.isfinite(self.radius) and self.radius > 0):
+            raise ValueError(f"MirrorBall.radius must be a positive number of metres, got {self.radius!r}")
+        object.__setattr__(self, "centre", c)
+        object.__setattr__(self, "radius", float(self.radius))
+
+    def prompt(self) -> str:
+        c = self.centre
+        return (f"Put the mirror ball ({200 * self.radius:.1f} cm across) on its mount, centre at x {100 * c[0]:+.1f}, "
+                f"y {100 * c[1]:+.1f}, z {100 * c[2]:.1f} cm; take the real objects away, room lights as for the "
+                "scene, projector black.")
+
+
+Setup = Union[RealScene, Collimator, WhiteField, FocalPlaneDiffuser, Board, MirrorBall]
 SETUPS: dict[str, type] = {"real_scene": RealScene, "collimator": Collimator, "white_field": WhiteField,
-                           "focal_plane_diffuser": FocalPlaneDiffuser, "board": Board}
+                           "focal_plane_diffuser": FocalPlaneDiffuser, "board": Board, "mirror_ball": MirrorBall}
 
 
 def setup_from_json(data: dict) -> Setup:

@@ -24,8 +24,9 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         matrix: (4, 4) rigid transform, world point -> point in the new frame.
 
     Returns:
-        A new scene of the same type: objects, point light and view camera moved by ``matrix``; the rig and the render
-        settings unchanged. The identity returns ``scene`` itself. Keyframes move too, exactly at the keys;
+        A new scene of the same type: objects, point light, the light probe's ball and view camera moved by
+        ``matrix``; the rig, the render settings and the environment (a direction field at infinity: its renderers
+        take the rotation) unchanged. The identity returns ``scene`` itself. Keyframes move too, exactly at the keys;
         between keys a moved object's Euler angles are interpolated in the new frame, which differs from the
         world frame's interpolation by about the frame's tilt: pose a moving scene first
         (``scene_in_frame(scene.at(t), matrix)``) where that matters.
@@ -61,5 +62,6 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         **objects,
         synthetic=[move(o) for o in scene.synthetic],
         lights=[lt.model_copy(update={"position": point(lt.position)}) for lt in scene.lights],
+        probe=None if scene.probe is None else scene.probe.model_copy(update={"ball_centre": point(scene.probe.ball_centre)}),
         view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},
     )

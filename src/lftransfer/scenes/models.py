@@ -32,7 +32,7 @@ from lftransfer.choices import (
     Window,
 )
 from lftransfer.scenes.animation import frame_times
-from lftransfer.scenes.assets import _texture_file
+from lftransfer.scenes.assets import _scene_file, _texture_file
 from lftransfer.validation import STRICT_NUMBER
 
 __all__ = [
@@ -184,8 +184,106 @@ class LightConfig(_Model):
         intensity: radiant intensity per RGB channel, W/sr.
     """
 
+    kind: Literal["point"] = "point"
     position: Vec3
     intensity: NonNegVec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+
+class ProbeConfig(_Model):
+    """The direct light as a light probe (``[light]`` with ``kind = "probe"``, docs/scene-format.md): the real
+    objects stand in a lit room (``[environment]``, known to the simulated rig only), a mirror ball on a mount at a
+    measured place is photographed by the view camera, and the environment it shows lights the synthetic objects.
+
+    Attributes:
+        kind: ``"probe"``.
+        ball_centre: where the ball's mount holds it, world metres (measured once; real half-space, seen by the
+            view camera).
+        ball_radius: metres.
+        ball_reflectance: its mirror reflectance per channel (a chrome ball: about 0.6 to 0.9).
+        map_width: texels of the recovered map around (its height is half).
+    """
+
+    kind: Literal["probe"]
+    ball_centre: Vec3
+    ball_radius: PosFloat = 0.025
+    ball_reflectance: RGBUnit = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+    map_width: Annotated[int, Field(ge=16, le=1024, multiple_of=2)] = 128
+
+    @field_validator("ball_centre")
+    @classmethod
+    def _real_side(cls, value):
+        if value[2] <= 0:
+            raise ValueError(f"the ball stands among the real objects (z > 0), found z = {value[2]}")
+        return value
+
+
+def _read_map(path: Path) -> np.ndarray:
+    """(H, W, 3) float32 linear RGB of an equirectangular map file (read by Mitsuba); a ValueError unless it is
+    twice as wide as high with three channels or more."""
+    from lftransfer.backend import mitsuba
+
+    rgb = np.array(mitsuba().Bitmap(str(path)), np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.shape[1] != 2 * rgb.shape[0]:
+        raise ValueError(f"expected an RGB map twice as wide as high, found shape {rgb.shape}")
+    return np.ascontiguousarray(rgb[..., :3])
+
+
+class EnvironmentConfig(_Model):
+    """The light of the room around the real objects (``[environment]``): a sky, a ground and a sun, or an HDR
+    map from a file. Like the real objects it is known to the simulated rig and its ground truth only; the
+    pipeline measures it with the light probe.
+
+    Attributes:
+        file: an equirectangular HDR map (EXR, linear radiance, Mitsuba's ``envmap`` convention: +y up), relative
+            to the scene file; when given, the sky fields are not used.
+        zenith, horizon, ground: radiance of the sky straight up, of the sky at the horizon (blended with the
+            sine of the elevation) and of everything below the horizon, W m^-2 sr^-1.
+        sun_direction: towards the sun, world (normalised when read).
+        sun_radiance: the sun's peak radiance, W m^-2 sr^-1 (its disc falls off as
+            ``exp(-(1 - cos angle) / (1 - cos sun_size_deg))``).
+        sun_size_deg: the sun's angular radius.
+        width: texels of the map around (its height is half).
+    """
+
+    file: Path | None = None
+    zenith: NonNegVec3 = Field(default_factory=lambda: [0.55, 0.7, 1.0])
+    horizon: NonNegVec3 = Field(default_factory=lambda: [0.9, 0.9, 0.85])
+    ground: NonNegVec3 = Field(default_factory=lambda: [0.25, 0.2, 0.15])
+    sun_direction: Vec3 = Field(default_factory=lambda: [0.75, 0.645, 0.16])
+    sun_radiance: NonNegVec3 = Field(default_factory=lambda: [2600.0, 2450.0, 2200.0])
+    sun_size_deg: Annotated[float, _Num, Field(gt=0, le=45, allow_inf_nan=False)] = 2.5
+    width: Annotated[int, Field(ge=16, le=4096, multiple_of=2)] = 256
+
+    @field_validator("file", mode="plain")
+    @classmethod
+    def _map_file(cls, value: Any, info: ValidationInfo) -> Path | None:
+        if value is None:
+            return None
+        if not isinstance(value, (str, Path)):
+            raise ValueError(f"expected an EXR file path string, found {type(value).__name__} {value!r}")
+        return _scene_file(value, info, "environment map file", _read_map, "cannot read an equirectangular map from")
+
+    @field_validator("sun_direction")
+    @classmethod
+    def _not_zero(cls, value):
+        if np.linalg.norm(value) < 1e-9:
+            raise ValueError("sun_direction must not be the zero vector")
+        return value
+
+    def radiance_map(self) -> np.ndarray:
+        """(H, W, 3) float32 radiance of the room's light, equirectangular (Mitsuba's ``envmap`` convention,
+        :func:`lftransfer.optics.geometry.env_directions`), world frame."""
+        if self.file is not None:
+            return _read_map(self.file)
+        from lftransfer.optics.geometry import env_directions
+
+        d = env_directions(self.width, self.width // 2)
+        up = np.clip(d[..., 1:2], 0.0, 1.0)
+        sky = (1 - up) * np.asarray(self.horizon) + up * np.asarray(self.zenith)
+        rgb = np.where(d[..., 1:2] > 0, sky, np.asarray(self.ground))
+        s = np.asarray(self.sun_direction, float) / np.linalg.norm(self.sun_direction)
+        lobe = np.exp(-(1 - d @ s) / (1 - np.cos(np.radians(self.sun_size_deg))))
+        return (rgb + lobe[..., None] * np.asarray(self.sun_radiance)).astype(np.float32)
 
 
 class RenderConfig(_Model):

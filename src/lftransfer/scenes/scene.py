@@ -13,7 +13,9 @@ from lftransfer.scenes.models import (
     MAX_LIGHTS,
     AnimationConfig,
     EffectConfig,
+    EnvironmentConfig,
     LightConfig,
+    ProbeConfig,
     RenderConfig,
     RigConfig,
     ViewConfig,
@@ -34,6 +36,8 @@ class _SceneBase(_Model):
         lights: the real point lights (their positions as measured by hand): ``[light]`` (one) or
             ``[[light]]`` (several) in the file; empty: the scene is lit by its emitting synthetic objects alone
             (through the projector on the real side).
+        probe: the light probe (``[light]`` with ``kind = "probe"``): the environment a mirror ball shows lights
+            the synthetic objects, instead of point lights; or None.
         render: render settings.
         animation: the time line of keyframed objects (``[animation]``), or None for a still scene.
         source: the TOML file it was loaded from, or None.
@@ -43,6 +47,7 @@ class _SceneBase(_Model):
     view: ViewConfig = Field(default_factory=ViewConfig)
     lights: list[LightConfig] = Field(default_factory=list, validation_alias=AliasChoices("light", "lights"),
                                       max_length=MAX_LIGHTS)
+    probe: ProbeConfig | None = None
     render: RenderConfig = Field(default_factory=RenderConfig)
     animation: AnimationConfig | None = None
     source: Path | None = None
@@ -70,6 +75,27 @@ class _SceneBase(_Model):
         """The synthetic objects that emit light."""
         return [o for o in self.synthetic if o.material.type == "emitter"]
 
+    @model_validator(mode="before")
+    @classmethod
+    def _probe_from_light(cls, data):
+        # ``[light] kind = "probe"`` is the light probe, kept apart from the point lights every step measures
+        if not isinstance(data, dict):
+            return data
+        key = "light" if "light" in data else "lights" if "lights" in data else None
+        value = data.get(key) if key else None
+        entries = [value] if isinstance(value, dict) else value if isinstance(value, list) else []
+        probes = [e for e in entries if isinstance(e, dict) and e.get("kind") == "probe"]
+        if not probes:
+            return data
+        if len(entries) > 1:
+            raise ValueError("light: a light probe is the scene's only direct light; found it with "
+                             f"{len(entries) - 1} other [[light]] table(s)")
+        if data.get("probe") is not None:
+            raise ValueError("give the light probe once: as [light] kind = 'probe' or as [probe], not both")
+        data = {k: v for k, v in data.items() if k != key}
+        data["probe"] = probes[0]
+        return data
+
     @field_validator("lights", mode="before")
     @classmethod
     def _one_or_several(cls, value):
@@ -78,9 +104,9 @@ class _SceneBase(_Model):
 
     @model_validator(mode="after")
     def _something_lights_it(self):
-        if not self.lights and not self.emitters:
-            raise ValueError("nothing lights the scene: give a [light] table (the real point light) or a synthetic "
-                             "object with material type = 'emitter'")
+        if not self.lights and not self.emitters and self.probe is None:
+            raise ValueError("nothing lights the scene: give a [light] table (the real point light, or kind = "
+                             "'probe'), or a synthetic object with material type = 'emitter'")
         return self
 
     @model_validator(mode="after")
@@ -131,11 +157,15 @@ class SceneConfig(_SceneBase):
         synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
         effect: the effect measured per verified frame (``[effect]``), or None; verification data, like the
             real objects, so the pipeline's part of the scene does not hold it.
+        environment: the light of the room around the real objects (``[environment]``), or None (a dark room);
+            hidden truth like the real objects: the simulated rig lights them by it, and the pipeline measures
+            it through the light probe.
     """
 
     real: list[RealObject] = Field(default_factory=list)
     synthetic: list[SyntheticObject] = Field(default_factory=list, validate_default=True)
     effect: EffectConfig | None = None
+    environment: EnvironmentConfig | None = None
 
     @field_validator("synthetic")
     @classmethod

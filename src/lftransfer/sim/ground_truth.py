@@ -1,7 +1,7 @@
 """The path-traced ground truth of a simulated world (docs/architecture.md, "Verification").
 
-The ground truth is the union scene (real objects + synthetic objects + point light, no lens array) path traced
-from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
+The ground truth is the union scene (real objects + synthetic objects + point light or the room's light, no lens
+array) path traced from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
 with the same seeds so that their noise cancels in the cross-transfer term. Two independent seeds give the
 ground truth's own noise. Renders are cached under a hash of everything they depend on, each entry with its
 checksum (:mod:`lftransfer.sim.gt_cache`). It renders the hidden world: the faces reach it through
@@ -106,6 +106,11 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...], crop: tuple[int, int, 
     }
     if crop is not None:                     # whole frames hash as they did before crops existed
         payload["crop"] = list(crop)
+    env = getattr(scene, "environment", None)
+    if env is not None:                      # scenes in a dark room hash as they did before rooms had light
+        payload["environment"] = {**env.model_dump(mode="json"), "v": 2}
+        if env.file is not None:
+            payload["environment"]["file_sha"] = hashlib.sha256(Path(env.file).read_bytes()).hexdigest()
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
@@ -164,22 +169,79 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
     extra = {"sensor": sensor,
              "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
              **light}
+    room = _room(scene)
     images: dict[str, list[np.ndarray]] = {}
     for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
-        mscene = mi.load_dict(scene_dict(objs, extra=extra), parallel=False, optimize=False)
+        shapes = dict(extra)
+        if room is not None:
+            shapes.update(room[name])
+        mscene = mi.load_dict(scene_dict(objs, extra=shapes), parallel=False, optimize=False)
         images[name] = []
         for seed in seeds:
             if progress:
                 progress(f"ground truth: {name}, seed {seed}")
             images[name].append(np.array(mi.render(mscene, spp=spp, seed=seed), dtype=np.float32))
+    alpha_real = images["real"][0][..., 3:4]
+    if room is not None:        # the room seen behind the real objects counts as covered in Mitsuba's alpha
+        alpha_real = _coverage(scene.real, view, crop)[..., None]
     stack = np.concatenate([images[n][i][..., :3] for n in ("union", "real", "synthetic") for i in range(2)]
-                           + [images["real"][0][..., 3:4], images["synthetic"][0][..., 3:4]], axis=-1)
+                           + [alpha_real, images["synthetic"][0][..., 3:4]], axis=-1)
     if use_cache:
         write_entry(inputs, stack)
     return _unpack(stack, depths)
 
 
 DEPTH_SPP = 16     # rays per pixel of the true depths
+
+
+def _room(scene) -> dict[str, dict] | None:
+    """Per render ("union", "real", "synthetic"), the Mitsuba dicts of the room's light (``[environment]``), or
+    None in a dark room. The union sees and is lit by the whole room. Each scene alone stands as the system gives
+    it light before any exchange, so that the cross term C_gt is what the array carries (the other objects' light
+    and the room seen past them):
+    - the real objects alone: the lens array (its nominal rectangle, an absorber) blocks the room behind it, as
+      the rig's panel does with the projector black (the projector later sends only the directions its lenslets
+      cover: the steeper room light from behind the array is the rig's loss);
+    - the synthetic objects alone: lit by the room but for the directions the lenslets record (|u|, |v| <= a
+      towards +z, zeroed in the map), which reach them through the array; the light probe gives them the rest
+      (:class:`~lftransfer.render.lights.EnvironmentLight`'s blocker). The camera does not see the room in this
+      render (it is composited over the real one, which shows it)."""
+    env = getattr(scene, "environment", None)
+    if env is None:
+        return None
+    from lftransfer.backend import mitsuba
+    from lftransfer.optics.geometry import env_directions
+    from lftransfer.render.shapes import lens_array_absorber
+    from lftransfer.rig.model import nominal_rig
+
+    mi = mitsuba()
+    radiance = env.radiance_map()
+    array = nominal_rig(scene.rig).array
+    d = env_directions(radiance.shape[1], radiance.shape[0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u, v = d[..., 0] / d[..., 2], d[..., 1] / d[..., 2]
+    window = (d[..., 2] > 0) & (np.abs(u) <= array.half_width) & (np.abs(v) <= array.half_width)
+    emitter = {"type": "envmap", "bitmap": mi.Bitmap(radiance)}
+    outside = {"type": "envmap", "bitmap": mi.Bitmap(np.where(window[..., None], 0.0, radiance).astype(np.float32))}
+    return {"union": {"room": emitter},
+            "real": {"room": emitter, "lens_array_absorber": lens_array_absorber(array)},
+            "synthetic": {"room": outside,
+                          "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": True}}}
+
+
+def _coverage(objects, view, crop) -> np.ndarray:
+    """(H, W) float32 the share of each pixel's rays that meet ``objects`` (of the ``crop`` where given)."""
+    from lftransfer.backend import mitsuba
+    from lftransfer.render.camera import sensor_dict
+    from lftransfer.render.renderer import HalfSpaceRenderer
+
+    w, h = view.resolution
+    sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=DEPTH_SPP))
+    alpha = HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=DEPTH_SPP).alpha
+    if crop is not None:
+        x, y, cw, ch = map(int, crop)
+        alpha = alpha[y:y + ch, x:x + cw]
+    return np.asarray(alpha, np.float32)
 
 
 def views_overlap(scene) -> bool:

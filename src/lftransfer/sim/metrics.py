@@ -479,3 +479,43 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
 
 def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
+
+
+def probe_errors(probe, truth: np.ndarray, world_to_array: np.ndarray) -> dict:
+    """A light probe's map against the true room (docs/architecture.md, "The light probe").
+
+    Args:
+        probe: ``lftransfer.calibration.probe.ProbeMeasurement`` (its maps in the lens array's frame as the
+            pipeline knows it).
+        truth: (H, W, 3) the room's true radiance map, world frame (any size; read along the probe's directions as
+            Mitsuba reads it).
+        world_to_array: (4, 4) the frame the probe's maps are in, from the world.
+
+    Returns:
+        JSON: ``brightest_direction_error_deg`` (the measured map's brightest spot against the true map's, each
+        :meth:`~lftransfer.calibration.probe.EnvironmentMap.peak_direction`),
+        ``power_ratio`` (measured / true radiance integrated over the measured directions, per channel, then
+        their mean), ``texel_rel_error_median`` (the measured texels away from the brightest 1 %, where a texel's
+        share of a sun's edge dominates), ``measured_share`` (of the sphere, by solid angle).
+    """
+    from lftransfer.calibration.probe import EnvironmentMap
+    from lftransfer.optics.geometry import env_directions
+    from lftransfer.render.lights import EnvironmentLight
+
+    h, w = probe.measured.valid.shape
+    # the true room along each of the probe's directions, looked up as the renderers look it up
+    room = EnvironmentLight(np.asarray(truth, np.float32), np.asarray(world_to_array, float)[:3, :3])
+    d = env_directions(w, h).reshape(-1, 3).astype(np.float32)
+    true = room.background(np.zeros_like(d), d).reshape(h, w, 3)
+    valid = probe.measured.valid
+    measured = EnvironmentMap(probe.measured.radiance, valid)
+    reference = EnvironmentMap(true.astype(np.float32), valid)
+    b_true = EnvironmentMap(true.astype(np.float32), np.ones_like(valid)).peak_direction()
+    b_meas = measured.peak_direction()
+    grey = true.sum(-1)
+    quiet = valid & (grey < np.quantile(grey, 0.99))
+    rel = np.abs(probe.measured.radiance[quiet] - true[quiet]).sum(-1) / np.maximum(grey[quiet], 1e-12)
+    return {"brightest_direction_error_deg": float(np.degrees(np.arccos(np.clip(b_true @ b_meas, -1.0, 1.0)))),
+            "power_ratio": float(np.mean(measured.power() / np.maximum(reference.power(), 1e-12))),
+            "texel_rel_error_median": float(np.median(rel)) if rel.size else float("nan"),
+            "measured_share": 1.0 - probe.filled_share}

@@ -74,6 +74,15 @@ class Oracle:
         return fidelity_floor(rig, self.world, result, gt, settings, time_s=time_s, cross=cross,
                               progress=progress)
 
+    def probe_errors(self, probe, world_to_array) -> dict | None:
+        """How well a light probe's measurement (:class:`~lftransfer.calibration.probe.ProbeMeasurement`, in the
+        frame ``world_to_array`` (4, 4) takes for the array's) shows the room as it is
+        (:func:`lftransfer.sim.metrics.probe_errors`); None where the world has no room light."""
+        from lftransfer.sim.metrics import probe_errors
+
+        env = getattr(self.world, "environment", None)
+        return None if env is None else probe_errors(probe, env.radiance_map(), world_to_array)
+
     def real_view_depth(self, *, time_s: float = 0.0, spp: int = 16):
         """(H, W) float32 the distance from the view camera's centre to the real objects as they stand at
         ``time_s``, along each pixel's ray (the mean over ``spp`` rays of those that hit), metres; inf where no real

@@ -29,13 +29,16 @@ from scipy.spatial.transform import Rotation
 from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.optics.geometry import apply_homography, rectangle_to_world
 from lftransfer.render.camera import sensor_dict
-from lftransfer.render.lights import LightFieldLight, PointLight
+from lftransfer.render.lights import EnvironmentLight, LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,
-                                     RealScene, RigInfo, Setup, ViewCapture, ViewFrame, WhiteField)
+                                     MirrorBall, RealScene, RigInfo, Setup, ViewCapture, ViewFrame, WhiteField)
 from lftransfer.scenes.frame import scene_in_frame
+
+ROOM_SAMPLES = 16      # directions of the room's light per shading point (importance-sampled, shadow rays)
+BALL_SPP = 64          # samples per pixel of the view camera's photograph of the mirror ball
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,11 @@ class SimRig:
                                        max_depth=scene.render.max_depth)
         self._point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
                               for lt in scene.lights]
+        # the room's light around the real objects (hidden truth); the array's absorber blocks it behind the array
+        env = scene.environment
+        self._room = None if env is None else EnvironmentLight(
+            env.radiance_map(), self._world_to_array[:3, :3], samples=ROOM_SAMPLES, seed=self._seed + 5)
+        self._ball_reflectance = tuple(scene.probe.ball_reflectance) if scene.probe is not None else (1.0, 1.0, 1.0)
         cam = self._truth.camera
         self._cam_shape = (cam.device.height, cam.device.width)
         px = np.stack(np.meshgrid(np.arange(cam.device.width), np.arange(cam.device.height)), -1).reshape(-1, 2)
@@ -142,6 +150,11 @@ class SimRig:
                              f"light {request.light} (0-based) to switch on")
         if isinstance(request, Board):
             self._world = self._board_renderer(request)
+        elif isinstance(request, MirrorBall):
+            if self._room is None:
+                raise ValueError("MirrorBall: the scene has no [environment] (the room's light) for the simulated "
+                                 "rig to show in the ball")
+            self._world = None
         elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
             self._real = self._real_renderer(request.time_s)
             self._world = self._real
@@ -225,6 +238,8 @@ class SimRig:
         A simulated view camera has no sensor noise; ``request.quality`` is its samples per pixel.
         """
         w, h = self._view.resolution
+        if isinstance(self._setup, MirrorBall):
+            return ViewFrame(radiance=self._ball_photo(self._setup, request.quality or BALL_SPP))
         if self._world is None:                       # collimator or diffusers: the view camera sees darkness
             return ViewFrame(radiance=np.zeros((h, w, 3), np.float32))
         lights = self._setup_lights()
@@ -248,7 +263,31 @@ class SimRig:
         return [self._projector_light] if self._projector_light is not None else []
 
     def _lights(self):
-        return [*self._point_lights, *self._projector_lights()]
+        room = [] if self._room is None else [self._room]
+        return [*self._point_lights, *room, *self._projector_lights()]
+
+    def _ball_photo(self, ball: MirrorBall, spp: int) -> np.ndarray:
+        """(H, W, 3) float32 the view camera's image of the mirror ball in the room's light, the lens array's
+        absorber behind it, path traced by Mitsuba (a mirror needs the BSDF-sampled paths the renderer's
+        next-event estimation leaves out)."""
+        from lftransfer.backend import mitsuba
+
+        mi = mitsuba()
+        view, (w, h) = self._view, self._view.resolution
+        m = np.eye(4)
+        m[:3, :3] = self._world_to_array[:3, :3]
+        # the ball's mount stands where it was measured in the world; the simulated rig sees it from its true frame
+        centre = (self._world_to_array @ np.append(np.asarray(ball.centre, float), 1.0))[:3]
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "path", "max_depth": 4},
+            "sensor": sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp),
+            "room": {"type": "envmap", "bitmap": mi.Bitmap(self._room.radiance),
+                     "to_world": mi.ScalarTransform4f(m.tolist())},
+            "ball": {"type": "sphere", "center": centre.tolist(), "radius": ball.radius,
+                     "bsdf": {"type": "conductor", "material": "none",
+                              "specular_reflectance": {"type": "rgb", "value": list(self._ball_reflectance)}}},
+            "lens_array_absorber": self._absorber})
+        return np.array(mi.render(scene, spp=spp, seed=self._seed + 11), np.float32)[..., :3]
 
     def _setup_lights(self) -> list:
         """The lights of the current set-up: the point lights (where they really stand) and the projector in the

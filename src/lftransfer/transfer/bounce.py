@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from lftransfer import choices
+from lftransfer.calibration.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light, view_depth_from_lightfield
@@ -56,6 +57,9 @@ class TransferSettings:
         composite: how the final frame is put together: "over" (the synthetic render over the real view) or
             "depth" (the nearer surface per pixel: the real scene's depth, measured through the rig as the depth
             projection measures it, carried into the view camera; :mod:`lftransfer.real_depth`).
+        direct_light: what lights the synthetic objects directly: "point" (the point lights' virtual twins; on a
+            light probe scene one point light at the probe's brightest direction) or "probe" (the environment the
+            light probe shows; :mod:`lftransfer.calibration.probe`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -74,6 +78,7 @@ class TransferSettings:
     projection: choices.Projection = choices.DEFAULT_PROJECTION
     window: choices.Window = choices.DEFAULT_WINDOW
     composite: choices.Composite = choices.DEFAULT_COMPOSITE
+    direct_light: choices.DirectLight = "point"
     lf_spp: int = choices.DEFAULT_SPP
     view_spp: int = choices.DEFAULT_SPP
     projector_fill: float = choices.DEFAULT_PROJECTOR_FILL
@@ -147,6 +152,7 @@ class TransferResult:
         view_depth: the real scene's depth in the view camera (``composite == "depth"``), else None.
         depth_sources: the depths it was fused from (the LF camera's carried into the view, then structured
             light's where measured), for the report; empty with the over composite.
+        probe: the light probe's measurement on a scene lit by one (photographed here or given), else None.
     """
 
     bounces: list[Bounce]
@@ -162,6 +168,7 @@ class TransferResult:
     depth: np.ndarray | None = None
     view_depth: ViewDepth | None = None
     depth_sources: tuple[ViewDepth, ...] = ()
+    probe: ProbeMeasurement | None = None
 
     def composite(self) -> np.ndarray:
         """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over
@@ -244,7 +251,8 @@ def count_steps(settings: TransferSettings) -> int:
 
 def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(), *,
                  progress: Progress | None = None, time_s: float = 0.0,
-                 depth: np.ndarray | None = None, view_depth: ViewDepth | None = None) -> TransferResult:
+                 depth: np.ndarray | None = None, view_depth: ViewDepth | None = None,
+                 probe: ProbeMeasurement | None = None) -> TransferResult:
     """Run N bounces of light field transfer between the rig's real scene and the synthetic scene.
 
     Args:
@@ -265,6 +273,8 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         view_depth: with ``depth``, the real scene's depth in the view camera measured with it (another run's on
             the same rig and model, :attr:`TransferResult.view_depth`), for the depth composite; None: carried
             from ``depth`` here.
+        probe: on a scene lit by a light probe, its measurement made earlier (another run's on the same rig);
+            None: the probe is photographed here (:meth:`SyntheticSide.measure_probe`).
 
     Returns:
         TransferResult with every bounce kept.
@@ -277,6 +287,13 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
 
     def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
         return side.render(lights, seed, timer)
+
+    if scene.probe is not None:
+        if probe is None:
+            step("photograph the light probe (the mirror ball)")
+            with timer("probe"):
+                probe = side.measure_probe(rig)
+        side.set_probe(probe.radiance)
 
     # Direct light.
     step("capture direct (projector black)")
@@ -361,4 +378,4 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
                           clipped_fraction=clipped, captured_raw=raw0,
                           saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
                           timings_s=timer.totals, depth=depth, view_depth=view_depth,
-                          depth_sources=sources)
+                          depth_sources=sources, probe=probe)

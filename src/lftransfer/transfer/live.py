@@ -134,6 +134,8 @@ class LiveTransfer:
             docstring). A decoupled loop holds a thread: :meth:`close` it (or use it in a ``with``).
         depth_every_frame: measure the real scene's depth at every step, not once (two extra frames each), for
             the depth composite of real objects that move.
+        probe: on a scene lit by a light probe, its :class:`~lftransfer.calibration.probe.ProbeMeasurement` made
+            earlier; None: photographed when the loop is made.
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP
@@ -143,7 +145,7 @@ class LiveTransfer:
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
                  *, projected: LightField | None = None, time_s: float = 0.0,
                  depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync",
-                 depth_every_frame: bool = False) -> None:
+                 depth_every_frame: bool = False, probe=None) -> None:
         choices.check_choice("loop", loop, choices.LiveLoop)
         self.rig = rig
         self.model = model
@@ -151,6 +153,11 @@ class LiveTransfer:
         self.loop = loop
         self.depth_every_frame = bool(depth_every_frame)
         self.side = SyntheticSide(model, scene, settings, time_s=time_s)
+        # a light probe's room is still: photographed once (or given, another run's), before the first capture
+        self.probe = None
+        if scene.probe is not None:
+            self.probe = probe if probe is not None else self.side.measure_probe(rig)
+            self.side.set_probe(self.probe.radiance)
         U = V = settings.angular_samples
         self._black = Projection(LightField.zeros(model.array, U, V), version=-1, black=True)
         if projected is not None and projected.data.shape != self._black.lf.data.shape:

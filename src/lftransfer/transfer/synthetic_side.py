@@ -13,7 +13,7 @@ from lftransfer.lightfield import LightField
 from lftransfer.lightfield.window import SteepRays, steep_rays
 from lftransfer.render import fast
 from lftransfer.render.camera import sensor_dict
-from lftransfer.render.lights import EDGE_REACH, EmitterLight, LightFieldLight, PointLight
+from lftransfer.render.lights import EDGE_REACH, EmitterLight, EnvironmentLight, LightFieldLight, PointLight
 from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
@@ -40,11 +40,17 @@ def resolve_renderer(scene, kind: str = "auto") -> str:
     they reflect onto each other is left out, and reports say so (Figs. 6 and 1b, each a glossy photograph on a
     glossy or metal frame: the same cross error and PSNR over the objects as the exact path against ground truth,
     benchmarks/glossy/fast_vs_exact.py). A half-space where nothing reflects light (no objects, or emitters only)
-    always takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters.
+    always takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters. So
+    does a scene lit by a light probe (the fast path has no environment light).
     """
     if kind not in ("auto", "fast", "exact"):
         raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
     if not _reflecting(scene):
+        return "exact"
+    if getattr(scene, "probe", None) is not None:
+        if kind == "fast":
+            raise ValueError("renderer 'fast': the fast path does not render a light probe's environment (its "
+                             "background and its light); use 'exact' or 'auto'")
         return "exact"
     if kind == "auto":
         ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
@@ -117,8 +123,10 @@ class SyntheticSide:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
         encoder: LightField -> projector image.
         point_lights: the virtual twins of the real point lights (array frame), one per light of the scene.
-        direct_lights: the synthetic scene's own light: the point lights, and its emitting objects where it
-            has any (:class:`~lftransfer.render.lights.EmitterLight`).
+        direct_lights: the synthetic scene's own light: the point lights, the light probe's map where one is set
+            (:meth:`set_probe`), and its emitting objects where it has any
+            (:class:`~lftransfer.render.lights.EmitterLight`).
+        probe: the light probe's map (h, w, 3), array frame, or None.
         prefilter: the projection prefilter from the real scene's measured depth (:meth:`set_depth`), or None:
             the box light field is projected.
     """
@@ -135,6 +143,7 @@ class SyntheticSide:
         # every projection is measured against a frame with the projector black: light added to its black level
         self.encoder = model.encoder(U, V, above_black=True)
         self.time_s = float(time_s)
+        self.probe: np.ndarray | None = None
         posed = self._posed(self.time_s)
         self.renderer = synthetic_renderer(posed, settings.renderer)
         self._set_lights(posed)
@@ -144,6 +153,24 @@ class SyntheticSide:
                                                self.height))
         self.prefilter: DepthPrefilter | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
+
+    def posed(self) -> SyntheticScene:
+        """The synthetic scene at the current time, in the lens array's frame."""
+        return self._posed(self.time_s)
+
+    def measure_probe(self, rig):
+        """Photograph the scene's light probe through ``rig`` and recover the room's light
+        (:func:`~lftransfer.calibration.probe.photograph_probe`, the ball and view camera as this side knows them);
+        returns the :class:`~lftransfer.calibration.probe.ProbeMeasurement`. The scene must have a probe."""
+        from lftransfer.calibration.probe import MirrorBall, photograph_probe
+
+        if self.scene.probe is None:
+            raise ValueError("measure_probe: the scene has no light probe ([light] kind = 'probe')")
+        posed = self.posed()
+        p = posed.probe
+        ball = MirrorBall(tuple(p.ball_centre), p.ball_radius, tuple(p.ball_reflectance))
+        return photograph_probe(rig, self.scene.probe.ball_centre, ball, posed.view, self.model.array.extent(),
+                                width=p.map_width)
 
     def _posed(self, t: float) -> SyntheticScene:
         return scene_in_frame(self.scene.at(t), self.model.world_to_array())
@@ -194,10 +221,26 @@ class SyntheticSide:
             return
         self.prefilter = DepthPrefilter(np.asarray(depth), self.model.array, U, U, spp=s.lf_spp, seed=s.seed)
 
+    def set_probe(self, radiance: np.ndarray | None) -> None:
+        """Light the synthetic objects by the light probe's map ((h, w, 3) radiance in the lens array's frame,
+        :class:`~lftransfer.calibration.probe.ProbeMeasurement`), as the settings' ``direct_light`` says: the map
+        itself (``"probe"``; the array blocks the directions its lenslets record, whose light arrives through it as
+        the captured light field, and lenslet cameras see the map behind the objects) or one point light at its
+        brightest direction (``"point"``, :func:`probe_point_light`)."""
+        self.probe = None if radiance is None else np.asarray(radiance, np.float32)
+        self._set_lights(self._posed(self.time_s))
+
     def _set_lights(self, posed: SyntheticScene) -> None:
         self.point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
                              for lt in posed.lights]
-        self.direct_lights = [*self.point_lights] \
+        probe = []
+        if self.probe is not None and self.settings.direct_light == "probe":
+            array = self.model.array
+            probe = [EnvironmentLight(self.probe, blocker=array.extent(), window=array.half_width,
+                                      samples=PROBE_SAMPLES, seed=self.settings.seed)]
+        elif self.probe is not None:
+            probe = [probe_point_light(self.probe, posed)]
+        self.direct_lights = [*self.point_lights, *probe] \
             + ([EmitterLight(seed=self.settings.seed)] if posed.emitters else [])
 
     def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
@@ -243,5 +286,26 @@ class SyntheticSide:
             with time_it("prefilter"):
                 ls = pf.apply(radiance)
         with time_it("render_view"):
-            view = self.renderer.render_view(self.sensor, self.width, self.height, lights, spp=s.view_spp, seed=seed)
+            # the view is composited over the real one, which shows the room: the render shows the objects only
+            seen = [light.hidden() if isinstance(light, EnvironmentLight) else light for light in lights]
+            view = self.renderer.render_view(self.sensor, self.width, self.height, seen, spp=s.view_spp, seed=seed)
         return ls, view
+
+
+PROBE_SAMPLES = 16          # directions of the light probe's map per shading point
+PROBE_POINT_DISTANCE_M = 1.0    # the negative control's point light: this far from the synthetic objects' centre
+
+
+def probe_point_light(radiance: np.ndarray, posed: SyntheticScene) -> PointLight:
+    """The light probe's map as one point light (the negative control, ``direct_light = "point"``): at the map's
+    brightest direction, :data:`PROBE_POINT_DISTANCE_M` from the centre of the synthetic objects' boxes, with the
+    intensity that gives a surface facing it there the irradiance the whole map gives it (W m^-2 times the
+    distance squared). ``radiance``: (h, w, 3) in the lens array's frame; ``posed``: the scene in that frame."""
+    from lftransfer.calibration.probe import EnvironmentMap
+
+    full = EnvironmentMap(np.asarray(radiance, np.float32), np.ones(np.shape(radiance)[:2], bool))
+    d = full.brightest_direction()
+    boxes = [o.bounds() for o in posed.synthetic] or [(np.zeros(3), np.zeros(3))]
+    centre = np.mean([(np.asarray(lo) + np.asarray(hi)) / 2 for lo, hi in boxes], axis=0)
+    irradiance = EnvironmentLight(radiance).irradiance_towards(d)
+    return PointLight(centre + PROBE_POINT_DISTANCE_M * d, irradiance * PROBE_POINT_DISTANCE_M ** 2)

@@ -115,6 +115,12 @@ Composite = Annotated[Optional[str], option(
     help=f"How the final frame is put together: the synthetic render over the real view, or the nearer surface per "
          f"pixel (the real scene's depth measured through the rig, carried into the view camera; default: the "
          f"scene's, {choices.DEFAULT_COMPOSITE} unless the scene says).")]
+DirectLight = Annotated[Optional[str], option(
+    "--direct-light", metavar=metavar(choices.DirectLight),
+    callback=choice_check("--direct-light", choices.DirectLight),
+    help="What lights the synthetic objects directly: the scene's point lights, or the environment its light probe "
+         "shows; on a light probe scene, point is one point light at the probe's brightest direction, for "
+         "comparison (default: probe where the scene's [light] has kind = 'probe', else point).")]
 Cluster = Annotated[Optional[str], option(
     "--cluster", metavar="auto|local|ray://HOST:PORT",
     help="Spread the work over a Ray cluster (pip install 'lftransfer[cluster]'): auto (the cluster `ray start` "

@@ -14,7 +14,7 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, operator,
                                        progress_bar, rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, GtSpp, LightingModel, MaxMemory,
+from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, DirectLight, GtSpp, LightingModel, MaxMemory,
                                         NoCache, NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction,
                                         Renderer, RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
@@ -158,6 +158,7 @@ def register(app: typer.Typer) -> None:
     def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
             lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
             projection: Projection = None, window: Window = None, composite: Composite = None,
+            direct_light: DirectLight = None,
             compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
                                                               "point), the other reconstruction, the other "
                                                               "projection and the other window, each a full "
@@ -177,8 +178,8 @@ def register(app: typer.Typer) -> None:
         scene = load(scene_file, quick)
         rig_opts = rig_options(scene, truth, rig)
         asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                     projection=projection, window=window, composite=composite, gt_spp=gt_spp, renderer=renderer,
-                     quiet_reference=quiet_reference or None)
+                     projection=projection, window=window, composite=composite, direct_light=direct_light,
+                     gt_spp=gt_spp, renderer=renderer, quiet_reference=quiet_reference or None)
         settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
         options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,
                              **rig_opts)

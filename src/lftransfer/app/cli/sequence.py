@@ -14,7 +14,7 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
                                        rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Cluster, Composite, GtSpp, MaxMemory, NoCache, NoFloor, OutDir,
+from lftransfer.app.cli.options import (Bounces, Cluster, Composite, DirectLight, GtSpp, MaxMemory, NoCache, NoFloor, OutDir,
                                             Quick, QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
                                             choice_check, flag, metavar, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
@@ -152,7 +152,7 @@ def register(app: typer.Typer) -> None:
                    renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
                    cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
                    no_floor: NoFloor = False, quiet_reference: QuietReference = False,
-                   composite: Composite = None) -> None:
+                   composite: Composite = None, direct_light: DirectLight = None) -> None:
         """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
         report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
         error and fidelity floor)."""
@@ -170,7 +170,8 @@ def register(app: typer.Typer) -> None:
         rig_opts = rig_options(scene, truth, rig)
         spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
         options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
-                                                composite=composite, quiet_reference=quiet_reference or None),
+                                                composite=composite, direct_light=direct_light,
+                                                quiet_reference=quiet_reference or None),
                              use_cache=not no_cache, floor=not no_floor,
                              cluster=spec if quiet_reference else None, **rig_opts)
         try:

@@ -1,4 +1,5 @@
-"""Light sources of the renderer: the point light, emitting objects and a light field seen through the lens array.
+"""Light sources of the renderer: the point light, emitting objects, an environment map and a light field seen through
+the lens array.
 
 Each light adds its reflected radiance at a batch of surface points in one call (next-event estimation with
 shadow rays). The light field light is the paper's interface seen from one half-space: every lenslet k is an
@@ -44,7 +45,8 @@ shadow rays (:meth:`LightFieldLight.reflect`); ``illuminate`` takes a BSDF conte
 weighted irradiance (:data:`Irradiance`) for the same purpose.
 
 The package, one job a module: :mod:`~lftransfer.render.lights.sources` (the point light, the emitting objects and
-the weight every light gives a direction), :mod:`~lftransfer.render.lights.lightfield_light` (the light field
+the weight every light gives a direction), :mod:`~lftransfer.render.lights.environment` (an environment map: a
+light probe's or the simulated room's, the lens array blocking it), :mod:`~lftransfer.render.lights.lightfield_light` (the light field
 light and its lighting models), :mod:`~lftransfer.render.lights.sampling` (how it reads the light field:
 aperture points, the linear blend, the table beyond the window, the array plane's raster) and
 :mod:`~lftransfer.render.lights.jit` (Dr.Jit arrays from NumPy and back).
@@ -53,6 +55,7 @@ aperture points, the linear blend, the table beyond the window, the array plane'
 from __future__ import annotations
 
 from lftransfer.choices import LIGHTING_MODELS, RECONSTRUCTIONS, WINDOWS, LightingModel, Reconstruction, Window
+from lftransfer.render.lights.environment import EnvironmentLight
 from lftransfer.render.lights.jit import jit_array, jit_rays, to_numpy
 from lftransfer.render.lights.lightfield_light import SAMPLING_POOL, Incident, LightFieldLight
 from lftransfer.render.lights.sampling import (EDGE_REACH, PLANE_CELLS_PER_PITCH, PlaneLookup, extended_table,
@@ -61,6 +64,6 @@ from lftransfer.render.lights.sources import EmitterLight, Irradiance, PointLigh
 
 __all__ = [
     "EDGE_REACH", "LIGHTING_MODELS", "PLANE_CELLS_PER_PITCH", "RECONSTRUCTIONS", "SAMPLING_POOL", "WINDOWS",
-    "EmitterLight", "Incident", "Irradiance", "LightFieldLight", "LightingModel", "PlaneLookup", "PointLight",
+    "EmitterLight", "EnvironmentLight", "Incident", "Irradiance", "LightFieldLight", "LightingModel", "PlaneLookup", "PointLight",
     "Reconstruction", "Window", "extended_table", "jit_array", "jit_rays", "plane_lookup", "to_numpy",
 ]
