@@ -154,3 +154,35 @@ def test_04_two_point_lights(variant, tmp_path):
     np.testing.assert_allclose(both, one + other, rtol=1e-4, atol=1e-6)
     real_both, real_sum = views[0].real_view_direct, views[1].real_view_direct + views[2].real_view_direct
     assert np.abs(real_both - real_sum).mean() < 0.02 * real_both.mean()
+
+
+@pytest.mark.slow
+def test_05_a_light_probe_lights_the_synthetic_objects(variant, tmp_path):
+    """The built-in ``probe`` scene on a small rig (6 x 7 lenslets, a 192 x 144 view): the room lights the real
+    block, the pipeline photographs the mirror ball and lights the synthetic cube by the map it recovers, and
+    report.json says so. Negative control: the same run with ``direct_light = "point"`` (one point light at the
+    probe's brightest direction) is worse over the synthetic object's pixels and in the cross term (its projector
+    carries no room behind the cube).
+
+    Measured (llvm_ad_rgb, 64 ground-truth samples per pixel): over the cube 30.6 dB with the probe, 28.8 with the
+    point light; cross-transfer error 0.63 against 0.81; the map's brightest spot 0.9 degree from the room's sun
+    (its texels are 2.9 degrees), its power 0.1 % low, 94 % of the sphere measured."""
+    scene = with_overrides(load_scene(builtin_scene("probe")),
+                           rig={"rows": 6, "cols": 7, "lf_camera": [448, 336], "projector": [224, 168],
+                                "angular_samples": 12},
+                           view={"resolution": [192, 144]}, render={"gt_spp": 64, "spp": 4})
+    reports = {}
+    for kind in ("probe", "point"):
+        reports[kind] = run_scene(scene, tmp_path / kind, RunOptions(
+            settings=Overrides(bounces=1, direct_light=kind), capture_spp=2, truth_seed=None, rig_model="nominal",
+            floor=False))
+    probe, point = reports["probe"], reports["point"]
+    assert json.loads((tmp_path / "probe" / "report.json").read_text())["direct_light"]["kind"] == "probe"
+    assert probe["settings"]["transfer"]["direct_light"] == "probe" and point["direct_light"]["kind"] == "point"
+    truth = probe["direct_light"]["probe"]["against_truth"]
+    assert truth["brightest_direction_error_deg"] < 2.0 and abs(truth["power_ratio"] - 1) < 0.02, truth
+    assert truth["measured_share"] > 0.9, truth
+    assert point["direct_light"]["point_light"]["intensity"][0] > 0
+    assert probe["psnr_by_side"]["synthetic"] > point["psnr_by_side"]["synthetic"] + 1.0, (probe, point)
+    assert probe["cross_transfer_rel_error"] < point["cross_transfer_rel_error"] - 0.1
+    assert probe["psnr_objects_db"] > point["psnr_objects_db"] + 0.5

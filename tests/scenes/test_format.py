@@ -22,6 +22,7 @@ from lftransfer.scenes import (
 )
 
 LIGHT = "[light]\nposition = [0.1, 0.2, 0.0]\n"
+PROBE = "[light]\nkind = 'probe'\nball_centre = [0.28, 0.1, 0.05]\n"
 BOX = "[[real]]\nname = 'a'\nshape = 'box'\nsize = [0.1, 0.1, 0.1]\ntranslate = [0.0, 0.0, 0.2]\n"
 
 
@@ -222,6 +223,12 @@ def test_with_overrides_revalidates():
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n" * 9 + BOX, "light", "at most 8"),
     (LIGHT + "[render]\nprojection = 'prefilter'\n" + BOX, "render.projection", "'box' or 'depth'"),
     (LIGHT + "[render]\nlf_spp = 0\n" + BOX, "render.lf_spp", "greater than 0"),
+    (PROBE.replace("0.05]", "-0.05]") + BOX, "probe.ball_centre", "the ball stands among the real objects"),
+    (PROBE.replace("[light]", "[[light]]") + LIGHT.replace("[light]", "[[light]]") + BOX, "<scene>",
+     "a light probe is the scene's only direct light"),
+    (PROBE + BOX + "[environment]\nfile = 'room.exr'\n", "environment.file", "does not exist"),
+    (PROBE + BOX + "[environment]\nsun_direction = [0, 0, 0]\n", "environment.sun_direction", "zero vector"),
+    (PROBE + BOX + "[environment]\nwidth = 33\n", "environment.width", "multiple of 2"),
 ])
 def test_bad_input_names_file_and_field(tmp_path, text, path, what):
     message = _error(tmp_path, text)
@@ -290,3 +297,27 @@ def test_material_ranges(tmp_path_factory, albedo, roughness, kind):
         with pytest.raises(SceneError) as info:
             load_scene(path)
         assert str(info.value).startswith(f"{path}: real[0].material.")
+
+
+def test_the_light_probe_and_its_room(tmp_path, variant):
+    """``[light] kind = "probe"`` is the light probe, apart from the point lights (the scene has none); it is part
+    of what the pipeline knows, the ``[environment]`` (the room) is not; the scene's frame moves the ball; the room
+    is a sky with a sun, or an equirectangular EXR next to the scene file (one twice as wide as high)."""
+    from lftransfer.backend import mitsuba
+    from lftransfer.scenes.frame import scene_in_frame
+
+    scene = load_scene(_write(tmp_path, PROBE + BOX + "[environment]\nsun_direction = [0, 1, 0]\nwidth = 64\n"))
+    assert scene.lights == [] and scene.probe.ball_centre == [0.28, 0.1, 0.05] and scene.probe.ball_radius == 0.025
+    part = scene.synthetic_part()
+    assert part.probe == scene.probe and not hasattr(part, "environment")
+    shift = np.eye(4)
+    shift[:3, 3] = [0.0, 0.0, 0.01]
+    assert scene_in_frame(scene, shift).probe.ball_centre == pytest.approx([0.28, 0.1, 0.06])
+    room = scene.environment.radiance_map()
+    assert room.shape == (32, 64, 3) and np.argmax(room.sum(-1)[:, 0]) == 0        # the sun at the zenith
+    mitsuba().Bitmap(np.full((8, 16, 3), 0.5, np.float32)).write(str(tmp_path / "room.exr"))
+    lit = load_scene(_write(tmp_path, PROBE + BOX + "[environment]\nfile = 'room.exr'\n", "file.toml"))
+    assert lit.environment.radiance_map().shape == (8, 16, 3) and lit.environment.file.is_absolute()
+    mitsuba().Bitmap(np.full((8, 8, 3), 0.5, np.float32)).write(str(tmp_path / "square.exr"))
+    message = _error(tmp_path, PROBE + BOX + "[environment]\nfile = 'square.exr'\n")
+    assert "environment.file" in message and "twice as wide as high" in message

@@ -622,6 +622,7 @@ class _Run:
             "gt_spp_needed": gt_spp_needed,
             "cross_term_rel_size": measured.get("cross_term_rel_size"),
             "cross_by_side": measured.get("cross_by_side"),
+            "psnr_by_side": measured.get("psnr_by_side"),
             "bounces": [{"index": b.index, "real_energy": b.real_energy, "synthetic_energy": b.synthetic_energy,
                          "projector_gain": b.projector_gain} for b in result.bounces],
             "projector_clipped_fraction": result.clipped_fraction,

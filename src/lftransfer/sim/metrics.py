@@ -148,6 +148,8 @@ class Evaluation:
         cross_by_side: the cross-transfer error split by where it shows (:func:`cross_by_side`): ``"real"``, the
             real objects lit by the synthetic ones through the projector; ``"synthetic"``, the synthetic objects
             lit by the captured light field. Empty where the cross term is undefined.
+        psnr_by_side: ``psnr_objects_db`` split the same way (``"real"``, ``"synthetic"``; None where a side shows
+            no pixel): what the synthetic objects' direct light changes shows on the ``"synthetic"`` pixels.
     """
 
     psnr_db: float | None
@@ -162,6 +164,7 @@ class Evaluation:
     metric_pixels: int
     undefined: dict[str, str]
     cross_by_side: dict[str, "CrossSide"] = field(default_factory=dict)
+    psnr_by_side: dict[str, float | None] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The metrics as JSON data (None for undefined values; ``metric_resolution`` a list)."""
@@ -248,6 +251,7 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
     peak = float(union.max())
     cross = cross_transfer_error(comp_n, comp_0, gt, target_width=target_width)   # what the objects add to each other
     mask = object_mask(gt, f)
+    seen = downsample(gt.synthetic_seen, f) > 0.5          # where a synthetic object is seen (as cross_by_side)
     u_norm = float(np.sqrt(np.sum(union[mask] ** 2)))
     undefined: dict[str, str] = {}
 
@@ -279,6 +283,8 @@ def evaluate(result, gt: GroundTruth, *, target_width: int = 256) -> Evaluation:
         metric_pixels=int(mask.sum()),
         undefined=undefined,
         cross_by_side=cross.by_side or {},
+        psnr_by_side={side: psnr_of(f"psnr_by_side.{side}", ds(comp_n), union, mask & where)
+                      for side, where in (("real", ~seen), ("synthetic", seen))},
     )
 
 
