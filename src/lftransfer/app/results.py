@@ -31,6 +31,7 @@ from pathlib import Path
 from lftransfer.app.results_format import db, fixed, median_p95, num, table
 from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
 from lftransfer.app.results_occlusion import occlusion_tables
+from lftransfer.app.results_probe import probe_tables
 from lftransfer.app.results_study import study_tables
 
 __all__ = ["Run", "RUNS", "ResultsError", "StoredRun", "load_run", "load_store", "render_results", "main"]
@@ -95,6 +96,13 @@ RUNS: tuple[Run, ...] = (
     _seq("occlusion_crossing_quick", "A real post crossing in front of a synthetic cube, quarter resolution",
          "occlusion_crossing", quick=True, calibrate=None, calibration=None,
          render=("--composite", "depth", "--verify-every", "6", "--no-floor")),
+    Run("probe_quick", "probe", "A light probe: the room's light on the synthetic cube, against one point light, "
+        "quarter resolution (`lft run probe --quick`, then `--direct-light point` with its calibration)",
+        (("lft", "run", "probe", "--quick", "--out", "out/runs/probe_quick"),
+         ("lft", "run", "probe", "--quick", "--direct-light", "point", "--calibration",
+          "out/runs/probe_quick/calibration.json", "--out", "out/runs/probe_point_quick")),
+        (("probe", "out/runs/probe_quick/report.json"), ("point", "out/runs/probe_point_quick/report.json")),
+        quick=True),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
         (("", "out/runs/oracle/report.json"),)),
@@ -200,7 +208,7 @@ class StoredRun:
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
 KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
-         "occlusion")
+         "occlusion", "probe")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -594,7 +602,8 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "calibration_seeds": calibration_seeds_tables, "twin_compare": twin_tables,
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
           "study": lambda s: study_tables(s.data),
-          "occlusion": lambda s: demo_tables(s) + occlusion_tables(s)}
+          "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
+          "probe": probe_tables}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
@@ -603,6 +612,7 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracl
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig6_quick_quiet",
                                             "fig1b_quick", "fig5", "fig6", "fig1b")),
           ("Occlusion: real objects in front of synthetic ones", ("occlusion_quick", "occlusion_crossing_quick")),
+          ("A light probe: the room's light as direct light", ("probe_quick",)),
           ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))
