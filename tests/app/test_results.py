@@ -134,13 +134,27 @@ def test_05_every_kind_renders(tmp_path):
         "hardware": {"cross_transfer_rel_error": 0.1432, "psnr_objects_db": 39.9},
         "latency": [{"configured_ms": 60, "median_ms": 173.6}]},
         provenance={**PROVENANCE, "machine": "x86_64, vm", "wall_s": None, "dirty": True})
+    side = lambda e, r: {"real": {"rel_error": r, "energy_ratio": 0.3}, "synthetic": {"rel_error": e}}  # noqa: E731
+    write(store, "probe_quick", "probe", {
+        "probe": {"psnr_objects_db": 29.26, "psnr_by_side": {"real": 28.1, "synthetic": 30.61},
+                  "cross_transfer_rel_error": 0.6835, "cross_gt_noise_rel": 0.12, "cross_by_side": side(0.54, 0.71),
+                  "direct_light": {"kind": "probe", "probe": {
+                      "map": [128, 64], "against_truth": {"measured_share": 0.9242, "power_ratio": 0.984,
+                                                          "brightest_direction_error_deg": 0.16,
+                                                          "texel_rel_error_median": 5e-5}}}},
+        "point": {"psnr_objects_db": 27.01, "psnr_by_side": {"real": 27.4, "synthetic": 28.81},
+                  "cross_transfer_rel_error": 0.836, "cross_gt_noise_rel": 0.12, "cross_by_side": side(0.54, 0.86),
+                  "direct_light": {"kind": "point"}}})
     md = render_results(load_store(store))
+    for text in ("30.61 dB", "28.81 dB", "0.683", "0.836", "92.4 %", "0.16 degrees", "-1.6 % off", "30 %",
+                 "one point light at the probe's brightest direction"):
+        assert text in md, text
     for text in ("16.2 (15.2 to 17.2)", "61.5 / 3.70", "`incident_light`", "122,880 + 196,608", "9.56",
                  "76.31 dB / 64.02 dB", "0.612", "30.71 dB", "265.1", "0.00871 / 0.00872", "0.161",
                  "seed 1", "0.391", "met", "0.156", "0.143", "39.90 dB", "0.013 apart", "174 ms",
                  "machine: x86_64, vm", "wall time not recorded", "uncommitted"):
         assert text in md, text
-    assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 4
+    assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 5
 
 
 def test_08_live_page_tables(tmp_path):

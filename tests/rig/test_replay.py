@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from lftransfer.rig import replay as replay_module
 from lftransfer.rig.base import Rig, RigError
 from lftransfer.rig.replay import RecordingRig, ReplayError, ReplayRig
-from lftransfer.rig.requests import (Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame, RealScene, RigInfo,
-                                     ViewCapture, ViewFrame, WhiteField, describe, image_digest, request_key,
+from lftransfer.rig.requests import (Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame, MirrorBall, RealScene,
+                                     RigInfo, ViewCapture, ViewFrame, WhiteField, describe, image_digest, request_key,
                                      setup_from_json)
 
 INFO = RigInfo(lf_camera=(40, 32), lf_camera_bits=12, projector=(20, 16), projector_bits=8, view=(24, 18),
@@ -411,7 +411,8 @@ _setups = st.one_of(
     st.builds(partial, st.just(Collimator), direction=st.tuples(_coord, _coord, _pos)),
     st.builds(partial, st.just(Board), centre=st.tuples(_coord, _coord, _pos), normal=st.tuples(_coord, _coord, _pos),
               size=st.tuples(_pos, _pos), albedo=st.floats(0.0, 1.0),
-              chart=st.none() | st.tuples(st.integers(2, 20), st.integers(2, 20), _pos), point_light=st.booleans()))
+              chart=st.none() | st.tuples(st.integers(2, 20), st.integers(2, 20), _pos), point_light=st.booleans()),
+    st.builds(partial, st.just(MirrorBall), centre=st.tuples(_coord, _coord, _pos), radius=_pos))
 _requests = st.one_of(
     st.builds(LFCapture, exposure_scale=st.floats(1e-3, 1e3), frames=st.integers(1, 64)),
     st.builds(ViewCapture, frames=st.integers(1, 64), quality=st.none() | st.integers(1, 4096)))

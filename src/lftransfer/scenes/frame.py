@@ -62,6 +62,7 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         **objects,
         synthetic=[move(o) for o in scene.synthetic],
         lights=[lt.model_copy(update={"position": point(lt.position)}) for lt in scene.lights],
-        probe=None if scene.probe is None else scene.probe.model_copy(update={"ball_centre": point(scene.probe.ball_centre)}),
+        probe=None if scene.probe is None else scene.probe.model_copy(
+            update={"ball_centre": point(scene.probe.ball_centre)}),
         view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},
     )

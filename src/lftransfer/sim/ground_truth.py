@@ -1,10 +1,11 @@
 """The path-traced ground truth of a simulated world (docs/architecture.md, "Verification").
 
 The ground truth is the union scene (real objects + synthetic objects + point light or the room's light, no lens
-array) path traced from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes are rendered
-with the same seeds so that their noise cancels in the cross-transfer term. Two independent seeds give the
-ground truth's own noise. Renders are cached under a hash of everything they depend on, each entry with its
-checksum (:mod:`lftransfer.sim.gt_cache`). It renders the hidden world: the faces reach it through
+array) path traced from the view camera with Mitsuba's ``path`` integrator; the real-alone and synthetic-alone scenes
+are rendered with the same seeds so that their noise cancels in the cross-transfer term (in a lit room, each alone
+as the rig lights it before any exchange: ``_room``). Two independent seeds give the ground truth's own noise.
+Renders are cached under a hash of everything they depend on, each entry with its checksum
+(:mod:`lftransfer.sim.gt_cache`). It renders the hidden world: the faces reach it through
 :class:`lftransfer.sim.oracle.Oracle`.
 """
 

@@ -14,8 +14,8 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, operator,
                                        progress_bar, rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, DirectLight, GtSpp, LightingModel, MaxMemory,
-                                        NoCache, NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction,
+from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, DirectLight, GtSpp, LightingModel,
+                                        MaxMemory, NoCache, NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction,
                                         Renderer, RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
 from lftransfer.settings import Overrides

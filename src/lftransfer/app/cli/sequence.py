@@ -14,8 +14,8 @@ from rich.table import Table
 from lftransfer import choices
 from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
                                        rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Cluster, Composite, DirectLight, GtSpp, MaxMemory, NoCache, NoFloor, OutDir,
-                                            Quick, QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
+from lftransfer.app.cli.options import (Bounces, Cluster, Composite, DirectLight, GtSpp, MaxMemory, NoCache,
+                                            NoFloor, OutDir, Quick, QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
                                             choice_check, flag, metavar, option)
 from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
 from lftransfer.settings import Overrides

@@ -46,7 +46,8 @@ weighted irradiance (:data:`Irradiance`) for the same purpose.
 
 The package, one job a module: :mod:`~lftransfer.render.lights.sources` (the point light, the emitting objects and
 the weight every light gives a direction), :mod:`~lftransfer.render.lights.environment` (an environment map: a
-light probe's or the simulated room's, the lens array blocking it), :mod:`~lftransfer.render.lights.lightfield_light` (the light field
+light probe's or the simulated room's, the lens array blocking it),
+:mod:`~lftransfer.render.lights.lightfield_light` (the light field
 light and its lighting models), :mod:`~lftransfer.render.lights.sampling` (how it reads the light field:
 aperture points, the linear blend, the table beyond the window, the array plane's raster) and
 :mod:`~lftransfer.render.lights.jit` (Dr.Jit arrays from NumPy and back).
@@ -64,6 +65,7 @@ from lftransfer.render.lights.sources import EmitterLight, Irradiance, PointLigh
 
 __all__ = [
     "EDGE_REACH", "LIGHTING_MODELS", "PLANE_CELLS_PER_PITCH", "RECONSTRUCTIONS", "SAMPLING_POOL", "WINDOWS",
-    "EmitterLight", "EnvironmentLight", "Incident", "Irradiance", "LightFieldLight", "LightingModel", "PlaneLookup", "PointLight",
+    "EmitterLight", "EnvironmentLight", "Incident", "Irradiance", "LightFieldLight", "LightingModel", "PlaneLookup",
+    "PointLight",
     "Reconstruction", "Window", "extended_table", "jit_array", "jit_rays", "plane_lookup", "to_numpy",
 ]
