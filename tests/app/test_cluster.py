@@ -58,6 +58,7 @@ def _busy_workers() -> list[int]:
 
 
 @pytest.mark.slow
+@pytest.mark.ray
 def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(variant, tmp_path):
     """A 4-frame converged sequence with its ground truth, on a local cluster of 2 workers, is bit-identical to the
     same sequence in one process (frames, metrics); one worker is killed while it renders a frame, and Ray's
@@ -98,6 +99,7 @@ def test_03_cluster_sequence_equals_one_process_and_survives_a_killed_worker(var
 
 
 @pytest.mark.slow
+@pytest.mark.ray
 def test_04_quiet_reference_on_a_cluster_equals_one_process(tmp_path):
     """A quiet reference spread over a local cluster of 2 workers (one part of each round per worker) is
     bit-identical to the same reference split alike in one process (one round after the first, to keep it short);

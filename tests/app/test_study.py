@@ -94,6 +94,7 @@ def test_02_every_cell_measured_written_and_resumed(variant, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.ray
 def test_03_study_on_a_cluster_equals_one_process(variant, tmp_path):
     pytest.importorskip("ray")
     from lftransfer.app.cluster import ClusterSpec

@@ -44,10 +44,16 @@ def probe_tables(stored) -> list[str]:
                 f"{fixed(100 * (truth['power_ratio'] - 1), 1, ' %')} off | "
                 f"{fixed(100 * truth['texel_rel_error_median'], 3)} % |", ""]
     side = stored.need("probe", "cross_by_side", "real")
+    floor = (stored.need("probe").get("fidelity_floor") or {}).get("real") or {}
     if side and side.get("energy_ratio") is not None:
-        out += [f"On the real side the exchange carries {fixed(100 * side['energy_ratio'], 0)} % of the true cross "
+        text = (f"On the real side the exchange carries {fixed(100 * side['energy_ratio'], 0)} % of the true cross "
                 "term's light: with the projector dark the array's panel shades the real objects from the room "
-                "behind it, and the projector gives back only the directions its lenslets cover (about 26.6 degrees "
-                "off the array's normal); the steeper light is the rig's loss (docs/architecture.md, \"The light "
-                "probe\").", ""]
+                "behind it, and the transfer projects only the room its lenslets see behind the synthetic objects, "
+                "within their window (about 26.6 degrees off the array's normal).")
+        if floor.get("floor") is not None:
+            text += (f" The projector could do far better: the real side's fidelity floor (the best projector image) "
+                     f"is {fixed(floor['floor'], 3)} against the transfer's {fixed(floor.get('transfer'), 3)} scored "
+                     "alike, so the steeper room light's effect can be sent at the window's angles; the transfer does "
+                     "not yet (docs/architecture.md, \"The light probe\").")
+        out += [text, ""]
     return out

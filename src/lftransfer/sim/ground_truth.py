@@ -201,8 +201,8 @@ def _room(scene) -> dict[str, dict] | None:
     it light before any exchange, so that the cross term C_gt is what the array carries (the other objects' light
     and the room seen past them):
     - the real objects alone: the lens array (its nominal rectangle, an absorber) blocks the room behind it, as
-      the rig's panel does with the projector black (the projector later sends only the directions its lenslets
-      cover: the steeper room light from behind the array is the rig's loss);
+      the rig's panel does with the projector black (the transfer later projects the room within the lenslets'
+      window only);
     - the synthetic objects alone: lit by the room but for the directions the lenslets record (|u|, |v| <= a
       towards +z, zeroed in the map), which reach them through the array; the light probe gives them the rest
       (:class:`~lftransfer.render.lights.EnvironmentLight`'s blocker). The camera does not see the room in this
