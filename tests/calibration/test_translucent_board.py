@@ -11,6 +11,9 @@ What each test shows:
   place shows it only its unlit back, and the chessboard is not found (the negative control).
 - test_03: a Board request checks ``translucent`` and leaves it out of its description while it is False (older
   recordings replay unchanged); the operator's prompt names the screen.
+- test_04: a camera behind the array's plane, beside the array (``occlusion_reverse``), would see the near board's
+  far edge through the array's panel: the boards move away from the array until the rays to every corner cross the
+  plane off the array (3.5 cm on that scene; cameras in or in front of the plane: none).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import pytest
 
 from lftransfer.app.pipeline import quick_scene
 from lftransfer.calibration.pose import (BOARD_CLEARANCE_M, CHART, POSE_DEPTHS, PoseError, board_pattern, chart_pose,
-                                         sees_lit_side)
+                                         panel_shift, sees_lit_side)
 from lftransfer.optics.geometry import project, rectangle_to_world
 from lftransfer.rig.requests import Board, ViewCapture, describe, setup_from_json
 from lftransfer.scenes import builtin_scene, load_scene
@@ -80,3 +83,28 @@ def test_03_the_request_names_the_screen():
     assert "translucent screen" in t.prompt() and "translucent" not in b.prompt()
     with pytest.raises(ValueError, match="translucent must be True or False"):
         Board(centre=(0.0, 0.0, 0.1), normal=(0.0, 0.0, -1.0), translucent="yes")
+
+
+def test_04_a_camera_behind_the_plane_sees_the_boards_past_the_panel():
+    from lftransfer.rig.model import nominal_rig
+
+    for name in ("fig4", "occlusion"):
+        scene = load_scene(builtin_scene(name))
+        assert panel_shift(scene.view, POSE_DEPTHS[0], SIZE, nominal_rig(scene.rig).array.extent()) == 0.0, name
+    scene = load_scene(builtin_scene("occlusion_reverse"))
+    extent = nominal_rig(scene.rig).array.extent()
+    shift = panel_shift(scene.view, POSE_DEPTHS[0], SIZE, extent)
+    assert 0.0 < shift < 0.1
+
+    def hidden(depth):                    # corners whose ray from the camera crosses the array's rectangle
+        b = board_pattern(scene.view, depth, extent=SIZE)
+        eye = np.asarray(scene.view.origin)
+        out = []
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                c = b.centre + sx * SIZE[0] / 2 * b.ex + sy * SIZE[1] / 2 * b.ey
+                p = eye + (-eye[2] / (c[2] - eye[2])) * (c - eye)
+                out.append(extent[0] <= p[0] <= extent[1] and extent[2] <= p[1] <= extent[3])
+        return any(out)
+
+    assert hidden(POSE_DEPTHS[0]) and not hidden(POSE_DEPTHS[0] + shift)

@@ -11,6 +11,12 @@ What each test shows:
 - test_02: a transfer whose only error is 10 % of the cross term: composited by the true depths it scores as well
   on the hidden pixels as on the others; the over operator, which draws the square over the post, is at least
   6 dB worse there (the negative control the target needs), and its cross-transfer error is larger.
+- test_03: the reverse (the square nearer than the post): the pixels where a synthetic object hides a real one are
+  counted apart, both composites draw the square there and score alike; negative control: a real depth measured
+  nearer than the square puts the post in front and loses more than 6 dB there.
+- test_04: the built-in scene ``occlusion_reverse`` (a camera behind the array's plane, beside it): its ground truth
+  shows a synthetic object in front of a real one and never the opposite; ``occlusion`` (a camera on the real side)
+  shows the opposite only.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pytest
 
 from lftransfer.composite import composite
 from lftransfer.real_depth import ViewDepth
@@ -88,6 +95,7 @@ def test_01_the_truth_without_exchange_keeps_the_nearer_surface():
     assert np.allclose(over.composite_alone(0)[5, 8], syn[5, 8])  # without depths: the over operator
     assert not views_overlap(load_scene(builtin_scene("fig4")))
     assert views_overlap(load_scene(builtin_scene("occlusion")))
+    assert views_overlap(load_scene(builtin_scene("occlusion_reverse")))
 
 
 def test_02_the_depth_composite_scores_the_hidden_pixels_as_the_rest():
@@ -107,3 +115,38 @@ def test_02_the_depth_composite_scores_the_hidden_pixels_as_the_rest():
     assert d["cross_transfer_rel_error"] < o["cross_transfer_rel_error"]
     assert abs(d["cross_transfer_rel_error"] - 0.1) < 0.01          # what the transfer got wrong, no more
     assert occlusion_metrics(result, _truth(depths=False), target_width=W) is None
+
+
+def test_03_a_synthetic_object_in_front_of_a_real_one():
+    a_syn, a_real, d_syn, d_real, syn, real, cross_syn, cross_real = _layers()
+    d_syn = np.where(a_syn > 0, 0.3, np.inf).astype(np.float32)             # now nearer than the post
+    front = (a_real > 0) & (a_syn > 0)
+    union = composite(syn + cross_syn, a_syn, real + cross_real)
+    gt = GroundTruth(union=np.stack([union, union + np.float32(1e-4)]), real=np.stack([real, real]),
+                     synthetic=np.stack([syn, syn]), alpha_real=a_real, alpha_synthetic=a_syn, depth_real=d_real,
+                     depth_synthetic=d_syn)
+    assert not gt.real_in_front.any() and gt.synthetic_in_front.sum() == front.sum() == 12
+
+    def run(real_depth):
+        depth = ViewDepth(np.where(np.isfinite(real_depth), real_depth, np.nan).astype(np.float32),
+                          np.where(np.isfinite(real_depth), 0.001, np.nan).astype(np.float32), "test")
+        return _Result(real_view=real + 0.9 * cross_real, real_view_direct=real,
+                       synthetic_view=ViewImage(syn + 0.9 * cross_syn, a_syn, d_syn), synthetic_direct=syn,
+                       view_depth=depth)
+
+    m = occlusion_metrics(run(d_real), gt, target_width=W)
+    assert m["hidden_pixels"] == 0 and m["synthetic_front_pixels"] == 12
+    assert m["depth"]["psnr_hidden_db"] is None and "depth_gain_hidden_db" not in m
+    assert m["depth"]["psnr_synthetic_front_db"] == pytest.approx(m["over"]["psnr_synthetic_front_db"])
+    wrong = occlusion_metrics(run(np.where(np.isfinite(d_real), 0.1, np.inf)), gt, target_width=W)
+    assert wrong["depth"]["psnr_synthetic_front_db"] < m["depth"]["psnr_synthetic_front_db"] - 6.0
+
+
+def test_04_which_side_can_be_in_front(variant):
+    from lftransfer.scenes import with_overrides
+    from lftransfer.sim.ground_truth import render_ground_truth
+
+    for name, real_front in (("occlusion_reverse", False), ("occlusion", True)):
+        scene = with_overrides(load_scene(builtin_scene(name)), view={"resolution": [64, 48]})
+        gt = render_ground_truth(scene, spp=4, use_cache=False)
+        assert gt.real_in_front.any() == real_front and gt.synthetic_in_front.any() != real_front, name

@@ -116,6 +116,38 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
 
 
+PANEL_STEP_M = 0.005       # a board a camera behind the array's plane would see partly through the array's panel
+PANEL_MAX_SHIFT_M = 0.15   # moves away from the array in these steps, at most this far
+
+
+def panel_shift(view, depth: float, extent: tuple[float, float], array_extent: tuple[float, float, float, float],
+                *, translucent: bool = False) -> float:
+    """How much farther from the array than ``depth`` a board must stand for the view camera to see all of it past
+    the array's panel (0 for a camera in front of or in the array's plane, whose rays to the real side never cross
+    the panel).
+
+    A camera behind the plane, beside the array, sees the real side over the array's edge; a board turned towards it
+    dips its far edge towards the array, and the rays to that edge cross the plane inside the array's rectangle,
+    where the panel hides it. Then the board (:func:`board_pattern` at ``depth`` plus the shift) moves away in
+    :data:`PANEL_STEP_M` steps until the rays to its corners cross the plane outside ``array_extent`` (xmin, xmax,
+    ymin, ymax) or :data:`PANEL_MAX_SHIFT_M` is reached."""
+    origin = np.asarray(view.origin, np.float64)
+    if origin[2] >= 0:
+        return 0.0
+    xmin, xmax, ymin, ymax = array_extent
+    shift = 0.0
+    while shift <= PANEL_MAX_SHIFT_M:
+        b = board_pattern(view, depth + shift, translucent=translucent, extent=extent)
+        corners = np.array([b.centre + sx * extent[0] / 2 * b.ex + sy * extent[1] / 2 * b.ey
+                            for sx in (-1, 1) for sy in (-1, 1)])
+        t = -origin[2] / (corners[:, 2] - origin[2])                  # where each ray crosses z = 0
+        x, y = origin[0] + t * (corners[:, 0] - origin[0]), origin[1] + t * (corners[:, 1] - origin[1])
+        if not np.any((x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)):
+            return shift
+        shift += PANEL_STEP_M
+    return PANEL_MAX_SHIFT_M
+
+
 FRINGE_PERIOD_M = 0.06    # metres on the board: blurred by a 25 mm aperture, a 60 mm sinusoid keeps ~3/4 of its contrast
 FRINGE_SHIFTS = 4         # phase steps per direction
 
@@ -518,6 +550,8 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
     # the array (board_pattern); every board moves as far as the nearest one, so the depths keep their parallax
     screen = not sees_lit_side(scene.view, min(depths))
     shift = board_pattern(scene.view, min(depths), translucent=screen, extent=size).centre[2] - min(depths)
+    # a camera behind the array's plane sees the boards past the array's panel: they move away until it hides none
+    shift += panel_shift(scene.view, min(depths) + shift, size, model.array.extent(), translucent=screen)
     for r in range(rounds):
         boards = []
         for depth in depths:

@@ -66,6 +66,14 @@ class GroundTruth:
             & (self.depth_real < self.depth_synthetic)
 
     @property
+    def synthetic_in_front(self) -> np.ndarray:
+        """(H, W) bool: pixels where a synthetic object hides a real one (both seen, the synthetic one nearer)."""
+        if self.depth_real is None or self.depth_synthetic is None:
+            return np.zeros(self.alpha_real.shape, bool)
+        return np.isfinite(self.depth_real) & np.isfinite(self.depth_synthetic) \
+            & (self.depth_synthetic < self.depth_real)
+
+    @property
     def synthetic_seen(self) -> np.ndarray:
         """(H, W) float32 how much of each pixel shows a synthetic object: its coverage, less the part a real object
         in front of it covers."""

@@ -440,7 +440,8 @@ def depth_errors(estimate, truth: np.ndarray) -> dict:
 
 
 def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> dict | None:
-    """How each composite fares where a real object hides a synthetic one (docs/architecture.md, "Occlusion").
+    """How each composite fares where a real object hides a synthetic one, or the reverse (docs/architecture.md,
+    "Occlusion").
 
     The same transfer is put together by the over operator (the paper's composite, which draws every synthetic
     object in front) and, where the run measured the real scene's depth in the view camera, by the depth-aware
@@ -452,28 +453,32 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
         target_width: the metrics' resolution (:func:`metric_factor`).
 
     Returns:
-        None where no real object hides a synthetic one in the ground truth; else ``hidden_pixels`` (pixels at the
-        metrics' resolution any part of which shows a real object in front of a synthetic one) and, for ``over``
-        and (where measured) ``depth``: ``psnr_hidden_db`` (over those pixels), ``psnr_objects_db``,
-        ``psnr_objects_unhidden_db`` (over the objects' other pixels: the scene as if nothing were hidden) and
-        ``cross_transfer_rel_error``; ``depth_gain_hidden_db``: depth minus over on the hidden pixels.
+        None where neither side hides the other in the ground truth; else ``hidden_pixels`` (pixels at the metrics'
+        resolution any part of which shows a real object in front of a synthetic one), ``synthetic_front_pixels``
+        (the same for a synthetic object in front of a real one) and, for ``over`` and (where measured) ``depth``:
+        ``psnr_hidden_db`` (over the hidden pixels; None where there are none), ``psnr_synthetic_front_db`` (over
+        the others; None where none), ``psnr_objects_db``, ``psnr_objects_unhidden_db`` (over the objects' pixels
+        where nothing is hidden) and ``cross_transfer_rel_error``; ``depth_gain_hidden_db``: depth minus over on
+        the hidden pixels.
     """
-    front = gt.real_in_front
-    if not front.any():
+    front, reverse = gt.real_in_front, gt.synthetic_in_front
+    if not front.any() and not reverse.any():
         return None
     f = metric_factor(result.real_view.shape[1], target_width)
     hidden = downsample(front.astype(np.float32), f) > 0
+    ahead = (downsample(reverse.astype(np.float32), f) > 0) & ~hidden
     union = downsample(gt.image, f)
     peak = float(union.max())
-    unhidden = object_mask(gt, f) & ~hidden
+    unhidden = object_mask(gt, f) & ~hidden & ~ahead
     runs = {"over": replace(result, view_depth=None)}
     if result.view_depth is not None:
         runs["depth"] = result
-    out: dict = {"hidden_pixels": int(hidden.sum())}
+    out: dict = {"hidden_pixels": int(hidden.sum()), "synthetic_front_pixels": int(ahead.sum())}
     for name, run in runs.items():
         frame = downsample(run.composite(), f)
         m = evaluate(run, gt, target_width=target_width)
-        out[name] = {"psnr_hidden_db": _finite(psnr(frame, union, peak, mask=hidden)),
+        out[name] = {"psnr_hidden_db": _finite(psnr(frame, union, peak, mask=hidden)) if hidden.any() else None,
+                     "psnr_synthetic_front_db": _finite(psnr(frame, union, peak, mask=ahead)) if ahead.any() else None,
                      "psnr_objects_db": m.psnr_objects_db,
                      "psnr_objects_unhidden_db": _finite(psnr(frame, union, peak, mask=unhidden))
                      if unhidden.any() else None,

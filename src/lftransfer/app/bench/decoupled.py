@@ -69,7 +69,8 @@ def _med_max(values) -> dict:
 def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int, min_captures: int = 3,
                   progress: Callable[[str], None] | None = None) -> DecoupledRun:
     """Run the decoupled loop over the scene times ``times`` (cycled) for at least ``frames`` counted frames and
-    until the counted frames used ``min_captures`` captures (or :data:`MAX_SECONDS` passed).
+    until the counted frames used ``min_captures`` captures and a change's light has reached one of them (or
+    :data:`MAX_SECONDS` passed).
 
     Args:
         rig: the simulated rig (only this loop uses it meanwhile).
@@ -92,7 +93,10 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
             if i > WARMUP_FRAMES:
                 done.append(frame)
             captures = len({f.capture_index for f in done})
-            if len(done) >= frames and captures >= min_captures:
+            # ... and until a change's light reached a frame (its latency measured), which needs a capture that
+            # started after the change: with captures slower than frames that can take more than min_captures
+            if len(done) >= frames and captures >= min_captures and (
+                    not live.changes or motion_latency(list(live.changes), done, "decoupled").light is not None):
                 break
             if time.perf_counter() - start > MAX_SECONDS and len(done) >= 2:
                 break
