@@ -160,7 +160,7 @@ def test_04_two_point_lights(variant, tmp_path):
 def test_05_a_light_probe_lights_the_synthetic_objects(variant, tmp_path):
     """The built-in ``probe`` scene on a small rig (6 x 7 lenslets, a 192 x 144 view): the room lights the real
     block, the pipeline photographs the mirror ball and lights the synthetic cube by the map it recovers, and
-    report.json says so. Negative control: the same run with ``direct_light = "point"`` (one point light at the
+    report.json says so (probe.png shows the photograph and the map). Negative control: the same run with ``direct_light = "point"`` (one point light at the
     probe's brightest direction) is worse over the synthetic object's pixels and in the cross term (its projector
     carries no room behind the cube).
 
@@ -178,6 +178,7 @@ def test_05_a_light_probe_lights_the_synthetic_objects(variant, tmp_path):
             floor=False))
     probe, point = reports["probe"], reports["point"]
     assert json.loads((tmp_path / "probe" / "report.json").read_text())["direct_light"]["kind"] == "probe"
+    assert (tmp_path / "probe" / "probe.png").stat().st_size > 0 and (tmp_path / "probe" / "probe.exr").exists()
     assert probe["settings"]["transfer"]["direct_light"] == "probe" and point["direct_light"]["kind"] == "point"
     truth = probe["direct_light"]["probe"]["against_truth"]
     assert truth["brightest_direction_error_deg"] < 2.0 and abs(truth["power_ratio"] - 1) < 0.02, truth

@@ -202,5 +202,21 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
     ]
     if captured_raw is not None:
         files.append(write_png(out / "captured_lf.png", device_image(captured_raw, camera_bits, stretch=True)))
+    if getattr(result, "probe", None) is not None:
+        files += [write_png(out / "probe.png", probe_panel(result.probe)),
+                  write_exr(out / "probe.exr", result.probe.radiance)]
     files.append(write_json(out / "report.json", report))
     return files
+
+
+def probe_panel(probe) -> np.ndarray:
+    """(H', W, 3) uint8: the light probe's photograph (top) over the map it gave, as wide as the photograph
+    (bottom; its unmeasured directions, filled, drawn at half brightness), both at the sky's display scale (the
+    sun saturates)."""
+    photo = np.asarray(probe.photo, np.float32)
+    w = photo.shape[1]
+    room = cv2.resize(probe.radiance, (w, w // 2), interpolation=cv2.INTER_LINEAR)
+    measured = cv2.resize(probe.measured.valid.astype(np.float32), (w, w // 2), interpolation=cv2.INTER_NEAREST)
+    room = room * (0.5 + 0.5 * measured)[..., None]
+    scale = display_scale(room, percentile=95.0)
+    return np.concatenate([to_display(photo, scale), to_display(room, scale)], axis=0)

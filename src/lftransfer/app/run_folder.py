@@ -21,8 +21,8 @@ __all__ = ["OUTPUT_FILES", "STATUS_FILE", "clear_run_folder", "remove_temporarie
 
 STATUS_FILE = "status.json"
 OUTPUT_FILES = ("report.json", "composite.png", "composite.exr", "ground_truth.png", "ground_truth.exr",
-                "bounces.png", "captured_lf.png", "projected_lf.png", "calibration.json", "calibration_report.html",
-                "calibration_errors.json")
+                "bounces.png", "captured_lf.png", "projected_lf.png", "probe.png", "probe.exr", "calibration.json",
+                "calibration_report.html", "calibration_errors.json")
 
 
 def _is_temporary(name: str) -> bool:
