@@ -165,8 +165,9 @@ def test_05_a_light_probe_lights_the_synthetic_objects(variant, tmp_path):
     carries no room behind the cube).
 
     Measured (llvm_ad_rgb, 64 ground-truth samples per pixel): over the cube 30.6 dB with the probe, 28.8 with the
-    point light; cross-transfer error 0.63 against 0.81; the map's brightest spot 0.9 degree from the room's sun
-    (its texels are 2.9 degrees), its power 0.1 % low, 94 % of the sphere measured."""
+    point light; over the objects 29.5 against 28.0; cross-transfer error 0.39 against 0.81 (0.63 with the probe
+    before the room's steep light was sent to the real side); the map's brightest spot 0.9 degree from the room's
+    sun (its texels are 2.9 degrees), its power 0.1 % low, 94 % of the sphere measured."""
     scene = with_overrides(load_scene(builtin_scene("probe")),
                            rig={"rows": 6, "cols": 7, "lf_camera": [448, 336], "projector": [224, 168],
                                 "angular_samples": 12},
@@ -185,5 +186,6 @@ def test_05_a_light_probe_lights_the_synthetic_objects(variant, tmp_path):
     assert truth["measured_share"] > 0.9, truth
     assert point["direct_light"]["point_light"]["intensity"][0] > 0
     assert probe["psnr_by_side"]["synthetic"] > point["psnr_by_side"]["synthetic"] + 1.0, (probe, point)
-    assert probe["cross_transfer_rel_error"] < point["cross_transfer_rel_error"] - 0.1
-    assert probe["psnr_objects_db"] > point["psnr_objects_db"] + 0.5
+    assert probe["cross_transfer_rel_error"] < point["cross_transfer_rel_error"] - 0.3
+    assert probe["psnr_objects_db"] > point["psnr_objects_db"] + 1.0
+    assert "stronger" in probe["direct_light"]["steep_room_light"]

@@ -548,6 +548,11 @@ class _Run:
         if result.probe is None:
             return out
         out["probe"] = result.probe.summary()
+        if s.direct_light == "probe":
+            out["steep_room_light"] = ("the room behind the synthetic objects projected stronger for the steep room "
+                                       "light the array's panel shades on the real side, as irradiance on surfaces "
+                                       "facing the array (transfer/room.py)" if s.prefilters else
+                                       "not sent: it needs the measured depth of the depth projection")
         if s.direct_light == "point":
             from lftransfer.scenes.frame import scene_in_frame
             from lftransfer.transfer.synthetic_side import probe_point_light

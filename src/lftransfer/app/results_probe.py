@@ -48,12 +48,11 @@ def probe_tables(stored) -> list[str]:
     if side and side.get("energy_ratio") is not None:
         text = (f"On the real side the exchange carries {fixed(100 * side['energy_ratio'], 0)} % of the true cross "
                 "term's light: with the projector dark the array's panel shades the real objects from the room "
-                "behind it, and the transfer projects only the room its lenslets see behind the synthetic objects, "
-                "within their window (about 26.6 degrees off the array's normal).")
+                "behind it; the transfer projects the room its lenslets see behind the synthetic objects, within "
+                "their window (about 26.6 degrees off the array's normal), stronger by what the window leaves out "
+                "(for surfaces facing the array; docs/architecture.md, \"The light probe\").")
         if floor.get("floor") is not None:
-            text += (f" The projector could do far better: the real side's fidelity floor (the best projector image) "
-                     f"is {fixed(floor['floor'], 3)} against the transfer's {fixed(floor.get('transfer'), 3)} scored "
-                     "alike, so the steeper room light's effect can be sent at the window's angles; the transfer does "
-                     "not yet (docs/architecture.md, \"The light probe\").")
+            text += (f" The real side's fidelity floor (the best projector image) is {fixed(floor['floor'], 3)} "
+                     f"against the transfer's {fixed(floor.get('transfer'), 3)}, scored alike.")
         out += [text, ""]
     return out

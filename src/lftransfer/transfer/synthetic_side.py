@@ -267,29 +267,55 @@ class SyntheticSide:
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
         """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is
         set) and S (its view image) under ``lights``; ``timer(stage)`` is an optional context manager factory timing
-        "render_lightfield", "prefilter" and "render_view"."""
+        "render_lightfield", "prefilter", "steep_room" and "render_view". Under a visible light probe's map (the
+        direct frame of a light probe scene) with a measured depth, the room behind the synthetic objects is sent
+        stronger for the steep room light the array's panel shades on the real side
+        (:mod:`~lftransfer.transfer.room`)."""
         from contextlib import nullcontext
 
         time_it = timer or (lambda _stage: nullcontext())
+        ls = self._lightfield(lights, seed, time_it)
+        room = [light for light in lights if isinstance(light, EnvironmentLight) and light.visible]
+        if room and self.prefilter is not None:
+            with time_it("steep_room"):
+                # the room behind the synthetic objects, sent stronger for the steep light the panel shades
+                # (transfer/room.py): only the entries whose landing point was measured change
+                behind = self._lightfield([room[0].seen_only()], seed, lambda _stage: nullcontext())
+                ls.data += (self._room_gain(ls)[..., None] - 1.0) * behind.data
+        with time_it("render_view"):
+            s = self.settings
+            # the view is composited over the real one, which shows the room: the render shows the objects only
+            seen = [light.hidden() if isinstance(light, EnvironmentLight) else light for light in lights]
+            view = self.renderer.render_view(self.sensor, self.width, self.height, seen, spp=s.view_spp, seed=seed)
+        return ls, view
+
+
+    def _lightfield(self, lights: Sequence, seed: int, time_it) -> LightField:
+        """The light field the synthetic scene sends through the array under ``lights`` (prefiltered where
+        :attr:`prefilter` is set)."""
         s = self.settings
         U = V = s.angular_samples
         pf = self.prefilter
         with time_it("render_lightfield"):
             if pf is None:
-                ls = self.renderer.render_lightfield(self.model.array, lights, U, V,
-                                                     model="area" if s.lighting_model == "area" else "point",
-                                                     spp=s.lf_spp, seed=seed)
-            else:
-                # one "sample" per ray: every primary ray still goes through render_samples
-                radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
-        if pf is not None:
-            with time_it("prefilter"):
-                ls = pf.apply(radiance)
-        with time_it("render_view"):
-            # the view is composited over the real one, which shows the room: the render shows the objects only
-            seen = [light.hidden() if isinstance(light, EnvironmentLight) else light for light in lights]
-            view = self.renderer.render_view(self.sensor, self.width, self.height, seen, spp=s.view_spp, seed=seed)
-        return ls, view
+                return self.renderer.render_lightfield(self.model.array, lights, U, V,
+                                                       model="area" if s.lighting_model == "area" else "point",
+                                                       spp=s.lf_spp, seed=seed)
+            # one "sample" per ray: every primary ray still goes through render_samples
+            radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
+        with time_it("prefilter"):
+            return pf.apply(radiance)
+
+    def _room_gain(self, ls: LightField) -> np.ndarray:
+        """(K, V, U) the steep room light's factor for the light probe's map and the measured depth
+        (:func:`~lftransfer.transfer.room.steep_room_gain`), found once per map and depth."""
+        from lftransfer.transfer.room import steep_room_gain
+
+        key = (id(self.probe), id(self.prefilter.depth))
+        if getattr(self, "_gain_key", None) != key:
+            self._gain = steep_room_gain(self.probe, self.model.array, self.prefilter.depth, ls.u, ls.v)
+            self._gain_key = key
+        return self._gain
 
 
 PROBE_SAMPLES = 16          # directions of the light probe's map per shading point

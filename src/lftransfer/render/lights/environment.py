@@ -56,12 +56,21 @@ class EnvironmentLight:
         self.visible = bool(visible)
         self.seed = int(seed)
         self._emitter = None
+        self._lights = True
 
     def hidden(self) -> "EnvironmentLight":
         """The same light, not seen by rays that leave the scene (for a render composited over another)."""
         other = EnvironmentLight.__new__(EnvironmentLight)
         other.__dict__.update(self.__dict__)
         other.visible = False
+        return other
+
+    def seen_only(self) -> "EnvironmentLight":
+        """The same map as rays that leave the scene see it, lighting nothing (a render of the room behind the
+        objects alone)."""
+        other = EnvironmentLight.__new__(EnvironmentLight)
+        other.__dict__.update(self.__dict__)
+        other.visible, other._lights = True, False
         return other
 
     @property
@@ -126,6 +135,8 @@ class EnvironmentLight:
         mi = mitsuba()
         import drjit as dr
 
+        if not self._lights:
+            return mi.Color3f(0.0)
         n = dr.width(si.p)
         rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed + 17), dr.arange(mi.UInt64, n))
         active = mi.Bool(active)

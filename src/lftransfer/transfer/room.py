@@ -1,0 +1,81 @@
+"""The room's steep light on the real side, sent at the lenslets' angles (docs/architecture.md, "The light probe").
+
+In a lit room the array's panel shades the real objects from the room behind it. The synthetic side's lenslet
+cameras see that room behind the synthetic objects, and the projector sends it on, but only along the directions a
+lenslet covers (|u|, |v| <= a, about 26.6 degrees off the array's normal): a real point close to the array sees the
+panel over most of its sky, and the window is a third of that. A projector cannot send light along the steeper
+directions, but a diffuse surface does not tell where its irradiance comes from: the room seen in the window is
+sent stronger by the ratio of the irradiance the whole panel would pass to the irradiance the window passes.
+
+The ratio depends on where the light lands: each light field entry's landing point is the measured depth along
+its centre ray (the projection prefilter's, :func:`~lftransfer.transfer.projection.measure_depth`); entries
+without a depth are not changed. The irradiance is taken on a surface facing the array (normal -z): the faces
+that receive light through the array face it, and the real objects' normals are not known. The ratio is found
+from the light probe's map on a grid of points in front of the array and read there trilinearly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lftransfer.optics.geometry import env_directions, env_solid_angles
+
+__all__ = ["MAX_GAIN", "steep_room_gain"]
+
+MAX_GAIN = 8.0                     # the room's window light is sent at most this much stronger
+GRID_XY = 9                        # grid points across the array's extent, per axis
+GRID_DEPTHS = np.geomspace(0.01, 0.5, 12)   # metres in front of the array
+
+
+def _gain_at(points: np.ndarray, radiance: np.ndarray, extent, a: float) -> np.ndarray:
+    """(P,) the ratio of the room's irradiance through the whole panel to that through the lenslets' window, on
+    a surface facing the array at ``points`` (P, 3) (array frame, z > 0); 1 where the window passes none."""
+    h, w = radiance.shape[:2]
+    d = env_directions(w, h).reshape(-1, 3)
+    weight = (env_solid_angles(w, h).reshape(-1) * radiance.reshape(-1, 3).mean(axis=1))     # (T,) W m^-2 per cos
+    back = d[:, 2] < -1e-6                                  # towards the array
+    d, weight = d[back], weight[back]
+    cos = -d[:, 2]                                          # against the normal -z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -points[:, 2:3] / d[None, :, 2]                 # (P, T) to the plane z = 0
+        x = points[:, 0:1] + t * d[None, :, 0]
+        y = points[:, 1:2] + t * d[None, :, 1]
+    xmin, xmax, ymin, ymax = extent
+    panel = (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
+    window = panel & (np.abs(d[:, 0] / d[:, 2]) <= a)[None] & (np.abs(d[:, 1] / d[:, 2]) <= a)[None]
+    lit = weight * cos
+    e_all, e_win = panel @ lit, window @ lit
+    return np.where(e_win > 0, e_all / np.maximum(e_win, 1e-30), 1.0)
+
+
+def steep_room_gain(radiance: np.ndarray, array, depth: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(K, V, U) factor for the room's light in each projected light field entry (see the module).
+
+    Args:
+        radiance: (h, w, 3) the light probe's map in the lens array's frame (Mitsuba's ``envmap`` convention).
+        array: the lens array (its extent, centres and angular half-width).
+        depth: (K, V, U) the real scene's depth along each entry's centre ray, metres along the array's normal (NaN:
+            unknown; the entry keeps factor 1).
+        u, v: (U,), (V,) the entries' angular coordinates.
+
+    Returns:
+        (K, V, U) float32 in [1, :data:`MAX_GAIN`].
+    """
+    from scipy.interpolate import RegularGridInterpolator
+
+    xmin, xmax, ymin, ymax = array.extent()
+    gx, gy = np.linspace(xmin, xmax, GRID_XY), np.linspace(ymin, ymax, GRID_XY)
+    X, Y, Z = np.meshgrid(gx, gy, GRID_DEPTHS, indexing="ij")
+    grid = _gain_at(np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1), np.asarray(radiance, np.float32),
+                    (xmin, xmax, ymin, ymax), array.half_width).reshape(X.shape)
+    look = RegularGridInterpolator((gx, gy, GRID_DEPTHS), grid, bounds_error=False, fill_value=None)
+    c = array.centres                                                     # (K, 2)
+    uu, vv = np.meshgrid(u, v)                                            # (V, U)
+    z = np.asarray(depth, float)
+    px = c[:, 0, None, None] + z * uu[None]
+    py = c[:, 1, None, None] + z * vv[None]
+    known = np.isfinite(z) & (z > 0)
+    pts = np.stack([np.clip(px, xmin, xmax), np.clip(py, ymin, ymax),
+                    np.clip(np.where(known, z, GRID_DEPTHS[0]), GRID_DEPTHS[0], GRID_DEPTHS[-1])], -1)
+    gain = look(pts.reshape(-1, 3)).reshape(z.shape)
+    return np.where(known, np.clip(gain, 1.0, MAX_GAIN), 1.0).astype(np.float32)
