@@ -124,7 +124,8 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...], crop: tuple[int, int, 
 
 
 def _lights_key(lights) -> dict | list | None:
-    dumps = [lt.model_dump(mode="json") for lt in lights]
+    # a point light's ``kind`` is left out: entries cached before lights had one stay valid
+    dumps = [lt.model_dump(mode="json", exclude={"kind"}) for lt in lights]
     return None if not dumps else dumps[0] if len(dumps) == 1 else dumps
 
 
