@@ -57,21 +57,21 @@ class GroundTruth:
         """(H, W, 3) the ground truth: the mean of the two union renders."""
         return self.union.mean(axis=0)
 
+    def _nearer(self, near: np.ndarray | None, far: np.ndarray | None) -> np.ndarray:
+        """(H, W) bool: pixels where both depths are seen and ``near`` is the nearer (none without depths)."""
+        if near is None or far is None:
+            return np.zeros(self.alpha_real.shape, bool)
+        return np.isfinite(near) & np.isfinite(far) & (near < far)
+
     @property
     def real_in_front(self) -> np.ndarray:
         """(H, W) bool: pixels where a real object hides a synthetic one (both seen, the real one nearer)."""
-        if self.depth_real is None or self.depth_synthetic is None:
-            return np.zeros(self.alpha_real.shape, bool)
-        return np.isfinite(self.depth_real) & np.isfinite(self.depth_synthetic) \
-            & (self.depth_real < self.depth_synthetic)
+        return self._nearer(self.depth_real, self.depth_synthetic)
 
     @property
     def synthetic_in_front(self) -> np.ndarray:
         """(H, W) bool: pixels where a synthetic object hides a real one (both seen, the synthetic one nearer)."""
-        if self.depth_real is None or self.depth_synthetic is None:
-            return np.zeros(self.alpha_real.shape, bool)
-        return np.isfinite(self.depth_real) & np.isfinite(self.depth_synthetic) \
-            & (self.depth_synthetic < self.depth_real)
+        return self._nearer(self.depth_synthetic, self.depth_real)
 
     @property
     def synthetic_seen(self) -> np.ndarray:
