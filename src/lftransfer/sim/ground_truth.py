@@ -193,7 +193,7 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
             images[name].append(np.array(mi.render(mscene, spp=spp, seed=seed), dtype=np.float32))
     alpha_real = images["real"][0][..., 3:4]
     if room is not None:        # the room seen behind the real objects counts as covered in Mitsuba's alpha
-        alpha_real = _coverage(scene.real, view, crop)[..., None]
+        alpha_real = _cropped(np.asarray(_objects_view(scene.real, view).alpha, np.float32), crop)[..., None]
     stack = np.concatenate([images[n][i][..., :3] for n in ("union", "real", "synthetic") for i in range(2)]
                            + [alpha_real, images["synthetic"][0][..., 3:4]], axis=-1)
     if use_cache:
@@ -239,19 +239,12 @@ def _room(scene) -> dict[str, dict] | None:
                           "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": True}}}
 
 
-def _coverage(objects, view, crop) -> np.ndarray:
-    """(H, W) float32 the share of each pixel's rays that meet ``objects`` (of the ``crop`` where given)."""
-    from lftransfer.backend import mitsuba
-    from lftransfer.render.camera import sensor_dict
-    from lftransfer.render.renderer import HalfSpaceRenderer
-
-    w, h = view.resolution
-    sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=DEPTH_SPP))
-    alpha = HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=DEPTH_SPP).alpha
-    if crop is not None:
-        x, y, cw, ch = map(int, crop)
-        alpha = alpha[y:y + ch, x:x + cw]
-    return np.asarray(alpha, np.float32)
+def _cropped(image: np.ndarray, crop: tuple[int, int, int, int] | None) -> np.ndarray:
+    """The ``crop`` (x, y, width, height) of an (H, W, ...) image; the image itself where None."""
+    if crop is None:
+        return image
+    x, y, cw, ch = map(int, crop)
+    return image[y:y + ch, x:x + cw]
 
 
 def views_overlap(scene) -> bool:
@@ -264,27 +257,25 @@ def views_overlap(scene) -> bool:
 def view_distances(objects, view, spp: int = DEPTH_SPP) -> np.ndarray:
     """(H, W) float32 distance from the view camera's centre to ``objects`` along each pixel's ray (the mean over
     ``spp`` rays of those that hit), metres; inf where none hits."""
+    return np.asarray(_objects_view(objects, view, spp).depth, np.float32)
+
+
+def _objects_view(objects, view, spp: int = DEPTH_SPP):
+    """The view camera's render of ``objects`` without lights (``ViewImage``: their coverage and distances)."""
     from lftransfer.backend import mitsuba
     from lftransfer.render.camera import sensor_dict
     from lftransfer.render.renderer import HalfSpaceRenderer
 
     w, h = view.resolution
     sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp))
-    return np.asarray(HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=spp).depth,
-                      np.float32)
+    return HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=spp)
 
 
 def true_depths(scene, crop: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) float32 distances from the view camera's centre to the real objects and to the synthetic objects
     (:func:`view_distances`); of the ``crop`` (x, y, width, height) only where given."""
-    out = []
-    for objs in (scene.real, scene.synthetic):
-        d = view_distances(objs, scene.view)
-        if crop is not None:
-            x, y, cw, ch = map(int, crop)
-            d = d[y:y + ch, x:x + cw]
-        out.append(d)
-    return out[0], out[1]
+    return _cropped(view_distances(scene.real, scene.view), crop), \
+        _cropped(view_distances(scene.synthetic, scene.view), crop)
 
 
 def _unpack(stack: np.ndarray, depths: tuple[np.ndarray, np.ndarray] | None = None) -> GroundTruth:
