@@ -16,6 +16,8 @@ lens array's); ``rotation`` turns the map's (world) directions into it.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from lftransfer.backend import mitsuba
@@ -56,21 +58,19 @@ class EnvironmentLight:
         self.visible = bool(visible)
         self.seed = int(seed)
         self._emitter = None
-        self._lights = True
+        self.illuminates = True           # lights the surfaces (False: only seen, :meth:`seen_only`)
 
     def hidden(self) -> "EnvironmentLight":
         """The same light, not seen by rays that leave the scene (for a render composited over another)."""
-        other = EnvironmentLight.__new__(EnvironmentLight)
-        other.__dict__.update(self.__dict__)
+        other = copy.copy(self)
         other.visible = False
         return other
 
     def seen_only(self) -> "EnvironmentLight":
         """The same map as rays that leave the scene see it, lighting nothing (a render of the room behind the
-        objects alone)."""
-        other = EnvironmentLight.__new__(EnvironmentLight)
-        other.__dict__.update(self.__dict__)
-        other.visible, other._lights = True, False
+        objects alone; :func:`~lftransfer.render.integrator.trace` then shades nothing)."""
+        other = copy.copy(self)
+        other.visible, other.illuminates = True, False
         return other
 
     @property
@@ -116,17 +116,12 @@ class EnvironmentLight:
         n = len(directions)
         if not self.visible or n == 0:
             return np.zeros((n, 3), np.float32)
-        mi = mitsuba()
         import drjit as dr
 
-        from lftransfer.render.lights.jit import to_numpy
+        from lftransfer.render.lights.jit import jit_rays, to_numpy
 
-        o = np.ascontiguousarray(origins, np.float32)
-        d = np.ascontiguousarray(directions, np.float32)
-        pj = mi.Point3f(*(mi.Float(o[:, c]) for c in range(3)))
-        dj = mi.Vector3f(*(mi.Float(d[:, c]) for c in range(3)))
-        value = dr.select(self._blocked(pj, dj), 0.0, self.radiance_along(dj))
-        return to_numpy(value)
+        ray = jit_rays(np.asarray(origins), np.asarray(directions))
+        return to_numpy(dr.select(self._blocked(ray.o, ray.d), 0.0, self.radiance_along(ray.d)))
 
     def illuminate(self, scene, si, active, seed: int = 0, irradiance: Irradiance = False, ctx=None):
         """Light from the environment at the points ``si`` (mi.Color3f, (N,)), reflected towards ``-si.wi`` (the
@@ -135,7 +130,7 @@ class EnvironmentLight:
         mi = mitsuba()
         import drjit as dr
 
-        if not self._lights:
+        if not self.illuminates:
             return mi.Color3f(0.0)
         n = dr.width(si.p)
         rng = mi.PCG32(n, dr.opaque(mi.UInt64, self.seed * 1000003 + seed + 17), dr.arange(mi.UInt64, n))
