@@ -55,8 +55,8 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         miss = np.flatnonzero(~hit)
         for light in seen:
             radiance[miss] += light.background(o[miss], d[miss])
-    if len(idx) == 0:
-        return radiance, hit, distance
+    if len(idx) == 0 or not any(getattr(light, "illuminates", True) for light in lights):
+        return radiance, hit, distance      # nothing hit, or nothing lights what was hit (e.g. a render of depths)
     radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed)
     return radiance, hit, distance
 
