@@ -27,8 +27,8 @@ from scipy.optimize import least_squares
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray, LensletDevice
-from lftransfer.optics.geometry import (backproject, plane_axes, project, rotation_2d, rotation_xy, rotation_z,
-                                        view_camera)
+from lftransfer.optics.geometry import (backproject, crosses_rectangle, plane_axes, project, rotation_2d, rotation_xy,
+                                        rotation_z, view_camera)
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
@@ -134,15 +134,12 @@ def panel_shift(view, depth: float, extent: tuple[float, float], array_extent: t
     origin = np.asarray(view.origin, np.float64)
     if origin[2] >= 0:
         return 0.0
-    xmin, xmax, ymin, ymax = array_extent
     shift = 0.0
     while shift <= PANEL_MAX_SHIFT_M:
         b = board_pattern(view, depth + shift, translucent=translucent, extent=extent)
         corners = np.array([b.centre + sx * extent[0] / 2 * b.ex + sy * extent[1] / 2 * b.ey
                             for sx in (-1, 1) for sy in (-1, 1)])
-        t = -origin[2] / (corners[:, 2] - origin[2])                  # where each ray crosses z = 0
-        x, y = origin[0] + t * (corners[:, 0] - origin[0]), origin[1] + t * (corners[:, 1] - origin[1])
-        if not np.any((x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)):
+        if not crosses_rectangle(origin, corners - origin, array_extent).any():
             return shift
         shift += PANEL_STEP_M
     return PANEL_MAX_SHIFT_M

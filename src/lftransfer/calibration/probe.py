@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lftransfer.optics.geometry import env_directions, env_solid_angles, view_camera
+from lftransfer.optics.geometry import crosses_rectangle, env_directions, env_solid_angles, view_camera
 
 __all__ = ["EnvironmentMap", "MirrorBall", "ProbeMeasurement", "env_directions", "fill_environment", "photograph_probe",
            "through_array", "unwrap_mirror_ball"]
@@ -139,13 +139,7 @@ def through_array(origin, width: int, height: int, extent: tuple[float, float, f
     """(H, W) bool: the map's directions that, from ``origin`` (3,) in the lens array's frame (real side), cross the
     array's rectangle ``extent`` (xmin, xmax, ymin, ymax) in the plane z = 0: what the ball sees of the rig, not
     of the room."""
-    o = np.asarray(origin, float)
-    d = env_directions(width, height)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -o[2] / d[..., 2]
-        x, y = o[0] + t * d[..., 0], o[1] + t * d[..., 1]
-    xmin, xmax, ymin, ymax = extent
-    return (t > 0) & (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
+    return crosses_rectangle(np.asarray(origin, float), env_directions(width, height), extent)
 
 
 def fill_environment(env: EnvironmentMap) -> np.ndarray:

@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["apply_homography", "backproject", "pixel_rays", "plane_axes", "project", "rectangle_to_world",
-           "rotation_2d", "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
+__all__ = ["apply_homography", "backproject", "crosses_rectangle", "env_directions", "env_solid_angles", "in_window",
+           "pixel_rays", "plane_axes", "project", "rectangle_to_world", "rotation_2d", "rotation_matrix", "rotation_xy",
+           "rotation_z", "view_camera"]
 
 
 def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -143,3 +144,23 @@ def env_solid_angles(width: int, height: int) -> np.ndarray:
     lo, hi = np.clip(theta - step / 2, 0, np.pi), np.clip(theta + step / 2, 0, np.pi)
     band = 2 * np.pi * (np.cos(lo) - np.cos(hi)) / width
     return np.repeat(band[:, None], width, axis=1)
+
+
+def crosses_rectangle(origins, directions, extent: tuple[float, float, float, float]) -> np.ndarray:
+    """(...) bool: whether each ray from ``origins`` along ``directions`` ((..., 3), broadcast together; the lens
+    array's frame) meets the plane z = 0 ahead of it inside ``extent`` (xmin, xmax, ymin, ymax): the array's
+    rectangle (:meth:`~lftransfer.optics.LensArray.extent`)."""
+    o, d = np.asarray(origins, np.float64), np.asarray(directions, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -o[..., 2] / d[..., 2]
+        x, y = o[..., 0] + t * d[..., 0], o[..., 1] + t * d[..., 1]
+    xmin, xmax, ymin, ymax = extent
+    return (t > 0) & (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
+
+
+def in_window(directions, a: float) -> np.ndarray:
+    """(...) bool: whether each direction ((..., 3)) lies in a lenslet's window, |u| and |v| <= ``a`` with
+    (u, v) = (d_x / d_z, d_y / d_z) (either side of the array: the sign of d_z is the caller's)."""
+    d = np.asarray(directions, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (np.abs(d[..., 0] / d[..., 2]) <= a) & (np.abs(d[..., 1] / d[..., 2]) <= a)

@@ -220,7 +220,7 @@ def _room(scene) -> dict[str, dict] | None:
     if env is None:
         return None
     from lftransfer.backend import mitsuba
-    from lftransfer.optics.geometry import env_directions
+    from lftransfer.optics.geometry import env_directions, in_window
     from lftransfer.render.shapes import lens_array_absorber
     from lftransfer.rig.model import nominal_rig
 
@@ -228,9 +228,7 @@ def _room(scene) -> dict[str, dict] | None:
     radiance = env.radiance_map()
     array = nominal_rig(scene.rig).array
     d = env_directions(radiance.shape[1], radiance.shape[0])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u, v = d[..., 0] / d[..., 2], d[..., 1] / d[..., 2]
-    window = (d[..., 2] > 0) & (np.abs(u) <= array.half_width) & (np.abs(v) <= array.half_width)
+    window = (d[..., 2] > 0) & in_window(d, array.half_width)
     emitter = {"type": "envmap", "bitmap": mi.Bitmap(radiance)}
     outside = {"type": "envmap", "bitmap": mi.Bitmap(np.where(window[..., None], 0.0, radiance).astype(np.float32))}
     return {"union": {"room": emitter},

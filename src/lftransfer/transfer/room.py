@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lftransfer.optics.geometry import env_directions, env_solid_angles
+from lftransfer.optics.geometry import crosses_rectangle, env_directions, env_solid_angles, in_window
 
 __all__ = ["MAX_GAIN", "steep_room_gain"]
 
@@ -36,13 +36,8 @@ def _gain_at(points: np.ndarray, radiance: np.ndarray, extent, a: float) -> np.n
     back = d[:, 2] < -1e-6                                  # towards the array
     d, weight = d[back], weight[back]
     cos = -d[:, 2]                                          # against the normal -z
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -points[:, 2:3] / d[None, :, 2]                 # (P, T) to the plane z = 0
-        x = points[:, 0:1] + t * d[None, :, 0]
-        y = points[:, 1:2] + t * d[None, :, 1]
-    xmin, xmax, ymin, ymax = extent
-    panel = (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
-    window = panel & (np.abs(d[:, 0] / d[:, 2]) <= a)[None] & (np.abs(d[:, 1] / d[:, 2]) <= a)[None]
+    panel = crosses_rectangle(points[:, None, :], d[None], extent)      # (P, T)
+    window = panel & in_window(d, a)[None]
     lit = weight * cos
     e_all, e_win = panel @ lit, window @ lit
     return np.where(e_win > 0, e_all / np.maximum(e_win, 1e-30), 1.0)
