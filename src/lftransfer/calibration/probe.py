@@ -173,6 +173,11 @@ class ProbeMeasurement:
     radiance: np.ndarray
 
     @property
+    def filled(self) -> EnvironmentMap:
+        """The map that lights the synthetic objects, every direction valid."""
+        return EnvironmentMap(self.radiance, np.ones(self.radiance.shape[:2], bool))
+
+    @property
     def filled_share(self) -> float:
         """The share of the sphere of directions (by solid angle) that was filled, not measured."""
         omega = self.measured.solid_angles()
@@ -180,14 +185,13 @@ class ProbeMeasurement:
 
     def brightest_direction(self) -> np.ndarray:
         """(3,) unit direction (the array's frame) of the filled map's brightest texel."""
-        return EnvironmentMap(self.radiance, np.ones(self.radiance.shape[:2], bool)).brightest_direction()
+        return self.filled.brightest_direction()
 
     def summary(self) -> dict:
         """JSON: the map's size, the share measured, its power and brightest direction."""
-        full = EnvironmentMap(self.radiance, np.ones(self.radiance.shape[:2], bool))
         return {"map": [int(self.radiance.shape[1]), int(self.radiance.shape[0])],
                 "measured_share": round(1.0 - self.filled_share, 4),
-                "power_w_m2": [round(float(v), 4) for v in full.power()],
+                "power_w_m2": [round(float(v), 4) for v in self.filled.power()],
                 "brightest_direction": [round(float(v), 4) for v in self.brightest_direction()]}
 
 

@@ -153,6 +153,7 @@ class SyntheticSide:
                                                self.height))
         self.prefilter: DepthPrefilter | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
+        self._gain: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (the probe's map, the depth, the factor)
 
     def posed(self) -> SyntheticScene:
         """The synthetic scene at the current time, in the lens array's frame."""
@@ -311,11 +312,10 @@ class SyntheticSide:
         (:func:`~lftransfer.transfer.room.steep_room_gain`), found once per map and depth."""
         from lftransfer.transfer.room import steep_room_gain
 
-        key = (id(self.probe), id(self.prefilter.depth))
-        if getattr(self, "_gain_key", None) != key:
-            self._gain = steep_room_gain(self.probe, self.model.array, self.prefilter.depth, ls.u, ls.v)
-            self._gain_key = key
-        return self._gain
+        depth = self.prefilter.depth
+        if self._gain is None or self._gain[0] is not self.probe or self._gain[1] is not depth:
+            self._gain = (self.probe, depth, steep_room_gain(self.probe, self.model.array, depth, ls.u, ls.v))
+        return self._gain[2]
 
 
 PROBE_SAMPLES = 16          # directions of the light probe's map per shading point
