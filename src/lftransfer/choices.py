@@ -105,6 +105,13 @@ DEFAULT_CAPTURE_SPP = 4
 """Rays per LF camera pixel in the simulated rig."""
 DEFAULT_PROJECTOR_FILL = 0.95
 
+DEFAULT_BLAS_THREADS = 1
+"""Threads of the BLAS libraries (NumPy's, SciPy's and OpenCV's OpenBLAS) in a process that renders with Dr.Jit.
+OpenBLAS's threads keep spinning for a while after each matrix product and take the cores from Dr.Jit's kernels
+that follow (docs/performance.md, "BLAS threads beside Dr.Jit"); one thread costs the products little, since the
+project's products are small. ``LFT_BLAS_THREADS`` or ``lft --blas-threads`` change it; 0 leaves the libraries'
+own default (:func:`lftransfer.backend.bound_blas`)."""
+
 
 def values(choice) -> tuple[str, ...]:
     """The values of a choice's ``Literal`` type, in their documented order."""

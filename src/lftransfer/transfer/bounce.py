@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from lftransfer import choices
+from lftransfer.backend import bound_blas
 from lftransfer.calibration.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
@@ -280,6 +281,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         TransferResult with every bounce kept.
     """
     step = progress or (lambda _msg: None)
+    bound_blas()        # NumPy's products beside Dr.Jit's kernels: lftransfer.backend
     timer = StageTimer()
     side = SyntheticSide(model, scene, settings, time_s=time_s)
     decoder, encoder = side.decoder, side.encoder

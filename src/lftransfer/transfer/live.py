@@ -38,6 +38,7 @@ from typing import Iterator
 import numpy as np
 
 from lftransfer import choices
+from lftransfer.backend import bound_blas
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
 from lftransfer.render.renderer import ViewImage
@@ -300,6 +301,7 @@ class LiveTransfer:
     def step(self, time_s: float) -> LiveFrame:
         """Run one frame at scene time ``time_s`` (seconds); see the module docstring."""
         t0 = time.perf_counter()
+        bound_blas()        # NumPy's products beside Dr.Jit's kernels: lftransfer.backend
         timer = StageTimer()
         side, s = self.side, self.settings
         with timer("pose"):

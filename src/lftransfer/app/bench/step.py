@@ -248,7 +248,7 @@ def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[obj
 def _settings_json(scene, options: BenchOptions, settings: TransferSettings, renderer: str, rig_model: str) -> dict:
     """The settings of a bench run, JSON-ready (machine: CPUs, platform, load averages over 1, 5 and 15 minutes at
     the end of the run: other work on the machine slows every number)."""
-    from lftransfer.backend import variant
+    from lftransfer.backend import blas_thread_counts, blas_threads, variant
 
     rig, view = scene.rig, scene.view
     return {
@@ -271,6 +271,7 @@ def _settings_json(scene, options: BenchOptions, settings: TransferSettings, ren
         "warmup": options.warmup,
         "animated": bool(scene.moving),
         "variant": variant(),
+        "blas_threads": {"asked": blas_threads(), "libraries": blas_thread_counts()},
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                     "load_average": [round(x, 2) for x in os.getloadavg()]},
     }

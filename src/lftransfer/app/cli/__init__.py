@@ -14,14 +14,15 @@ options they share are defined once in :mod:`~lftransfer.app.cli.options`. docs/
 from __future__ import annotations
 
 import logging
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
+from lftransfer import backend, choices
 from lftransfer.app.cli import bench, run, sequence, study
 from lftransfer.app.cli.calibrate import calibrate_app
 from lftransfer.app.cli.common import Group
-from lftransfer.app.cli.options import flag
+from lftransfer.app.cli.options import flag, option
 from lftransfer.app.cli.twin import twin_app
 
 __all__ = ["app", "main"]
@@ -46,8 +47,21 @@ def _version(value: bool) -> None:
 def _main(debug: Annotated[bool, flag("--debug", "Show the Python traceback of an unexpected error (may stand "
                                                  "anywhere on the command line).")] = False,
           version: Annotated[bool, typer.Option("--version", metavar="", callback=_version, is_eager=True,
-                                                help="Show the version and exit.")] = False) -> None:
+                                                help="Show the version and exit.")] = False,
+          blas_threads: Annotated[Optional[int], option(
+              "--blas-threads", metavar="N", min=0,
+              help=f"Threads of NumPy's, SciPy's and OpenCV's BLAS beside the renderer (default "
+                   f"${backend.BLAS_THREADS_ENV} or {choices.DEFAULT_BLAS_THREADS}; 0: the libraries' own, one "
+                   f"per core). More than one takes cores from the renderer: docs/performance.md.")] = None,
+          ) -> None:
     """Light field transfer between real and synthetic objects."""
+    try:
+        if blas_threads is not None:
+            backend.set_blas_threads(blas_threads)
+        else:
+            backend.blas_threads()          # a bad $LFT_BLAS_THREADS is refused here, in one line
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="'--blas-threads'") from None
 
 
 run.register(app)
