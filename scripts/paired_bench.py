@@ -23,6 +23,7 @@ import argparse
 import json
 import os
 import platform
+import shlex
 import statistics
 import subprocess
 import sys
@@ -76,13 +77,25 @@ def side_env(src: Path) -> dict:
     return env
 
 
+def lft_entry(src: Path) -> str:
+    """The ``lft`` command's entry point in that checkout (``module:attribute`` of its pyproject.toml)."""
+    import tomllib
+
+    scripts = tomllib.loads((src / "pyproject.toml").read_text(encoding="utf-8"))["project"].get("scripts", {})
+    if "lft" not in scripts:
+        raise SystemExit(f"error: {src / 'pyproject.toml'}: no [project.scripts] lft entry point")
+    return scripts["lft"]
+
+
 def bench_once(src: Path, env: dict, bench_args: list[str], log: Path) -> dict:
-    """One ``lft bench`` of the checkout at ``src``; its JSON."""
+    """One ``lft bench`` of the checkout at ``src`` (its own entry point, with this Python); its JSON."""
+    module, _, attr = lft_entry(src).partition(":")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "bench.json"
-        argv = [sys.executable, "-m", "lftransfer", "bench", *bench_args, "--json", str(out)]
+        argv = [sys.executable, "-c", f"import sys; from {module} import {attr} as lft; sys.argv[0] = 'lft'; lft()",
+                "bench", *bench_args, "--json", str(out)]
         with log.open("a") as f:
-            f.write(f"+ PYTHONPATH={env['PYTHONPATH']} {' '.join(argv)}\n")
+            f.write(f"+ PYTHONPATH={env['PYTHONPATH']} {shlex.join(argv)}\n")
             f.flush()
             done = subprocess.run(argv, cwd=ROOT, env=env, stdout=f, stderr=subprocess.STDOUT)
         if done.returncode != 0:
@@ -121,7 +134,8 @@ def print_table(rows: list[dict], label_a: str, label_b: str) -> None:
         return "-" if v is None else f"{v:8.2f} [{r[0]:.1f}, {r[1]:.1f}]"
 
     print(f"A = {label_a}\nB = {label_b}\n")
-    print(f"{'figure (ms, median of the benches medians [min, max])':<28} {'A':>24} {'B':>24} {'B / A':>7}")
+    print("ms: the median over the rounds of each bench's own median [lowest, highest]\n")
+    print(f"{'figure':<28} {'A':>24} {'B':>24} {'B / A':>7}")
     for row in rows:
         ratio = "-" if row["ratio"] is None else f"{row['ratio']:.3f}"
         print(f"{row['figure']:<28} {ms(row['a_ms'], row['a_range']):>24} {ms(row['b_ms'], row['b_range']):>24} "

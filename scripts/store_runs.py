@@ -125,16 +125,18 @@ def execute(run: Run) -> Path:
 
 def adopt(spec: str) -> Path:
     """``NAME=FILE``: store JSON a run already wrote, without running it again. Only for a run whose JSON carries
-    its own provenance (benchmarks/twin/compare.py writes its commit, date and machine); the wall time is then
-    unknown."""
+    its own provenance (benchmarks/twin/compare.py writes its commit, date and machine; scripts/paired_bench.py its
+    two commits, date, machine and wall time)."""
     name, _, file = spec.partition("=")
     run = RUN_BY_NAME.get(name)
     if run is None or not file:
         raise SystemExit(f"error: --adopt {spec}: expected NAME=FILE with NAME one of {', '.join(RUN_BY_NAME)}")
-    if run.kind != "twin_compare":
+    if run.kind not in ("twin_compare", "paired"):
         raise SystemExit(f"error: --adopt {name}: its JSON has no provenance of its own; run it instead")
     path = Path(file)
     data = json.loads(path.read_text(encoding="utf-8"))
+    if run.kind == "paired":
+        return _adopt_paired(run, path, data)
     for key in ("commit", "date", "machine"):
         if key not in data:
             raise SystemExit(f"error: {path}: missing field '{key}' (needed for the provenance)")
@@ -152,6 +154,23 @@ def adopt(spec: str) -> Path:
                           f"scripts/store_runs.py), so its wall time is not recorded."}
     stored = store(run, data, provenance)
     print(f"[{name}] stored {stored.relative_to(ROOT)} from {path}")
+    return stored
+
+
+def _adopt_paired(run: Run, path: Path, data: dict) -> Path:
+    for key in ("a", "b", "date", "machine", "rounds", "bench_args", "wall_s"):
+        if key not in data:
+            raise SystemExit(f"error: {path}: missing field '{key}' (needed for the provenance)")
+    command = (f"python scripts/paired_bench.py --against {data['a']['ref']} --with {data['b']['ref']} "
+               f"--rounds {data['rounds']} --json {path.as_posix()} -- {' '.join(data['bench_args'])}")
+    machine = {k: v for k, v in data["machine"].items() if k != "load_average_end"}
+    machine["load_average"] = machine.pop("load_average_start", None)
+    provenance = {"commands": [command], "commit": data["b"]["commit"], "date": data["date"], "machine": machine,
+                  "wall_s": data["wall_s"],
+                  "note": f"Stored from {path.as_posix()} as written by that command (not run again by "
+                          f"scripts/store_runs.py); the commit is side B's, the one measured against side A's."}
+    stored = store(run, data, provenance)
+    print(f"[{run.name}] stored {stored.relative_to(ROOT)} from {path}")
     return stored
 
 
@@ -194,7 +213,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="only the quarter-resolution runs")
     ap.add_argument("--list", action="store_true", help="list the runs and which are stored, and stop")
     ap.add_argument("--adopt", action="append", default=[], metavar="NAME=FILE",
-                    help="store JSON a run already wrote (twin_compare only: its JSON holds its provenance)")
+                    help="store JSON a run already wrote (twin_compare and paired runs only: their JSON holds "
+                         "their provenance)")
     args = ap.parse_args()
     unknown = [n for n in args.names if n not in RUN_BY_NAME]
     if unknown:

@@ -195,6 +195,43 @@ def test_08_live_page_tables(tmp_path):
         render_results(load_store(store))
 
 
+def test_09_paired_bench_table(tmp_path):
+    """A paired bench (scripts/paired_bench.py): both sides named with their commits, each figure's median and
+    range per side and the ratio B / A, the load at the start and the end; its summary takes the median over the
+    rounds of each bench's own median."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("paired_bench", Path(__file__).parents[2] / "scripts" /
+                                                  "paired_bench.py")
+    paired = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(paired)
+    bench = lambda it, lf: {"pipeline_iteration_ms": it, "floor_ms": 16.0,  # noqa: E731
+                            "stages_ms": {"render_lightfield": {"median": lf}}}
+    rows = paired.summarise([bench(90.0, 30.0), bench(80.0, 25.0), bench(85.0, 40.0)],
+                            [bench(60.0, 18.0), bench(70.0, 19.0), bench(65.0, 17.0)])
+    by = {r["figure"]: r for r in rows}
+    assert [r["figure"] for r in rows][:2] == ["pipeline_iteration_ms", "render_lightfield"]
+    assert by["pipeline_iteration_ms"]["a_ms"] == 85.0 and by["pipeline_iteration_ms"]["b_range"] == [60.0, 70.0]
+    assert by["render_lightfield"]["ratio"] == pytest.approx(18.0 / 30.0)
+    assert by["floor_ms"]["ratio"] == 1.0
+    store = tmp_path / "runs"
+    write(store, "paired_84066a4", "paired", {
+        "a": {"ref": "84066a4", "commit": "84066a4" + "0" * 33, "label": "84066a4 (84066a4a)"},
+        "b": {"ref": "HEAD", "commit": "1" * 40, "label": "HEAD (11111111)"},
+        "bench_args": ["--rig-model", "oracle"], "rounds": 3,
+        "machine": {"load_average_start": [1.5, 1.25, 1.0], "load_average_end": [2.0, 1.75, 1.5]}, "rows": rows})
+    md = render_results(load_store(store))
+    section = md.split("### The pipeline against commit 84066a4")[1].split("\n### ")[0]
+    for text in ("A = 84066a4 (84066a4a), B = HEAD (11111111)", "`lft bench --rig-model oracle`", "3 benches each",
+                 "1.50 / 1.25 / 1.00 at the start", "`pipeline_iteration_ms` | 85.0 (80.0 to 90.0) | 65.0 (60.0 to "
+                 "70.0) | 0.765", "`render_lightfield` | 30.0 (25.0 to 40.0) | 18.0 (17.0 to 19.0) | 0.600"):
+        assert text in section, text
+    write(store, "paired_84066a4", "paired", {"a": {}, "b": {}})
+    with pytest.raises(ResultsError, match="paired_84066a4.json: missing field 'data.rows'"):
+        render_results(load_store(store))
+
+
 def test_the_pitch_study_answers_the_pitch_for_a_target_error():
     """A power law error = 0.004 pitch^1.0 gives pitch 12.5 mm for an error of 0.05 (within the measured pitches);
     a flat curve gives no answer; the table carries the floors and the answer for each scene."""

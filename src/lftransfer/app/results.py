@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lftransfer.app.results_format import db, fixed, median_p95, num, table
-from lftransfer.app.results_live import live_fps_tables, profile_tables, soak_tables
+from lftransfer.app.results_live import live_fps_tables, paired_tables, profile_tables, soak_tables
 from lftransfer.app.results_occlusion import occlusion_tables
 from lftransfer.app.results_probe import probe_tables
 from lftransfer.app.results_study import study_tables
@@ -124,6 +124,13 @@ RUNS: tuple[Run, ...] = (
         (("lft", "bench", "--live", "--projection", "box", "--no-peer", "--calibration",
           "out/runs/demo/calibration.json", "--json", "out/runs/bench_live_box.json"),),
         (("", "out/runs/bench_live_box.json"),), needs=("demo",)),
+    Run("paired_84066a4", "paired", "The pipeline against commit 84066a4 (BLAS threads unbounded), paired: "
+        "`scripts/paired_bench.py`",
+        (("python", "scripts/paired_bench.py", "--against", "84066a4", "--with", "HEAD", "--json",
+          "out/runs/paired_84066a4.json"),), (("", "out/runs/paired_84066a4.json"),)),
+    Run("paired_8184fa7", "paired", "The pipeline against commit 8184fa7 (before the regression), paired",
+        (("python", "scripts/paired_bench.py", "--against", "8184fa7", "--with", "HEAD", "--json",
+          "out/runs/paired_8184fa7.json"),), (("", "out/runs/paired_8184fa7.json"),)),
     _seq("fig5_quick", "Fig. 5 at quarter resolution: the planet's shadow on the head", "fig5", quick=True,
          calibrate=("lft", "calibrate", "rig", "fig5", "--quick", "--out",
                     "out/runs/fig5_quick_cal/calibration.json"),
@@ -212,7 +219,7 @@ class StoredRun:
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
 KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
-         "occlusion", "probe")
+         "occlusion", "probe", "paired")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -607,10 +614,11 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
           "study": lambda s: study_tables(s.data),
           "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
-          "probe": probe_tables}
+          "probe": probe_tables, "paired": paired_tables}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
-          ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box")),
+          ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box",
+                                          "paired_84066a4", "paired_8184fa7")),
           ("The live page: `lft live`", ("live_fps_quick", "live_fps", "soak_live_quick", "profile_before",
                                           "profile")),
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig6_quick_quiet",

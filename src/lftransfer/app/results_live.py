@@ -1,12 +1,13 @@
-"""The live page's tables of docs/results.md: frames per second and edit-to-pixel latency
-(``scripts/measure_live_fps.py``), the soak (``scripts/soak_live.py``) and the pipeline's profile
-(``scripts/profile_pipeline.py``). Each takes a :class:`lftransfer.app.results.StoredRun`."""
+"""The speed tables of docs/results.md: the live page's frames per second and edit-to-pixel latency
+(``scripts/measure_live_fps.py``), the soak (``scripts/soak_live.py``), the pipeline's profile
+(``scripts/profile_pipeline.py``) and a paired bench of two commits (``scripts/paired_bench.py``). Each takes a
+:class:`lftransfer.app.results.StoredRun`."""
 
 from __future__ import annotations
 
 from lftransfer.app.results_format import fixed, median_p95, num, table
 
-__all__ = ["live_fps_tables", "profile_tables", "soak_tables"]
+__all__ = ["live_fps_tables", "paired_tables", "profile_tables", "soak_tables"]
 
 
 def _setting(d: dict) -> list[str]:
@@ -82,3 +83,23 @@ def profile_tables(s) -> list[str]:
         cell = lambda xs, i: f"`{xs[i][0]}` {num(xs[i][1])}" if i < len(xs) else ""   # noqa: E731
         out += table(["self", "inclusive"], [[cell(own, i), cell(inclusive, i)] for i in range(min(n, 12))])
     return out
+
+
+def paired_tables(s) -> list[str]:
+    d = s.data
+    rows = s.need("rows")
+    a, b = s.need("a"), s.need("b")
+    machine = d.get("machine") or {}
+    load = [machine.get("load_average_start"), machine.get("load_average_end")]
+    out = [f"A = {a.get('label')}, B = {b.get('label')}: `lft bench {' '.join(d.get('bench_args') or [])}`, "
+           f"{d.get('rounds')} benches each, alternated (A B, B A, ...); per figure the median over the benches of "
+           "each bench's own median, the lowest and highest of those, and the ratio B / A (below 1: B is faster)"
+           + (f"; load average (1, 5, 15 min) {' / '.join(fixed(x, 2) for x in load[0])} at the start, "
+              f"{' / '.join(fixed(x, 2) for x in load[1])} at the end" if all(load) else "") + ".", ""]
+
+    def cell(v, r) -> str:
+        return "-" if v is None else f"{fixed(v, 1)} ({fixed(r[0], 1)} to {fixed(r[1], 1)})"
+
+    return out + table(["figure, ms", "A", "B", "B / A"],
+                       [[f"`{r['figure']}`", cell(r.get("a_ms"), r.get("a_range")),
+                         cell(r.get("b_ms"), r.get("b_range")), num(r.get("ratio"))] for r in rows])
