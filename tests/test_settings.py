@@ -58,6 +58,7 @@ def test_overrides_win_and_only_the_area_model_has_reconstruction_projection_win
     # the comparisons: none equal to the run's own value; area-only choices dropped under another model
     every = resolve_settings(scene, Overrides.comparing_all())
     assert every.comparisons == (("lighting_model", "point"), ("reconstruction", "box"), ("projection", "box"),
+                                 ("projection", "solve"),
                                  ("window", "cut"))
     assert resolve_settings(scene, Overrides.comparing_all(lighting_model="point")).comparisons == \
         (("lighting_model", "area"),)

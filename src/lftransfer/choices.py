@@ -19,10 +19,12 @@ Reconstruction = Literal["box", "linear"]
 """Area model: how the captured light field is read between lenslet centres, ``"linear"`` (blended across the
 three lenslets around each aperture point) or ``"box"`` (one sample per lenslet over its whole aperture)."""
 
-Projection = Literal["box", "depth"]
-"""Area model: what the projector is sent, ``"depth"`` (prefiltered from the real scene's depth, measured
-through the rig with one extra frame) or ``"box"`` (each entry the mean of the synthetic light over its lenslet's
-aperture; :mod:`lftransfer.transfer.projection`)."""
+Projection = Literal["box", "depth", "solve"]
+"""Area model: what the projector is sent, ``"depth"`` (a light field prefiltered from the real scene's depth,
+measured through the rig with one extra frame; :mod:`lftransfer.transfer.projection`), ``"solve"`` (the projector's
+drive solved so that the measured real surface receives the synthetic objects' irradiance, from the same depth;
+:mod:`lftransfer.transfer.surface_solve`) or ``"box"`` (each entry the mean of the synthetic light over its
+lenslet's aperture)."""
 
 Window = Literal["edge", "cut"]
 """Area model: what the synthetic scene receives from beyond the lenslets' window, ``"edge"`` (the captured light

@@ -230,20 +230,21 @@ class ConvergedFrame:
 
 
 def _projection(scene, seq: SequenceOptions, settings: TransferSettings) -> tuple[TransferSettings, list[str]]:
-    """The sequence's settings and what its report says of the projection prefilter (``[render] projection =
-    "depth"``, one sentence): a live loop measures the depth once, so where real objects move it projects the box
-    light field instead."""
+    """The sequence's settings and what its report says of a projection made from the real scene's depth
+    (``[render] projection = "depth"`` or ``"solve"``, one sentence): a live loop measures the depth once, so where
+    real objects move it projects the box light field instead."""
     if not settings.prefilters:
         return settings, []
+    made = ("prefiltered from the real scene's depth" if settings.projection == "depth" else
+            "solved against the real surface the depth measures")
     if seq.mode != "live":
-        return settings, ["projection: prefiltered from the real scene's depth, measured in every frame (one extra "
-                          "frame with the projector white)"]
+        return settings, [f"projection: {made}, measured in every frame (one extra frame with the projector white)"]
     if any(o.moves for o in scene.real):
         return replace(settings, projection="box"), [
-            "projection: the box light field, not the depth prefilter the scene asks for: the real objects move, "
-            "and the live loop measures the depth once"]
-    return settings, ["projection: prefiltered from the real scene's depth, measured once before the first frame "
-                      "(two extra frames; the real objects stand still)"]
+            f"projection: the box light field, not the {settings.projection} projection the scene asks for: the real "
+            "objects move, and the live loop measures the depth once"]
+    return settings, [f"projection: {made}, measured once before the first frame (two extra frames; the real "
+                      "objects stand still)"]
 
 
 def _depth_every_frame(scene, settings: TransferSettings) -> bool:

@@ -51,15 +51,14 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.sim.metrics import cross_term_truth, downsample, metric_factor, object_mask
+from lftransfer.transfer.solver import FLOOR_ITERATIONS, POWER_ITERATIONS, BoxFit, box_least_squares
 
 _log = logging.getLogger(__name__)
 
 __all__ = ["BoxFit", "FidelityFloor", "ProjectorOperator", "SideFloor", "box_least_squares", "fidelity_floor",
            "nonnegative_bound", "real_floor", "score_cross", "synthetic_floor", "true_incident_lightfield"]
 
-FLOOR_ITERATIONS = 40          # MFISTA steps of the real side's floor, at most
-FLOOR_STOPS = (5, 10, 20)      # ... and the earlier steps whose point is scored too (early stopping)
-POWER_ITERATIONS = 6           # for the step size (largest eigenvalue of A^T W A)
+FLOOR_STOPS = (5, 10, 20)      # the earlier steps of FLOOR_ITERATIONS whose point is scored too (early stopping)
 TRUE_LF_SPP = 16               # rays per light field entry of the synthetic side's true light field
 
 
@@ -251,78 +250,6 @@ class _Metric:
         h, w = small.shape[:2]
         big[:h * f, :w * f] = np.repeat(np.repeat(small, f, axis=0), f, axis=1) / np.float32(f * f)
         return big
-
-
-@dataclass(frozen=True)
-class BoxFit:
-    """What :func:`box_least_squares` found.
-
-    Attributes:
-        x: the best point found, the shape of ``start``.
-        losses: ||A x - b||^2 of the start and after each step (the best so far: never increasing).
-        lipschitz: the largest eigenvalue of A^T A found by power iteration (the step is 1 / (1.05 of it)).
-        snapshots: step -> the best point after that many steps, for the steps asked for (``keep``).
-    """
-
-    x: np.ndarray
-    losses: list[float]
-    lipschitz: float
-    snapshots: dict[int, np.ndarray] = field(default_factory=dict)
-
-
-def box_least_squares(apply: Callable[[np.ndarray], np.ndarray], transpose: Callable[[np.ndarray], np.ndarray],
-                      target: np.ndarray, start: np.ndarray, upper: np.ndarray, *,
-                      iterations: int = FLOOR_ITERATIONS, power_iterations: int = POWER_ITERATIONS,
-                      keep: tuple[int, ...] = (), progress: Callable[[str], None] | None = None) -> BoxFit:
-    """min ||A x - b||^2 over 0 <= x <= upper by MFISTA (projected gradient with Nesterov momentum, each step kept
-    only where it lowers the loss, so the result is never worse than ``start``; Beck and Teboulle 2009).
-
-    Args:
-        apply: x -> A x; transpose: r -> A^T r (exact transposes of each other).
-        target: b, the shape of A x.
-        start: a feasible x.
-        upper: the upper bound of each x (>= 0).
-        iterations: steps (3 applications of A or A^T each).
-        power_iterations: power-iteration steps for the step size (2 applications each).
-        keep: steps after which to keep the best point so far (``BoxFit.snapshots``).
-        progress: called every 10 steps.
-    """
-    rng = np.random.default_rng(0)
-    v = rng.random(start.shape).astype(np.float32) * upper
-    lipschitz = 0.0
-    for _ in range(power_iterations):
-        av = transpose(apply(v))
-        lipschitz = float(np.sqrt(np.sum(av.astype(np.float64) ** 2) / max(np.sum(v.astype(np.float64) ** 2),
-                                                                            1e-300)))
-        v = av / max(float(np.abs(av).max()), 1e-30)
-    step = np.float32(1.0 / (1.05 * lipschitz)) if lipschitz > 0 else np.float32(0.0)
-
-    def loss(x: np.ndarray) -> tuple[float, np.ndarray]:
-        r = apply(x) - target
-        return float(np.sum(r.astype(np.float64) ** 2)), r
-
-    x = np.clip(start, 0.0, upper).astype(np.float32)
-    best_loss, r_y = loss(x)
-    losses = [best_loss]
-    best, y, tk = x, x, 1.0
-    snapshots: dict[int, np.ndarray] = {}
-    for k in range(iterations):
-        z = np.clip(y - step * transpose(r_y), 0.0, upper)
-        z_loss, _ = loss(z)
-        if z_loss < best_loss:
-            best, best_loss = z, z_loss
-        losses.append(best_loss)
-        t_next = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * tk * tk))
-        y = np.clip(best + np.float32(tk / t_next) * (z - best) + np.float32((tk - 1.0) / t_next) * (best - x),
-                    0.0, upper)
-        x, tk = best, t_next
-        if k + 1 in keep:
-            snapshots[k + 1] = best
-        if k + 1 < iterations:
-            r_y = apply(y) - target
-        if progress and (k + 1) % 10 == 0:
-            progress(f"step {k + 1}/{iterations}, loss {best_loss / max(losses[0], 1e-300):.3g} of the start's")
-    return BoxFit(x=best, losses=losses, lipschitz=lipschitz, snapshots=snapshots)
 
 
 def nonnegative_bound(apply: Callable[[np.ndarray], np.ndarray], target: np.ndarray, upper: np.ndarray) -> float:

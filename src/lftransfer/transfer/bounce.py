@@ -4,8 +4,9 @@ Light transport is linear, so the real scene's response to a projected light fie
 response to the real point light by differencing two captures, and each bounce can be inspected alone:
 
 - direct: R_0 = decode(capture(black)); Ls_0, S_0 rendered with the virtual point light only (with
-  ``projection = "depth"`` one more capture, the projector white, first gives the real scene's depth, from which
-  every Ls_n is prefiltered: :mod:`lftransfer.transfer.projection`);
+  ``projection = "depth"`` or ``"solve"`` one more capture, the projector white, first gives the real scene's
+  depth, from which every Ls_n is prefiltered, :mod:`lftransfer.transfer.projection`, or its projector image
+  solved, :mod:`lftransfer.transfer.surface_solve`);
 - bounce n >= 1: R_n = (decode(capture(encode(g_n Ls_{n-1}))) - R_0) / g_n, the gain g_n filling the
   projector's range; Ls_n, S_n rendered with the synthetic scene lit by R_{n-1} only;
 - final frame: real view = view camera while the projector shows encode(Ls_0 + ... + Ls_{N-1});
@@ -51,8 +52,9 @@ class TransferSettings:
         reconstruction: how the captured light field is read between lenslet centres when it lights the
             synthetic scene: "box" or "linear" (area model; :mod:`lftransfer.render.lights`).
         projection: what the projector is sent: "box" (each entry the mean of the synthetic light over its
-            lenslet's aperture) or "depth" (prefiltered from the real scene's depth measured through the rig with
-            one extra frame; area model; :mod:`lftransfer.transfer.projection`).
+            lenslet's aperture), "depth" (prefiltered from the real scene's depth measured through the rig with
+            one extra frame; area model; :mod:`lftransfer.transfer.projection`) or "solve" (the projector's drive
+            solved against the surface that depth measures; :mod:`lftransfer.transfer.surface_solve`).
         window: what the synthetic scene receives from beyond the lenslets' window: "edge" (the captured light
             field read at the window's edge) or "cut" (nothing; area model; :mod:`lftransfer.render.lights`).
         composite: how the final frame is put together: "over" (the synthetic render over the real view) or
@@ -95,9 +97,10 @@ class TransferSettings:
 
     @property
     def prefilters(self) -> bool:
-        """Whether the projected light field is prefiltered from a measured depth (``projection == "depth"``, which
-        needs the area model, and something to project: at least one bounce)."""
-        return self.projection == "depth" and self.lighting_model == "area" and self.bounces > 0
+        """Whether the projection is made from a measured depth (``projection`` ``"depth"``, the prefilter, or
+        ``"solve"``, the solve against the measured surface; both need the area model, and something to project: at
+        least one bounce)."""
+        return self.projection in ("depth", "solve") and self.lighting_model == "area" and self.bounces > 0
 
 
 @dataclass

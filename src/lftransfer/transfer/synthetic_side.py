@@ -18,7 +18,9 @@ from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
 from lftransfer.scenes.frame import scene_in_frame
+from lftransfer.real_depth.surface import measured_surface
 from lftransfer.transfer.projection import DepthPrefilter
+from lftransfer.transfer.surface_solve import SolvingEncoder, SurfaceSolve, TargetedLightField
 
 __all__ = ["SyntheticSide", "approximations", "resolve_renderer", "synthetic_renderer"]
 
@@ -121,14 +123,18 @@ class SyntheticSide:
 
     Attributes:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
-        encoder: LightField -> projector image.
+        encoder: LightField -> projector image (:class:`~lftransfer.transfer.surface_solve.SolvingEncoder`: a
+            light field carrying a surface target is solved against the measured surface, any other encoded as the
+            rig model's encoder does).
         point_lights: the virtual twins of the real point lights (array frame), one per light of the scene.
         direct_lights: the synthetic scene's own light: the point lights, the light probe's map where one is set
             (:meth:`set_probe`), and its emitting objects where it has any
             (:class:`~lftransfer.render.lights.EmitterLight`).
         probe: the light probe's map (h, w, 3), array frame, or None.
-        prefilter: the projection prefilter from the real scene's measured depth (:meth:`set_depth`), or None:
-            the box light field is projected.
+        prefilter: the projection prefilter from the real scene's measured depth (:meth:`set_depth`), or None.
+        surface_solve: the projection's solve against the measured real surface (:meth:`set_depth`,
+            ``projection = "solve"``), or None. With neither, the box light field is projected.
+        depth: the real scene's depth the projection uses, (K, V, U) metres, or None.
     """
 
     def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0) -> None:
@@ -141,7 +147,7 @@ class SyntheticSide:
         U = V = settings.angular_samples
         self.decoder = model.decoder(U, V)
         # every projection is measured against a frame with the projector black: light added to its black level
-        self.encoder = model.encoder(U, V, above_black=True)
+        self.encoder = SolvingEncoder(model.encoder(U, V, above_black=True))
         self.time_s = float(time_s)
         self.probe: np.ndarray | None = None
         posed = self._posed(self.time_s)
@@ -152,8 +158,14 @@ class SyntheticSide:
         self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
                                                self.height))
         self.prefilter: DepthPrefilter | None = None
+        self.depth: np.ndarray | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
         self._gain: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (the probe's map, the depth, the factor)
+
+    @property
+    def surface_solve(self) -> SurfaceSolve | None:
+        """The projection's solve against the measured surface (the encoder's), or None."""
+        return self.encoder.solve
 
     def posed(self) -> SyntheticScene:
         """The synthetic scene at the current time, in the lens array's frame."""
@@ -199,14 +211,15 @@ class SyntheticSide:
         else:
             self.renderer = synthetic_renderer(posed, settings.renderer)
         self._set_lights(posed)
-        if self.prefilter is not None:
-            self.set_depth(self.prefilter.depth)
+        if self.depth is not None:
+            self.set_depth(self.depth)
 
     def set_depth(self, depth: np.ndarray | None) -> None:
-        """Prefilter every outgoing light field from this depth of the real scene
-        (:mod:`~lftransfer.transfer.projection`), when the settings ask for it (``settings.prefilters``; None: the
-        box light field), and check the steep light read beyond the lenslets' window against it
-        (:mod:`~lftransfer.lightfield.window`).
+        """Make every outgoing projection from this depth of the real scene, when the settings ask for it
+        (``settings.prefilters``): the prefiltered light field (``projection = "depth"``,
+        :mod:`~lftransfer.transfer.projection`) or the solve against the surface the depth measures (``"solve"``,
+        :mod:`~lftransfer.transfer.surface_solve`); None: the box light field. The steep light read beyond the
+        lenslets' window is checked against it (:mod:`~lftransfer.lightfield.window`).
 
         Args:
             depth: (K, V, U) depth of each light field entry's centre ray, metres (NaN: unknown), from
@@ -214,9 +227,19 @@ class SyntheticSide:
         """
         s = self.settings
         if depth is None or not s.prefilters:
-            self.prefilter = None
+            self.prefilter, self.depth, self.encoder.solve = None, None, None
             return
         U = s.angular_samples
+        if s.projection == "solve":
+            self.prefilter = None
+            solve = self.encoder.solve
+            if solve is None or solve.surface.depth is not depth or solve.seed != s.seed:
+                self.encoder.solve = SurfaceSolve(measured_surface(depth, self.model.array, U, U), self.encoder.encoder,
+                                                  seed=s.seed)
+            self.depth = depth
+            return
+        self.encoder.solve = None
+        self.depth = depth
         old = self.prefilter
         if old is not None and old.depth is depth and old.spp == s.lf_spp and old.seed == s.seed:
             return
@@ -260,16 +283,17 @@ class SyntheticSide:
         s = self.settings
         if s.lighting_model != "area" or s.window != "edge":
             return None
-        depth = None if self.prefilter is None else self.prefilter.depth
+        depth = self.depth
         if self._steep is None or self._steep[0] is not depth or self._steep[1].shape != real_lf.data.shape[:3]:
             self._steep = (depth, steep_rays(real_lf, EDGE_REACH, depth))
         return self._steep[1]
 
     def render(self, lights: Sequence, seed: int, timer: Callable | None = None) -> tuple[LightField, ViewImage]:
         """Ls (the light field the synthetic scene sends through the array; prefiltered where :attr:`prefilter` is
-        set) and S (its view image) under ``lights``; ``timer(stage)`` is an optional context manager factory timing
-        "render_lightfield", "prefilter", "steep_room" and "render_view". Under a visible light probe's map (the
-        direct frame of a light probe scene) with a measured depth, the room behind the synthetic objects is sent
+        set, carrying its measured surface's target where :attr:`surface_solve` is) and S (its view image) under
+        ``lights``; ``timer(stage)`` is an optional context manager factory timing "render_lightfield", "prefilter",
+        "surface_target", "steep_room" and "render_view". Under a visible light probe's map (the direct frame of a
+        light probe scene) with the prefilter's measured depth, the room behind the synthetic objects is sent
         stronger for the steep room light the array's panel shades on the real side
         (:mod:`~lftransfer.transfer.room`)."""
         from contextlib import nullcontext
@@ -292,20 +316,28 @@ class SyntheticSide:
 
 
     def _lightfield(self, lights: Sequence, seed: int, time_it) -> LightField:
-        """The light field the synthetic scene sends through the array under ``lights`` (prefiltered where
-        :attr:`prefilter` is set)."""
+        """The light field the synthetic scene sends through the array under ``lights``: prefiltered where
+        :attr:`prefilter` is set; the box light field carrying the measured surface's target where
+        :attr:`surface_solve` is (:class:`~lftransfer.transfer.surface_solve.TargetedLightField`)."""
         s = self.settings
         U = V = s.angular_samples
-        pf = self.prefilter
+        pf, solve = self.prefilter, self.encoder.solve
+        if pf is not None:
+            with time_it("render_lightfield"):
+                # one "sample" per ray: every primary ray still goes through render_samples
+                radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
+            with time_it("prefilter"):
+                return pf.apply(radiance)
         with time_it("render_lightfield"):
-            if pf is None:
-                return self.renderer.render_lightfield(self.model.array, lights, U, V,
-                                                       model="area" if s.lighting_model == "area" else "point",
-                                                       spp=s.lf_spp, seed=seed)
-            # one "sample" per ray: every primary ray still goes through render_samples
-            radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
-        with time_it("prefilter"):
-            return pf.apply(radiance)
+            lf = self.renderer.render_lightfield(self.model.array, lights, U, V,
+                                                 model="area" if s.lighting_model == "area" else "point",
+                                                 spp=s.lf_spp, seed=seed)
+        if solve is None:
+            return lf
+        with time_it("surface_target"):
+            # the synthetic objects' irradiance at the measured surface, through the lenslets' apertures
+            radiance = self.renderer.render_samples(solve.origins, solve.directions, lights, 1, seed=seed).radiance
+            return TargetedLightField(lf.data, lf.array, solve.target(radiance))
 
     def _room_gain(self, ls: LightField) -> np.ndarray:
         """(K, V, U) the steep room light's factor for the light probe's map and the measured depth

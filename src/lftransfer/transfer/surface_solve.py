@@ -1,0 +1,291 @@
+"""The projection solved against the measured real surface (``projection = "solve"``; docs/architecture.md, "The
+projector's side").
+
+The projector can only add light, one radiance per direction over each lenslet's whole aperture, through its own
+pixels. The light that matters is the light arriving at the real surface, and the rig measures where that surface
+is (:func:`~lftransfer.real_depth.measured_surface`: points, normals, a confidence per point). So the projector's
+drive d (per pixel and channel, 0 to 1) is chosen to make the irradiance the projector gives each measured point
+equal to the irradiance the synthetic objects send it:
+
+    min over 0 <= d <= 1 of  sum_n c_n^2 (F S (d M^T) - T)_n^2  +  beta^2 |Z (S (d M^T) - X_box)|^2
+
+- S: the rig model's resampling of projector pixels onto its lenslets' light field
+  (:meth:`~lftransfer.lightfield.codec.LensletCodec.image_to_lightfield_matrix`), M its emission per unit drive
+  (maximum radiance times colour cross-talk, light above the black level): S (d M^T) is the light field the model
+  says the projector emits.
+- F: irradiance at the measured points from that light field, for lenslets that emit one radiance per direction
+  over their aperture, read bilinearly between grid directions (as the projector's lenslets are), a fixed set of
+  ``aperture_samples`` stratified aperture points per lenslet, the point's measured normal for the cosine, and the
+  measured depth for visibility (a point hidden from a lenslet's centre behind the measured surface gets nothing
+  from it). F is a sparse matrix built once per depth.
+- T: the synthetic objects' irradiance at the same points over the same aperture points: the renderer traces each
+  aperture point's ray into the synthetic half-space (:attr:`SurfaceSolve.origins`, :attr:`~SurfaceSolve.directions`)
+  and T is the same weighted sum of their radiance (:meth:`SurfaceSolve.target`). Where the projector could
+  reproduce that light exactly, the fit is exact; where it cannot (an edge sharper than a lenslet's footprint,
+  light beyond the window), it finds the closest it can send.
+- Z: the light field entries whose light lands on no measured point (the surface was not seen there): they keep
+  the box light field's value (``beta`` the typical column norm of F, so both terms weigh alike).
+- c: each point's confidence.
+
+The fit is the fidelity floor's solver (:func:`~lftransfer.transfer.solver.box_least_squares`, MFISTA over the
+drive, started from the bilinear encoding of the box light field, so it never scores worse than that on its own
+objective), with the floor's maps: the resampling matrix and its transpose. Unlike the floor it knows nothing of
+the real objects' material and fits no reference: its yardstick stays the floor (docs/architecture.md).
+
+Linear: the synthetic light field carries its surface target (:class:`TargetedLightField`); sums and gains of it
+(the bounce loop projects g Ls_n and, in the final frame, Ls_0 + ... + Ls_{N-1}) carry the same sums and gains of
+the targets, and :class:`SolvingEncoder`, the synthetic side's encoder, solves when it is given one. A target
+close to the last one solved (a live loop's next frame, or the same light at another gain) starts from the last
+drive with :data:`WARM_ITERATIONS` steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from lftransfer.lightfield import LightField
+from lftransfer.real_depth.surface import MeasuredSurface
+from lftransfer.transfer.solver import box_least_squares
+
+__all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolvingEncoder", "SurfaceSolve", "TargetedLightField",
+           "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
+
+APERTURE_SAMPLES = 16           # aperture points per lenslet of F and T
+ITERATIONS = 30                 # MFISTA steps from the box light field's encoding
+WARM_ITERATIONS = 10            # ... from the last drive, when the target changed little
+WARM_CHANGE = 0.2               # "changed little": |T - T_last| below this fraction of |T|
+VISIBILITY_TOLERANCE_M = 0.004  # a point farther than the measured depth by more than this is hidden
+
+
+@dataclass(eq=False)
+class TargetedLightField(LightField):
+    """A synthetic light field (the box light field: each entry the mean over its aperture) with the irradiance
+    it should give the measured real surface (:meth:`SurfaceSolve.target`). Sums, differences and scalings apply
+    to both, so a bounce's gain and the final frame's sum keep their targets.
+
+    Attributes:
+        target: (N, 3) float32 irradiance at the :class:`SurfaceSolve`'s points, W m^-2.
+    """
+
+    target: np.ndarray = field(default=None, repr=False)
+
+    def _with(self, lf: LightField, target: np.ndarray) -> "TargetedLightField":
+        return TargetedLightField(lf.data, lf.array, np.asarray(target, np.float32))
+
+    def __add__(self, other):
+        out = LightField.__add__(self, other)
+        if out is NotImplemented:
+            return out
+        return self._with(out, self.target + other.target if isinstance(other, TargetedLightField) else self.target)
+
+    def __radd__(self, other):
+        if isinstance(other, LightField):        # LightField + TargetedLightField lands here first
+            return self.__add__(other)
+        return self._with(LightField.__radd__(self, other), self.target)
+
+    def __sub__(self, other):
+        out = LightField.__sub__(self, other)
+        if out is NotImplemented:
+            return out
+        return self._with(out, self.target - other.target if isinstance(other, TargetedLightField) else self.target)
+
+    def __neg__(self):
+        return self._with(LightField.__neg__(self), -self.target)
+
+    def __mul__(self, scalar: float):
+        return self._with(LightField.__mul__(self, scalar), self.target * np.float32(scalar))
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, scalar: float):
+        return self._with(LightField.__truediv__(self, scalar), self.target / np.float32(scalar))
+
+    def copy(self) -> "TargetedLightField":
+        return self._with(LightField.copy(self), self.target.copy())
+
+
+class SurfaceSolve:
+    """F, the target's rays and the solve for one measured surface and one projector model (module docstring).
+
+    Args:
+        surface: the measured real surface (array frame).
+        encoder: the rig model's :class:`~lftransfer.lightfield.LightFieldEncoder` (``above_black``: the light
+            field is light added to the projector's black).
+        aperture_samples: aperture points per lenslet.
+        seed: their stratification's seed.
+
+    Attributes:
+        origins, directions: (R, 3) float32 read-only rays whose synthetic radiance makes the target: from aperture
+            points (z = 0) into the synthetic half-space (z < 0).
+        points: N, the surface's points; rays: R.
+        surface, encoder, seed: as given.
+        shape: the projector's drive image shape (H, W, 3).
+        emission: M, (3, 3) float32 radiance above black per unit drive (maximum radiance times cross-talk).
+    """
+
+    def __init__(self, surface: MeasuredSurface, encoder, *, aperture_samples: int = APERTURE_SAMPLES,
+                 seed: int = 0) -> None:
+        array, codec = encoder.array, encoder.codec
+        U, V, K = codec.U, codec.V, array.K
+        self.surface, self.encoder, self.seed = surface, encoder, seed
+        if surface.depth.shape != (K, V, U):
+            raise ValueError(f"the surface's depth has shape {surface.depth.shape}, the encoder's light field "
+                             f"{(K, V, U)}")
+        rows, cols, vals, ray_point, origins, directions, weights = self._geometry(surface, array, U, V,
+                                                                                   aperture_samples, seed)
+        N, E = len(surface), K * V * U
+        self.points, self.rays = N, len(ray_point)
+        self._F = sp.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(N, E))
+        self._FT = self._F.T.tocsr()
+        self._gather = sp.csr_matrix((weights.astype(np.float32), (ray_point, np.arange(len(ray_point)))),
+                                     shape=(N, len(ray_point)))
+        self.origins, self.directions = origins.astype(np.float32), directions.astype(np.float32)
+        for a in (self.origins, self.directions):
+            a.flags.writeable = False
+        landed = np.zeros(E, bool)
+        landed[np.unique(cols)] = True
+        data = np.tile(LightField.zeros(array, U, V).mask().ravel(), K)
+        self._free = (data & ~landed)[:, None]                    # entries tied to the box light field
+        column = np.sqrt(np.asarray(self._F.multiply(self._F).sum(0)).ravel())
+        self._beta = np.float32(np.sqrt(np.mean(column[landed] ** 2)) if landed.any() else 1.0)
+        self._S = codec.image_to_lightfield_matrix().astype(np.float32)
+        self._ST = self._S.T.tocsr()
+        prj = encoder.projector
+        cross = np.asarray(prj.cross_talk_matrix, float) if prj.mixes_colours else np.eye(3)
+        self.emission = (prj.max_radiance * cross).astype(np.float32)
+        self._emission_inv = np.linalg.inv(self.emission).astype(np.float32)
+        self.shape = (codec.device.height, codec.device.width, 3)
+        self._lipschitz: float | None = None
+        self._last: tuple[np.ndarray, np.ndarray] | None = None   # (target, drive) of the last solve
+
+    @staticmethod
+    def _geometry(surface, array, U, V, M, seed):
+        """F's entries and the target's rays: every (point, lenslet, aperture point) whose direction is inside
+        the lenslet's window, in front of the point's surface and not hidden by the measured depth."""
+        P, normals, conf, depth = surface.points, surface.normals, surface.confidence, surface.depth
+        a = array.half_width
+        z = np.maximum(P[:, 2], 1e-6)
+        rel = P[:, None, :2] - array.centres[None, :, :]                            # (N, K, 2)
+        reach = a + 0.75 * array.pitch / z                                         # centre ray plus an aperture
+        n_idx, k_idx = np.nonzero(np.all(np.abs(rel) <= (reach * z)[:, None, None], axis=2))
+        # visibility from the lenslet's centre, by the depth measured along the entry nearest the direction
+        slope = rel[n_idx, k_idx] / z[n_idx, None]
+        col = np.clip(np.floor((slope[:, 0] + a) * U / (2 * a)).astype(np.int64), 0, U - 1)
+        row = np.clip(np.floor((slope[:, 1] + a) * V / (2 * a)).astype(np.int64), 0, V - 1)
+        seen = depth[k_idx, row, col]
+        keep = ~(np.isfinite(seen) & (P[n_idx, 2] > seen + VISIBILITY_TOLERANCE_M))
+        n_idx, k_idx = n_idx[keep], k_idx[keep]
+        offsets = array.sample_aperture(M, seed=seed)                               # (M, 2)
+        n_r, k_r = np.repeat(n_idx, M), np.repeat(k_idx, M)
+        p = np.zeros((len(n_r), 3))
+        p[:, :2] = array.centres[k_r] + np.tile(offsets, (len(n_idx), 1))
+        w = P[n_r] - p
+        r2 = np.einsum("ij,ij->i", w, w)
+        d = w / np.sqrt(r2)[:, None]                                                # lenslet -> point
+        u, v = d[:, 0] / d[:, 2], d[:, 1] / d[:, 2]
+        cos_n = -np.einsum("ij,ij->i", normals[n_r], d)
+        ok = (np.abs(u) <= a) & (np.abs(v) <= a) & (cos_n > 0)
+        n_r, k_r, p, d, u, v, r2, cos_n = n_r[ok], k_r[ok], p[ok], d[ok], u[ok], v[ok], r2[ok], cos_n[ok]
+        g = array.aperture_area / M * d[:, 2] * cos_n / r2 * conf[n_r]              # W m^-2 per W m^-2 sr^-1
+        # the bilinear read of the lenslet's table at (u, v), as the projector's lenslets read theirs
+        fx = np.clip((u + a) * U / (2 * a) - 0.5, 0.0, U - 1.0)
+        fy = np.clip((v + a) * V / (2 * a) - 0.5, 0.0, V - 1.0)
+        x0 = np.minimum(np.floor(fx).astype(np.int64), max(U - 2, 0))
+        y0 = np.minimum(np.floor(fy).astype(np.int64), max(V - 2, 0))
+        tx, ty = fx - x0, fy - y0
+        base = (k_r * V + y0) * U + x0
+        dx, dy = (1 if U > 1 else 0), (U if V > 1 else 0)
+        rows = np.tile(n_r, 4)
+        cols = np.concatenate([base, base + dx, base + dy, base + dy + dx])
+        vals = np.concatenate([g * (1 - tx) * (1 - ty), g * tx * (1 - ty), g * (1 - tx) * ty, g * tx * ty])
+        return rows, cols, vals, n_r, p, -d, g
+
+    # ------------------------------------------------------------------ the maps
+    def target(self, radiance: np.ndarray) -> np.ndarray:
+        """(N, 3) float32 irradiance at the points from the radiance (R, 3) the synthetic objects send along
+        :attr:`origins` / :attr:`directions`."""
+        radiance = np.asarray(radiance, np.float32)
+        if radiance.shape != (self.rays, 3):
+            raise ValueError(f"radiance has shape {radiance.shape}, expected {(self.rays, 3)}")
+        return np.asarray(self._gather @ radiance, np.float32)
+
+    def irradiance(self, lf: LightField | np.ndarray) -> np.ndarray:
+        """(N, 3) float32 irradiance F X at the points from a light field the projector emits (above black)."""
+        x = lf.data if isinstance(lf, LightField) else lf
+        return np.asarray(self._F @ np.asarray(x, np.float32).reshape(-1, 3), np.float32)
+
+    def emitted(self, drive: np.ndarray) -> np.ndarray:
+        """(K, V, U, 3) float32 S (d M^T): the light field the model's projector emits above black for a drive
+        image (H, W, 3) in [0, 1]."""
+        x = np.asarray(self._S @ (np.asarray(drive, np.float32).reshape(-1, 3) @ self.emission.T), np.float32)
+        return x.reshape(self.surface.depth.shape + (3,))
+
+    def _emitted_adjoint(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(self._ST @ x, np.float32) @ self.emission).reshape(self.shape)
+
+    def box_drive(self, lf: LightField) -> np.ndarray:
+        """The drive of the plain (bilinear) encoding of a light field, clipped to [0, 1] (H, W, 3) float32."""
+        image = self.encoder.codec.lightfield_to_image(lf)
+        return np.clip(image.reshape(-1, 3) @ self._emission_inv.T, 0.0, 1.0).reshape(self.shape).astype(np.float32)
+
+    # ------------------------------------------------------------------ the solve
+    def solve(self, lf: TargetedLightField) -> np.ndarray:
+        """The drive (H, W, 3) float32 in [0, 1] whose light best gives the measured surface ``lf.target``, with
+        the entries that land nowhere measured kept at ``lf``'s values (module docstring)."""
+        target = np.asarray(lf.target, np.float32)
+        if target.shape != (self.points, 3):
+            raise ValueError(f"target has shape {target.shape}, expected {(self.points, 3)}")
+        N, free, beta = self.points, self._free, self._beta
+        box = lf.data.reshape(-1, 3).astype(np.float32)
+        b = np.concatenate([target, beta * np.where(free, box, 0.0)]).astype(np.float32)
+
+        def apply(drive: np.ndarray) -> np.ndarray:
+            x = np.asarray(self._S @ (drive.reshape(-1, 3) @ self.emission.T), np.float32)
+            return np.concatenate([np.asarray(self._F @ x, np.float32), beta * np.where(free, x, 0.0)])
+
+        def transpose(r: np.ndarray) -> np.ndarray:
+            x = np.asarray(self._FT @ r[:N], np.float32) + beta * np.where(free, r[N:], 0.0)
+            return self._emitted_adjoint(x)
+
+        last = self._last
+        if last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target):
+            start, steps = last[1], WARM_ITERATIONS
+        else:
+            start, steps = self.box_drive(lf), ITERATIONS
+        fit = box_least_squares(apply, transpose, b, start, np.ones(self.shape, np.float32), iterations=steps,
+                                lipschitz=self._lipschitz)
+        self._lipschitz = fit.lipschitz
+        self._last = (target, fit.x)
+        return fit.x
+
+
+class SolvingEncoder:
+    """The synthetic side's encoder: a :class:`TargetedLightField` is solved against the measured surface
+    (:meth:`SurfaceSolve.solve`, then the drive quantised to the projector's codes); any other light field (a
+    calibration pattern, the depth's white frame, the box or prefiltered projections) is encoded as the wrapped
+    encoder encodes it, bit for bit.
+
+    Args:
+        encoder: the rig model's :class:`~lftransfer.lightfield.LightFieldEncoder`.
+
+    Attributes:
+        solve: the :class:`SurfaceSolve` of the measured surface, or None (set by the synthetic side once the depth
+            is measured).
+    """
+
+    def __init__(self, encoder) -> None:
+        self.encoder = encoder
+        self.solve: SurfaceSolve | None = None
+
+    def __getattr__(self, name: str):
+        return getattr(self.encoder, name)
+
+    def __call__(self, lf: LightField) -> np.ndarray:
+        if isinstance(lf, TargetedLightField) and self.solve is not None and lf.target is not None \
+                and len(lf.target) == self.solve.points and np.any(lf.target):
+            drive = self.solve.solve(lf)
+            return self.encoder.quantise((drive.reshape(-1, 3) @ self.solve.emission.T).reshape(self.solve.shape))
+        return self.encoder(lf)
