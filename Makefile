@@ -33,6 +33,7 @@ test: $(STAMP)
 # quarter-resolution ones, RUNS="demo bench" for some); `make results` rewrites docs/results.md and docs/cli.md.
 RUNS ?=
 runs: $(STAMP)
+	$(PY) -m pip install -q -e ".[profile]"    # py-spy, for the stored profile
 	$(PY) scripts/store_runs.py $(RUNS)
 
 results: $(STAMP) cli-docs

@@ -1,10 +1,11 @@
-"""A study of the projector's side: does the depth prefilter of the projected light field
-(``[render] projection = "depth"``, :mod:`lftransfer.transfer.projection`) make the irradiance a real surface
-receives closer to what the synthetic scene would have sent it than the box light field does?
+"""A study of the projector's side: do the depth prefilter of the projected light field
+(``[render] projection = "depth"``, :mod:`lftransfer.transfer.projection`) and the solve against the measured
+surface (``"solve"``, :mod:`lftransfer.transfer.surface_solve`) make the irradiance a real surface receives closer
+to what the synthetic scene would have sent it than the box light field does?
 
-Each scene runs twice, projecting the box light field and the prefiltered one (the depth measured through the
-rig: the projector shows white, the LF camera captures, a plane sweep finds where neighbouring lenslets agree),
-and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes: Fig. 4 and five scenes of this folder
+Each scene runs three times, projecting the box light field, the prefiltered one and the solved one (the depth
+measured through the rig: the projector shows white, the LF camera captures, a plane sweep finds where
+neighbouring lenslets agree), and prints ``cross_by_side`` as ``where_the_error_is.py`` does. Scenes: Fig. 4 and five scenes of this folder
 (true rig model, truth seed 2, the linear reconstruction, 2 bounces); at quarter resolution (ground truth 8192
 samples per pixel) or, with ``--full``, at the paper's (48 x 48 directions per lenslet, ground truth 512).
 
@@ -32,11 +33,11 @@ from lftransfer.sim.ground_truth import render_ground_truth
 from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells, study_scenes
-VARIANTS = ("box", "depth")
+VARIANTS = ("box", "depth", "solve")
 
 
 def transfer(opened, known, settings, variant: str, time_s: float = 0.0, synthetic=None, lf_spp=None):
-    """One converged transfer projecting the variant's light field ("box" or "depth"), with ``lf_spp`` rays per
+    """One converged transfer projecting the variant's light field ("box", "depth" or "solve"), with ``lf_spp`` rays per
     light field entry (None: the settings')."""
     synthetic = known.scene if synthetic is None else synthetic
     settings = replace(settings, projection=variant, lf_spp=lf_spp or settings.lf_spp)
