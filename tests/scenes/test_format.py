@@ -221,7 +221,7 @@ def test_with_overrides_revalidates():
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n[[light]]\nposition = [0.1, 0.2]\n" + BOX, "light[1].position",
      "at least 3"),
     ("[[light]]\nposition = [0.1, 0.2, 0.0]\n" * 9 + BOX, "light", "at most 8"),
-    (LIGHT + "[render]\nprojection = 'prefilter'\n" + BOX, "render.projection", "'box' or 'depth'"),
+    (LIGHT + "[render]\nprojection = 'prefilter'\n" + BOX, "render.projection", "'box', 'depth' or 'solve'"),
     (LIGHT + "[render]\nlf_spp = 0\n" + BOX, "render.lf_spp", "greater than 0"),
     (PROBE.replace("0.05]", "-0.05]") + BOX, "probe.ball_centre", "the ball stands among the real objects"),
     (PROBE.replace("[light]", "[[light]]") + LIGHT.replace("[light]", "[[light]]") + BOX, "<scene>",

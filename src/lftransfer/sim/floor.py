@@ -51,7 +51,7 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.sim.metrics import cross_term_truth, downsample, metric_factor, object_mask
-from lftransfer.transfer.solver import FLOOR_ITERATIONS, POWER_ITERATIONS, BoxFit, box_least_squares
+from lftransfer.transfer.solver import FLOOR_ITERATIONS, BoxFit, box_least_squares
 
 _log = logging.getLogger(__name__)
 

@@ -141,7 +141,7 @@ def register(app: typer.Typer) -> None:
              rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False,
              quiet_reference: QuietReference = False) -> None:
         """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-        transfer, check against ground truth (both lighting models, both reconstructions, both projections, both
+        transfer, check against ground truth (both lighting models, both reconstructions, every projection, both
         windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
         from lftransfer.app.pipeline import RunOptions
 
@@ -161,7 +161,7 @@ def register(app: typer.Typer) -> None:
             direct_light: DirectLight = None,
             compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
                                                               "point), the other reconstruction, the other "
-                                                              "projection and the other window, each a full "
+                                                              "projections and the other window, each a full "
                                                               "re-run.")] = False,
             gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
             renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
