@@ -5,6 +5,8 @@ target follows its sums and gains; anything else is encoded as before, bit for b
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import pytest
 
@@ -70,6 +72,7 @@ def _box(array) -> LightField:
     return LightField(sample_mean(_light(o, d), 16).reshape(array.K, U, U, 3), array)
 
 
+@lru_cache(maxsize=8)
 def _errors(encoder, surface_name: str, shift_m: float = 0.0) -> dict[str, float]:
     """Relative error of the irradiance the surface receives, against the synthetic light's: by a denser
     quadrature (64 other aperture points per lenslet) on the true surface, for the projector's light of the box
