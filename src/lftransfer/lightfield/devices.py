@@ -38,7 +38,7 @@ from lftransfer.lightfield.response import ResponseCurve
 from lftransfer.optics.device import LensletDevice
 from lftransfer.optics.lens_array import LensArray
 
-__all__ = ["CameraModel", "ProjectorModel", "LightFieldDecoder", "LightFieldEncoder"]
+__all__ = ["CameraModel", "ProjectorModel", "LightFieldDecoder", "LightFieldEncoder", "ProjectorDrive"]
 
 
 def _check_bits(bits: int, name: str) -> int:
@@ -570,3 +570,40 @@ class LightFieldEncoder:
         image = _check_codes(image, self.projector.device, "projector image")
         code = image.astype(np.float32) / np.float32(self.projector.levels)
         return self.projector.emit(self.projector.response.decode(code))
+
+
+class ProjectorDrive:
+    """The light field a projector's lenslets emit above its black as a linear map of its linear drive, and that
+    map's exact transpose: X = S (d M^T), with d the drive (per pixel and channel, 0 to 1: the response curve's
+    decoded code), M the emission per unit drive (the maximum radiance times the colour cross-talk) and S the
+    codec's resampling of projector pixels onto the light field
+    (:meth:`~lftransfer.lightfield.codec.LensletCodec.image_to_lightfield_matrix`: the same taps and weights). The
+    fidelity floor fits a drive through the simulated rig's true projector with it, the projection solve through
+    the rig model's (:mod:`lftransfer.transfer.surface_solve`).
+
+    Args:
+        encoder: a :class:`LightFieldEncoder` (its codec and projector).
+
+    Attributes:
+        emission: M, (3, 3) float32, W m^-2 sr^-1 per unit drive.
+        resample: S, (K * V * U, H * W) float32 sparse.
+        shape: (H, W, 3) of a drive image; lf_shape: (K, V, U, 3) of the light field.
+    """
+
+    def __init__(self, encoder: LightFieldEncoder) -> None:
+        codec, projector = encoder.codec, encoder.projector
+        self.emission = (projector.max_radiance * projector.cross_talk_matrix).astype(np.float32)
+        self.resample = codec.image_to_lightfield_matrix()
+        self._transpose = self.resample.T.tocsr()
+        self.shape = (codec.device.height, codec.device.width, 3)
+        self.lf_shape = (codec.array.K, codec.V, codec.U, 3)
+
+    def __call__(self, drive: np.ndarray) -> np.ndarray:
+        """X: (K, V, U, 3) float32 light field emitted above the black for an (H, W, 3) drive."""
+        flat = np.ascontiguousarray(drive, np.float32).reshape(-1, 3) @ self.emission.T
+        return np.asarray(self.resample @ flat, np.float32).reshape(self.lf_shape)
+
+    def adjoint(self, x: np.ndarray) -> np.ndarray:
+        """The transpose: a (K, V, U, 3) (or (K * V * U, 3)) light field -> (H, W, 3) float32."""
+        flat = np.asarray(self._transpose @ np.ascontiguousarray(x, np.float32).reshape(-1, 3), np.float32)
+        return (flat @ self.emission).reshape(self.shape)

@@ -50,6 +50,7 @@ from typing import Callable
 
 import numpy as np
 
+from lftransfer.lightfield.devices import ProjectorDrive
 from lftransfer.sim.metrics import cross_term_truth, downsample, metric_factor, object_mask
 from lftransfer.transfer.solver import FLOOR_ITERATIONS, BoxFit, box_least_squares
 
@@ -86,8 +87,7 @@ class ProjectorOperator:
         self.black = self._emitted_lf(black)
         self.white = self._emitted_lf(white) - self.black          # X_white: the range of each entry
         self.projector = rig._prj_encoder.projector
-        self.emission = (self.projector.max_radiance * self.projector.cross_talk_matrix).astype(np.float32)   # E
-        self.resample = rig._prj_codec.image_to_lightfield_matrix()                                         # S
+        self.drive = ProjectorDrive(rig._prj_encoder)                 # X = S (d E^T), the true projector's
         self.drive_shape = black.shape
         ones = LightField(np.ones_like(self.black), rig.truth.array)
         self.light = LightFieldLight(ones, side="real", model="area", aperture_samples=rig.aperture_samples,
@@ -114,13 +114,11 @@ class ProjectorOperator:
 
     def lf_of_drive(self, drive: np.ndarray) -> np.ndarray:
         """X = S (d E^T): (K, V, U, 3) light field emitted above the black for an (H, W, 3) linear drive."""
-        flat = np.ascontiguousarray(drive, np.float32).reshape(-1, 3) @ self.emission.T
-        return np.asarray(self.resample @ flat, np.float32).reshape(self.black.shape)
+        return self.drive(drive)
 
     def drive_adjoint(self, grad: np.ndarray) -> np.ndarray:
         """The transpose of :meth:`lf_of_drive`: (K, V, U, 3) -> (H, W, 3)."""
-        flat = np.asarray(self.resample.T @ np.ascontiguousarray(grad, np.float32).reshape(-1, 3), np.float32)
-        return (flat @ self.emission).reshape(self.drive_shape)
+        return self.drive.adjoint(grad)
 
     def forward(self, x: np.ndarray) -> np.ndarray:
         """(H, W, 3) view radiance added by X."""

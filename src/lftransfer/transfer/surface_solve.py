@@ -47,6 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from lftransfer.lightfield import LightField
+from lftransfer.lightfield.devices import ProjectorDrive
 from lftransfer.real_depth.surface import MeasuredSurface
 from lftransfer.transfer.solver import box_least_squares
 
@@ -122,8 +123,8 @@ class SurfaceSolve:
             points (z = 0) into the synthetic half-space (z < 0).
         points: N, the surface's points; rays: R.
         surface, encoder, seed: as given.
+        drive: the model projector's :class:`~lftransfer.lightfield.devices.ProjectorDrive` (S and M).
         shape: the projector's drive image shape (H, W, 3).
-        emission: M, (3, 3) float32 radiance above black per unit drive (maximum radiance times cross-talk).
     """
 
     def __init__(self, surface: MeasuredSurface, encoder, *, aperture_samples: int = APERTURE_SAMPLES,
@@ -151,13 +152,9 @@ class SurfaceSolve:
         self._free = (data & ~landed)[:, None]                    # entries tied to the box light field
         column = np.sqrt(np.asarray(self._F.multiply(self._F).sum(0)).ravel())
         self._beta = np.float32(np.sqrt(np.mean(column[landed] ** 2)) if landed.any() else 1.0)
-        self._S = codec.image_to_lightfield_matrix().astype(np.float32)
-        self._ST = self._S.T.tocsr()
-        prj = encoder.projector
-        cross = np.asarray(prj.cross_talk_matrix, float) if prj.mixes_colours else np.eye(3)
-        self.emission = (prj.max_radiance * cross).astype(np.float32)
-        self._emission_inv = np.linalg.inv(self.emission).astype(np.float32)
-        self.shape = (codec.device.height, codec.device.width, 3)
+        self.drive = ProjectorDrive(encoder)
+        self._emission_inv = np.linalg.inv(self.drive.emission).astype(np.float32)
+        self.shape = self.drive.shape
         self._lipschitz: float | None = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (target, drive) of the last solve
 
@@ -220,11 +217,12 @@ class SurfaceSolve:
     def emitted(self, drive: np.ndarray) -> np.ndarray:
         """(K, V, U, 3) float32 S (d M^T): the light field the model's projector emits above black for a drive
         image (H, W, 3) in [0, 1]."""
-        x = np.asarray(self._S @ (np.asarray(drive, np.float32).reshape(-1, 3) @ self.emission.T), np.float32)
-        return x.reshape(self.surface.depth.shape + (3,))
+        return self.drive(drive)
 
-    def _emitted_adjoint(self, x: np.ndarray) -> np.ndarray:
-        return (np.asarray(self._ST @ x, np.float32) @ self.emission).reshape(self.shape)
+    def radiance_image(self, drive: np.ndarray) -> np.ndarray:
+        """(H, W, 3) float32 d M^T: the radiance above black each projector pixel makes its lenslet emit (what
+        the encoder quantises to codes)."""
+        return (np.asarray(drive, np.float32).reshape(-1, 3) @ self.drive.emission.T).reshape(self.shape)
 
     def box_drive(self, lf: LightField) -> np.ndarray:
         """The drive of the plain (bilinear) encoding of a light field, clipped to [0, 1] (H, W, 3) float32."""
@@ -243,12 +241,11 @@ class SurfaceSolve:
         b = np.concatenate([target, beta * np.where(free, box, 0.0)]).astype(np.float32)
 
         def apply(drive: np.ndarray) -> np.ndarray:
-            x = np.asarray(self._S @ (drive.reshape(-1, 3) @ self.emission.T), np.float32)
+            x = self.drive(drive).reshape(-1, 3)
             return np.concatenate([np.asarray(self._F @ x, np.float32), beta * np.where(free, x, 0.0)])
 
         def transpose(r: np.ndarray) -> np.ndarray:
-            x = np.asarray(self._FT @ r[:N], np.float32) + beta * np.where(free, r[N:], 0.0)
-            return self._emitted_adjoint(x)
+            return self.drive.adjoint(np.asarray(self._FT @ r[:N], np.float32) + beta * np.where(free, r[N:], 0.0))
 
         last = self._last
         if last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target):
@@ -287,5 +284,5 @@ class SolvingEncoder:
         if isinstance(lf, TargetedLightField) and self.solve is not None and lf.target is not None \
                 and len(lf.target) == self.solve.points and np.any(lf.target):
             drive = self.solve.solve(lf)
-            return self.encoder.quantise((drive.reshape(-1, 3) @ self.solve.emission.T).reshape(self.solve.shape))
+            return self.encoder.quantise(self.solve.radiance_image(drive))
         return self.encoder(lf)

@@ -233,7 +233,7 @@ class SyntheticSide:
         if s.projection == "solve":
             self.prefilter = None
             solve = self.encoder.solve
-            if solve is None or solve.surface.depth is not depth or solve.seed != s.seed:
+            if solve is None or self.depth is not depth or solve.seed != s.seed:
                 self.encoder.solve = SurfaceSolve(measured_surface(depth, self.model.array, U, U), self.encoder.encoder,
                                                   seed=s.seed)
             self.depth = depth
