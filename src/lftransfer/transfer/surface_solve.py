@@ -41,7 +41,10 @@ drive with :data:`WARM_ITERATIONS` steps.
 
 from __future__ import annotations
 
+import time
+from collections import deque
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -51,13 +54,15 @@ from lftransfer.lightfield.devices import ProjectorDrive
 from lftransfer.real_depth.surface import MeasuredSurface
 from lftransfer.transfer.solver import box_least_squares
 
-__all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolvingEncoder", "SurfaceSolve", "TargetedLightField",
-           "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
+__all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolveRecord", "SolvingEncoder", "SurfaceSolve", "TargetedLightField",
+           "TOLERANCE", "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
 
 APERTURE_SAMPLES = 16           # aperture points per lenslet of F and T
 ITERATIONS = 30                 # MFISTA steps from the box light field's encoding
 WARM_ITERATIONS = 10            # ... from the last drive, when the target changed little
 WARM_CHANGE = 0.2               # "changed little": |T - T_last| below this fraction of |T|
+TOLERANCE = 1e-3                # stop once a step's guaranteed decrease is below this fraction of the loss
+HISTORY = 64                    # solves remembered (SurfaceSolve.history)
 VISIBILITY_TOLERANCE_M = 0.004  # a point farther than the measured depth by more than this is hidden
 
 
@@ -108,6 +113,25 @@ class TargetedLightField(LightField):
         return self._with(LightField.copy(self), self.target.copy())
 
 
+@dataclass(frozen=True)
+class SolveRecord:
+    """One solve (:attr:`SurfaceSolve.history`).
+
+    Attributes:
+        warm: started from the last solution (the target changed little) rather than from the box light field.
+        iterations: the steps taken (fewer than asked where converged, :data:`TOLERANCE`).
+        seconds: wall-clock time of the solve.
+        loss_start, loss_end: the weighted squared misfit sum_n c_n^2 |F X - T|_n^2 of the start and (an upper
+            bound of) the result, (W m^-2)^2.
+    """
+
+    warm: bool
+    iterations: int
+    seconds: float
+    loss_start: float
+    loss_end: float
+
+
 class SurfaceSolve:
     """F, the target's rays and the solve for one measured surface and one projector model (module docstring).
 
@@ -123,8 +147,9 @@ class SurfaceSolve:
             points (z = 0) into the synthetic half-space (z < 0).
         points: N, the surface's points; rays: R.
         surface, encoder, seed: as given.
-        drive: the model projector's :class:`~lftransfer.lightfield.devices.ProjectorDrive` (S and M).
-        shape: the projector's drive image shape (H, W, 3).
+        landed: (K, V, U) bool read-only: the entries whose light lands on a measured point (the ones fitted).
+        emission: M, (3, 3) float32: the model projector's radiance per unit drive (its colour cross-talk).
+        history: the last :data:`HISTORY` solves (:class:`SolveRecord`).
     """
 
     def __init__(self, surface: MeasuredSurface, encoder, *, aperture_samples: int = APERTURE_SAMPLES,
@@ -148,15 +173,28 @@ class SurfaceSolve:
             a.flags.writeable = False
         landed = np.zeros(E, bool)
         landed[np.unique(cols)] = True
+        self.landed = landed.reshape(K, V, U)
+        self.landed.flags.writeable = False
         data = np.tile(LightField.zeros(array, U, V).mask().ravel(), K)
-        self._free = (data & ~landed)[:, None]                    # entries tied to the box light field
-        column = np.sqrt(np.asarray(self._F.multiply(self._F).sum(0)).ravel())
-        self._beta = np.float32(np.sqrt(np.mean(column[landed] ** 2)) if landed.any() else 1.0)
-        self.drive = ProjectorDrive(encoder)
-        self._emission_inv = np.linalg.inv(self.drive.emission).astype(np.float32)
-        self.shape = self.drive.shape
+        projector = encoder.projector
+        self.emission = (projector.max_radiance * projector.cross_talk_matrix).astype(np.float32)
+        # each channel's light field entries: 0 up to the channel's own full drive; none off the data samples
+        self._upper = (data[:, None] * np.diag(self.emission)[None, :]).astype(np.float32)
         self._lipschitz: float | None = None
-        self._last: tuple[np.ndarray, np.ndarray] | None = None   # (target, drive) of the last solve
+        self._last: tuple[np.ndarray, np.ndarray] | None = None   # (target, light field) of the last solve
+        self.history: deque[SolveRecord] = deque(maxlen=HISTORY)
+
+    @cached_property
+    def drive(self) -> ProjectorDrive:
+        """The model projector's :class:`~lftransfer.lightfield.devices.ProjectorDrive` (S and M): what its pixels
+        emit, to judge a solve by (built on first use: the solve itself does not need it)."""
+        return ProjectorDrive(self.encoder)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """The projector's drive image shape (H, W, 3)."""
+        device = self.encoder.codec.device
+        return (device.height, device.width, 3)
 
     @staticmethod
     def _geometry(surface, array, U, V, M, seed):
@@ -219,44 +257,41 @@ class SurfaceSolve:
         image (H, W, 3) in [0, 1]."""
         return self.drive(drive)
 
-    def radiance_image(self, drive: np.ndarray) -> np.ndarray:
-        """(H, W, 3) float32 d M^T: the radiance above black each projector pixel makes its lenslet emit (what
-        the encoder quantises to codes)."""
-        return (np.asarray(drive, np.float32).reshape(-1, 3) @ self.drive.emission.T).reshape(self.shape)
-
-    def box_drive(self, lf: LightField) -> np.ndarray:
-        """The drive of the plain (bilinear) encoding of a light field, clipped to [0, 1] (H, W, 3) float32."""
+    def encoded_drive(self, lf: LightField) -> np.ndarray:
+        """(H, W, 3) float32 in [0, 1]: the drive the encoder sends for a light field (above black): its bilinear
+        resampling onto the pixels, the colour cross-talk undone, clipped (before the response and quantisation)."""
         image = self.encoder.codec.lightfield_to_image(lf)
-        return np.clip(image.reshape(-1, 3) @ self._emission_inv.T, 0.0, 1.0).reshape(self.shape).astype(np.float32)
+        inverse = np.linalg.inv(self.emission.astype(np.float64)).astype(np.float32)
+        return np.clip(image.reshape(-1, 3) @ inverse.T, 0.0, 1.0).reshape(self.shape).astype(np.float32)
 
     # ------------------------------------------------------------------ the solve
-    def solve(self, lf: TargetedLightField) -> np.ndarray:
-        """The drive (H, W, 3) float32 in [0, 1] whose light best gives the measured surface ``lf.target``, with
-        the entries that land nowhere measured kept at ``lf``'s values (module docstring)."""
+    def solve(self, lf: TargetedLightField, *, iterations: int | None = None) -> LightField:
+        """The light field (above black) whose light best gives the measured surface ``lf.target``: the entries
+        whose light lands on a measured point are fitted, each channel between 0 and its full drive; the others
+        keep ``lf``'s values (module docstring).
+
+        Args:
+            lf: the synthetic light field with its target.
+            iterations: the steps (default :data:`ITERATIONS`, or :data:`WARM_ITERATIONS` from the last solution
+                when the target changed little).
+        """
         target = np.asarray(lf.target, np.float32)
         if target.shape != (self.points, 3):
             raise ValueError(f"target has shape {target.shape}, expected {(self.points, 3)}")
-        N, free, beta = self.points, self._free, self._beta
-        box = lf.data.reshape(-1, 3).astype(np.float32)
-        b = np.concatenate([target, beta * np.where(free, box, 0.0)]).astype(np.float32)
-
-        def apply(drive: np.ndarray) -> np.ndarray:
-            x = self.drive(drive).reshape(-1, 3)
-            return np.concatenate([np.asarray(self._F @ x, np.float32), beta * np.where(free, x, 0.0)])
-
-        def transpose(r: np.ndarray) -> np.ndarray:
-            return self.drive.adjoint(np.asarray(self._FT @ r[:N], np.float32) + beta * np.where(free, r[N:], 0.0))
-
+        box = np.asarray(lf.data, np.float32).reshape(-1, 3)
         last = self._last
-        if last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target):
-            start, steps = last[1], WARM_ITERATIONS
-        else:
-            start, steps = self.box_drive(lf), ITERATIONS
-        fit = box_least_squares(apply, transpose, b, start, np.ones(self.shape, np.float32), iterations=steps,
-                                lipschitz=self._lipschitz)
+        warm = last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target)
+        start = np.where(self.landed.reshape(-1, 1), last[1], box) if warm else box
+        steps = iterations if iterations is not None else (WARM_ITERATIONS if warm else ITERATIONS)
+        t0 = time.perf_counter()
+        fit = box_least_squares(lambda x: np.asarray(self._F @ x, np.float32),
+                                lambda r: np.asarray(self._FT @ r, np.float32), target, start, self._upper,
+                                iterations=steps, lipschitz=self._lipschitz, monotone=False, tolerance=TOLERANCE)
         self._lipschitz = fit.lipschitz
         self._last = (target, fit.x)
-        return fit.x
+        self.history.append(SolveRecord(bool(warm), len(fit.losses), time.perf_counter() - t0, fit.losses[0],
+                                        fit.losses[-1]))
+        return LightField(fit.x.reshape(lf.data.shape), lf.array)
 
 
 class SolvingEncoder:
@@ -283,6 +318,5 @@ class SolvingEncoder:
     def __call__(self, lf: LightField) -> np.ndarray:
         if isinstance(lf, TargetedLightField) and self.solve is not None and lf.target is not None \
                 and len(lf.target) == self.solve.points and np.any(lf.target):
-            drive = self.solve.solve(lf)
-            return self.encoder.quantise(self.solve.radiance_image(drive))
+            return self.encoder(self.solve.solve(lf))
         return self.encoder(lf)
