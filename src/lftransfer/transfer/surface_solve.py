@@ -1,42 +1,37 @@
 """The projection solved against the measured real surface (``projection = "solve"``; docs/architecture.md, "The
-projector's side").
+projection solved against the measured surface").
 
-The projector can only add light, one radiance per direction over each lenslet's whole aperture, through its own
-pixels. The light that matters is the light arriving at the real surface, and the rig measures where that surface
-is (:func:`~lftransfer.real_depth.measured_surface`: points, normals, a confidence per point). So the projector's
-drive d (per pixel and channel, 0 to 1) is chosen to make the irradiance the projector gives each measured point
-equal to the irradiance the synthetic objects send it:
+The projector can only add light, one radiance per direction over each lenslet's whole aperture. The light that
+matters is the light arriving at the real surface, and the rig measures where that surface is
+(:func:`~lftransfer.real_depth.measured_surface`: points, normals, a confidence per point). So the light field X the
+projector is sent (above its black) is chosen to make the irradiance it gives each measured point equal to the
+irradiance the synthetic objects send it:
 
-    min over 0 <= d <= 1 of  sum_n c_n^2 (F S (d M^T) - T)_n^2  +  beta^2 |Z (S (d M^T) - X_box)|^2
+    min over 0 <= X <= X_max of  sum_n c_n^2 (F X - T)_n^2,   entries landing on no point kept at the box light field
 
-- S: the rig model's resampling of projector pixels onto its lenslets' light field
-  (:meth:`~lftransfer.lightfield.codec.LensletCodec.image_to_lightfield_matrix`), M its emission per unit drive
-  (maximum radiance times colour cross-talk, light above the black level): S (d M^T) is the light field the model
-  says the projector emits.
-- F: irradiance at the measured points from that light field, for lenslets that emit one radiance per direction
-  over their aperture, read bilinearly between grid directions (as the projector's lenslets are), a fixed set of
-  ``aperture_samples`` stratified aperture points per lenslet, the point's measured normal for the cosine, and the
-  measured depth for visibility (a point hidden from a lenslet's centre behind the measured surface gets nothing
+- F: irradiance at the measured points from a light field whose lenslets emit one radiance per direction over
+  their aperture, read bilinearly between grid directions (as the projector's lenslets are), over a fixed set of
+  ``aperture_samples`` stratified aperture points per lenslet, with the point's measured normal for the cosine and
+  the measured depth for visibility (a point hidden from a lenslet's centre behind the measured surface gets nothing
   from it). F is a sparse matrix built once per depth.
 - T: the synthetic objects' irradiance at the same points over the same aperture points: the renderer traces each
   aperture point's ray into the synthetic half-space (:attr:`SurfaceSolve.origins`, :attr:`~SurfaceSolve.directions`)
   and T is the same weighted sum of their radiance (:meth:`SurfaceSolve.target`). Where the projector could
   reproduce that light exactly, the fit is exact; where it cannot (an edge sharper than a lenslet's footprint,
   light beyond the window), it finds the closest it can send.
-- Z: the light field entries whose light lands on no measured point (the surface was not seen there): they keep
-  the box light field's value (``beta`` the typical column norm of F, so both terms weigh alike).
+- X_max: each channel's radiance at its full drive (the model projector's emission); 0 off the data samples.
 - c: each point's confidence.
 
-The fit is the fidelity floor's solver (:func:`~lftransfer.transfer.solver.box_least_squares`, MFISTA over the
-drive, started from the bilinear encoding of the box light field, so it never scores worse than that on its own
-objective), with the floor's maps: the resampling matrix and its transpose. Unlike the floor it knows nothing of
-the real objects' material and fits no reference: its yardstick stays the floor (docs/architecture.md).
+The fit is the fidelity floor's solver (:func:`~lftransfer.transfer.solver.box_least_squares`, here FISTA with
+gradient restart, two applications of F a step), started from the box light field. The encoder then sends X as it
+sends any light field. Unlike the floor it knows nothing of the real objects' material and fits no reference: its
+yardstick stays the floor (docs/architecture.md).
 
 Linear: the synthetic light field carries its surface target (:class:`TargetedLightField`); sums and gains of it
 (the bounce loop projects g Ls_n and, in the final frame, Ls_0 + ... + Ls_{N-1}) carry the same sums and gains of
 the targets, and :class:`SolvingEncoder`, the synthetic side's encoder, solves when it is given one. A target
 close to the last one solved (a live loop's next frame, or the same light at another gain) starts from the last
-drive with :data:`WARM_ITERATIONS` steps.
+solution, and a solve stops once converged (:data:`TOLERANCE`): a still scene's frame takes one step.
 """
 
 from __future__ import annotations
@@ -52,14 +47,14 @@ import scipy.sparse as sp
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.devices import ProjectorDrive
 from lftransfer.real_depth.surface import MeasuredSurface
-from lftransfer.transfer.solver import box_least_squares
+from lftransfer.transfer.solver import RowBlocks, box_least_squares
 
 __all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolveRecord", "SolvingEncoder", "SurfaceSolve", "TargetedLightField",
            "TOLERANCE", "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
 
 APERTURE_SAMPLES = 16           # aperture points per lenslet of F and T
 ITERATIONS = 30                 # MFISTA steps from the box light field's encoding
-WARM_ITERATIONS = 10            # ... from the last drive, when the target changed little
+WARM_ITERATIONS = 1             # ... from the last solution, when the target changed little or in a live loop
 WARM_CHANGE = 0.2               # "changed little": |T - T_last| below this fraction of |T|
 TOLERANCE = 1e-3                # stop once a step's guaranteed decrease is below this fraction of the loss
 HISTORY = 64                    # solves remembered (SurfaceSolve.history)
@@ -150,6 +145,9 @@ class SurfaceSolve:
         landed: (K, V, U) bool read-only: the entries whose light lands on a measured point (the ones fitted).
         emission: M, (3, 3) float32: the model projector's radiance per unit drive (its colour cross-talk).
         history: the last :data:`HISTORY` solves (:class:`SolveRecord`).
+        live: set by a live loop: every solve after the first starts from the last solution and takes at most
+            :data:`WARM_ITERATIONS` steps, however much the target changed, so the solution converges over the
+            frames rather than within one (a bounce loop's targets, which differ by bounce, start cold).
     """
 
     def __init__(self, surface: MeasuredSurface, encoder, *, aperture_samples: int = APERTURE_SAMPLES,
@@ -165,24 +163,27 @@ class SurfaceSolve:
         N, E = len(surface), K * V * U
         self.points, self.rays = N, len(ray_point)
         self._F = sp.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(N, E))
-        self._FT = self._F.T.tocsr()
+        self._fitted = np.unique(cols)                            # the entries that land on a point
+        fitted = self._F[:, self._fitted]
+        self._products = RowBlocks(fitted), RowBlocks(fitted.T)
         self._gather = sp.csr_matrix((weights.astype(np.float32), (ray_point, np.arange(len(ray_point)))),
                                      shape=(N, len(ray_point)))
         self.origins, self.directions = origins.astype(np.float32), directions.astype(np.float32)
         for a in (self.origins, self.directions):
             a.flags.writeable = False
         landed = np.zeros(E, bool)
-        landed[np.unique(cols)] = True
+        landed[self._fitted] = True
         self.landed = landed.reshape(K, V, U)
         self.landed.flags.writeable = False
         data = np.tile(LightField.zeros(array, U, V).mask().ravel(), K)
         projector = encoder.projector
         self.emission = (projector.max_radiance * projector.cross_talk_matrix).astype(np.float32)
         # each channel's light field entries: 0 up to the channel's own full drive; none off the data samples
-        self._upper = (data[:, None] * np.diag(self.emission)[None, :]).astype(np.float32)
+        self._upper = (data[self._fitted, None] * np.diag(self.emission)[None, :]).astype(np.float32)
         self._lipschitz: float | None = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (target, light field) of the last solve
         self.history: deque[SolveRecord] = deque(maxlen=HISTORY)
+        self.live = False
 
     @cached_property
     def drive(self) -> ProjectorDrive:
@@ -280,18 +281,40 @@ class SurfaceSolve:
             raise ValueError(f"target has shape {target.shape}, expected {(self.points, 3)}")
         box = np.asarray(lf.data, np.float32).reshape(-1, 3)
         last = self._last
-        warm = last is not None and np.linalg.norm(target - last[0]) < WARM_CHANGE * np.linalg.norm(target)
-        start = np.where(self.landed.reshape(-1, 1), last[1], box) if warm else box
+        warm = last is not None and (self.live or np.linalg.norm(target - last[0])
+                                     < WARM_CHANGE * np.linalg.norm(target))
+        start = last[1] if warm else box[self._fitted]
         steps = iterations if iterations is not None else (WARM_ITERATIONS if warm else ITERATIONS)
         t0 = time.perf_counter()
-        fit = box_least_squares(lambda x: np.asarray(self._F @ x, np.float32),
-                                lambda r: np.asarray(self._FT @ r, np.float32), target, start, self._upper,
+        forward, backward = self._products
+        fit = box_least_squares(lambda x: np.asarray(forward @ x, np.float32),
+                                lambda r: np.asarray(backward @ r, np.float32), target, start, self._upper,
                                 iterations=steps, lipschitz=self._lipschitz, monotone=False, tolerance=TOLERANCE)
         self._lipschitz = fit.lipschitz
         self._last = (target, fit.x)
+        self._last_box = box[self._fitted]
         self.history.append(SolveRecord(bool(warm), len(fit.losses), time.perf_counter() - t0, fit.losses[0],
                                         fit.losses[-1]))
-        return LightField(fit.x.reshape(lf.data.shape), lf.array)
+        out = box.copy()
+        out[self._fitted] = fit.x
+        return LightField(out.reshape(lf.data.shape), lf.array)
+
+    def last_misfit(self) -> dict[str, float] | None:
+        """How far the last solve is from converged: the relative misfit |c (F X - T)| / |c T| of its solution and
+        of the same target solved from the box light field for :data:`ITERATIONS` steps (nothing kept of that
+        solve). A live frame takes :data:`WARM_ITERATIONS` steps from the last frame's solution; this says what
+        that costs. None before any solve."""
+        if self._last is None:
+            return None
+        target, x = self._last
+        forward, backward = self._products
+        norm = max(float(np.linalg.norm(target)), 1e-30)
+        fit = box_least_squares(lambda v: np.asarray(forward @ v, np.float32),
+                                lambda r: np.asarray(backward @ r, np.float32), target, self._last_box, self._upper,
+                                iterations=ITERATIONS, lipschitz=self._lipschitz, monotone=False, tolerance=TOLERANCE)
+        return {"misfit": float(np.linalg.norm(forward @ x - target)) / norm,
+                "converged_misfit": float(np.linalg.norm(forward @ fit.x - target)) / norm,
+                "box_misfit": float(np.linalg.norm(forward @ self._last_box - target)) / norm}
 
 
 class SolvingEncoder:

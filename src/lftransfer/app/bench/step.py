@@ -149,6 +149,12 @@ class BenchResult:
             the timed frames (each capture inside its frame, so on the simulated rig the simulator's capture is in
             it) and "decoupled" (the decoupled run's, or None); each None where nothing moved.
         decoupled: the decoupled loop's run (:class:`~lftransfer.app.bench.decoupled.DecoupledRun`), or None.
+        surface_solve: the projection's solve against the measured surface (``projection = "solve"``; part of the
+            ``encode`` stage), or None: ``cold_ms`` and ``cold_iterations`` of the first solve after the depth was
+            measured (in the warm-up), ``warm_ms`` (the spread over the timed frames' solves) and
+            ``warm_iterations`` (median and most); ``last_frame``: the last timed frame's misfit at the measured
+            points against the same target solved to convergence and the box light field's
+            (:meth:`~lftransfer.transfer.surface_solve.SurfaceSolve.last_misfit`).
     """
 
     pipeline_iteration_ms: float
@@ -173,6 +179,7 @@ class BenchResult:
     notes: list[str] = field(default_factory=list)
     latency_ms: dict = field(default_factory=dict)
     decoupled: DecoupledRun | None = None
+    surface_solve: dict | None = None
 
     def to_json(self) -> dict:
         """JSON-ready dict (nested dataclasses as dicts)."""
@@ -312,10 +319,13 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
             say(f"warm-up frame {i + 1}/{options.warmup} (kernels, ray tiles)")
             with RayRecorder(live.side.renderer) as recorder:
                 step()
+        solve = live.side.surface_solve
+        solved_before = len(solve.history) if solve is not None else 0
         frames = []
         for i in range(options.iterations):
             say(f"live step {i + 1}/{options.iterations}")
             frames.append(step())
+        solves = _surface_solve(live.side.surface_solve, solved_before)
         say("floor: the step's rays cast once against the synthetic scene")
         batches = recorder.batches
         floor = ray_floor(live.side.renderer.objects, batches, repeats=options.iterations,
@@ -390,7 +400,26 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         latency_ms={"sync": _latency(sync_latency),
                     "decoupled": _latency(decoupled.latency) if decoupled is not None else None},
         decoupled=decoupled,
+        surface_solve=solves,
     )
+
+
+def _surface_solve(solve, before: int) -> dict | None:
+    """:attr:`BenchResult.surface_solve` from the solve's history (``before``: its length when the timed frames
+    began)."""
+    if solve is None or not solve.history:
+        return None
+    history = list(solve.history)
+    cold = next((r for r in history if not r.warm), None)
+    timed = history[before:] if before < len(history) else []
+    warm = [r for r in timed if r.warm]
+    return {"last_frame": solve.last_misfit(),
+            "cold_ms": round(1000 * cold.seconds, 1) if cold else None,
+            "cold_iterations": cold.iterations if cold else None,
+            "warm_ms": asdict(Spread.of([r.seconds for r in warm])) if warm else None,
+            "warm_iterations": {"median": statistics.median(r.iterations for r in warm),
+                                "max": max(r.iterations for r in warm)} if warm else None,
+            "timed_solves": len(timed), "cold_in_timed": len(timed) - len(warm)}
 
 
 def _latency(latency) -> dict | None:
