@@ -20,11 +20,11 @@ Reconstruction = Literal["box", "linear"]
 three lenslets around each aperture point) or ``"box"`` (one sample per lenslet over its whole aperture)."""
 
 Projection = Literal["box", "depth", "solve"]
-"""Area model: what the projector is sent, ``"depth"`` (a light field prefiltered from the real scene's depth,
-measured through the rig with one extra frame; :mod:`lftransfer.transfer.projection`), ``"solve"`` (the projector's
-drive solved so that the measured real surface receives the synthetic objects' irradiance, from the same depth;
-:mod:`lftransfer.transfer.surface_solve`) or ``"box"`` (each entry the mean of the synthetic light over its
-lenslet's aperture)."""
+"""Area model: what the projector is sent, ``"solve"`` (the light field solved so that the real surface, as the
+rig measures it with one extra frame, receives the synthetic objects' irradiance;
+:mod:`lftransfer.transfer.surface_solve`), ``"depth"`` (a light field prefiltered from the same measured depth;
+:mod:`lftransfer.transfer.projection`) or ``"box"`` (each entry the mean of the synthetic light over its lenslet's
+aperture)."""
 
 Window = Literal["edge", "cut"]
 """Area model: what the synthetic scene receives from beyond the lenslets' window, ``"edge"`` (the captured light
@@ -65,7 +65,7 @@ DIRECT_LIGHTS: tuple[str, ...] = get_args(DirectLight)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
-DEFAULT_PROJECTION: Projection = "depth"
+DEFAULT_PROJECTION: Projection = "solve"
 DEFAULT_WINDOW: Window = "edge"
 DEFAULT_RENDERER: Renderer = "auto"
 DEFAULT_COMPOSITE: Composite = "over"
