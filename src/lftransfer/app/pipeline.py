@@ -243,8 +243,19 @@ def count_run_steps(scene, options: RunOptions) -> int:
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
     floor = FLOOR_STEPS if floor_skipped(options) is None else 0
+    ablations = 2 * (count_steps(settings.transfer) - 1) if _runs_ablations(options, settings) else 0
     return (1 + calibration + count_steps(settings.transfer) + (gt_steps(settings) if _verifies(options) else 0)
-            + floor + reruns + control + 1)
+            + floor + reruns + ablations + control + 1)
+
+
+SURFACE_SHIFT_M = 0.02          # the solve's negative control: the measured depth moved this far
+
+
+def _runs_ablations(options: RunOptions, settings: RunSettings) -> bool:
+    """Whether a run measures its solve's ablations (:meth:`_Run.surface_ablations`): a verified run with
+    comparisons (the demo's) whose projection is the surface solve."""
+    return bool(settings.comparisons) and settings.transfer.projection == "solve" and \
+        settings.transfer.prefilters and _verifies(options)
 
 
 def gt_steps(settings: RunSettings) -> int:
@@ -372,10 +383,12 @@ class _Run:
         gt, metrics, tables, gt_spp_needed = self.verify(result)
         floor = self.floor(result, gt)
         self.compare(known, gt, tables, result)
+        ablations = self.surface_ablations(known, result, gt)
         control = self.negative_control(result, gt)
         self.timings["total"] = time.perf_counter() - t0
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor, gt)
         report["occlusion"] = self.occlusion(result, gt)
+        report["surface_ablations"] = ablations
         self.step("write outputs")
         comp = result.composite()
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
@@ -507,6 +520,46 @@ class _Run:
                 tables[TABLES[name]][value] = {k: getattr(m, k) for k in BY_MODEL_KEYS}
             self.timings[f"transfer_{value}_{'model' if name == 'lighting_model' else name}"] = \
                 time.perf_counter() - t
+
+    def surface_ablations(self, known: Knowledge, result, gt) -> dict | None:
+        """Stage 4b (the surface solve, where the run compares): the same transfer given the oracle's true depth
+        (what the solve reaches with a perfect measurement: the rest is the method's) and given the measured depth
+        moved :data:`SURFACE_SHIFT_M` farther (a negative control: it must do worse). Each: the cross-transfer error
+        and the real side scored as the fidelity floor scores it."""
+        if not _runs_ablations(self.options, self.settings) or gt is None or result.depth is None:
+            return None
+        import numpy as np
+
+        from lftransfer.sim.metrics import evaluate
+
+        oracle, s = self.opened.oracle, self.settings.transfer
+        U = s.angular_samples
+
+        def scored(res) -> dict:
+            real, synthetic = oracle.score_cross(gt, res.composite() - res.composite_direct())
+            return {"cross_transfer_rel_error": evaluate(res, gt).cross_transfer_rel_error, "real_side": real,
+                    "synthetic_side": synthetic}
+
+        out = {"run": scored(result)}
+        for name, depth in (("oracle_surface", oracle.lightfield_depth(known.model, U, U)),
+                            ("depth_moved_2cm", np.asarray(result.depth) + SURFACE_SHIFT_M)):
+            t = time.perf_counter()
+            alt = run_transfer(self.opened.rig, known.model, known.scene, s, progress=self.step, depth=depth,
+                               view_depth=result.view_depth)
+            out[name] = scored(alt)
+            self.timings[f"solve_{name}"] = time.perf_counter() - t
+        known_depth = np.isfinite(np.asarray(result.depth))
+        truth = out["oracle_surface"]
+        out["notes"] = [
+            "oracle_surface: the same solve given the real objects' true depth along the model's entries (no "
+            "measurement error): its gap to the floor is the method's, the run's gap beyond it the depth's",
+            f"depth_moved_2cm: the measured depth moved {SURFACE_SHIFT_M * 100:.0f} cm away from the array "
+            "(a negative control: the light is aimed where the surface is not)",
+            f"real_side: the real side's cross term scored as the fidelity floor scores it (noise-corrected); the "
+            f"measured depth knew {known_depth.mean():.0%} of the entries"]
+        if truth["real_side"] is not None and out["run"]["real_side"] is not None:
+            out["depth_share"] = out["run"]["real_side"] - truth["real_side"]
+        return out
 
     def negative_control(self, result, gt) -> ControlRun | None:
         """Stage 5: the run again with the rig file's nominal values on the same rig, set against the run's result

@@ -24,8 +24,8 @@ from lftransfer.render.camera import sensor_dict
 from lftransfer.render.shapes import scene_dict
 from lftransfer.sim.gt_cache import CacheProblem, read_entry, write_entry
 
-__all__ = ["GT_MAX_DEPTH", "GroundTruth", "render_ground_truth", "single_seed", "true_depths", "view_distances",
-           "views_overlap"]
+__all__ = ["GT_MAX_DEPTH", "GroundTruth", "lightfield_depths", "render_ground_truth", "single_seed", "true_depths",
+           "view_distances", "views_overlap"]
 
 GT_MAX_DEPTH = 12  # Mitsuba path depth (counts the segment to the emitter): far beyond what transfer keeps
 
@@ -267,6 +267,23 @@ def _objects_view(objects, view, spp: int = DEPTH_SPP):
     w, h = view.resolution
     sensor = mitsuba().load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp))
     return HalfSpaceRenderer(list(objects), max_depth=1).render_view(sensor, w, h, [], spp=spp)
+
+
+def lightfield_depths(world, model, U: int, V: int, *, time_s: float = 0.0) -> np.ndarray:
+    """(K, V, U) float64 depth of the real objects along each light field entry's centre ray, as a rig model
+    defines the entries (its lens array, in the array frame it places in the world), metres along the array's
+    normal: what :func:`~lftransfer.transfer.projection.measure_depth` measures, without its error. NaN off the
+    data samples and where the ray meets no real object."""
+    from lftransfer.lightfield import LightField
+    from lftransfer.render.renderer import HalfSpaceRenderer, lightfield_rays
+    from lftransfer.scenes.frame import scene_in_frame
+
+    posed = scene_in_frame(world.at(time_s), model.world_to_array())
+    array = model.array
+    origins, directions = lightfield_rays(array, U, V, side="real", area=False, spp=1)
+    _, hit, dist = HalfSpaceRenderer(list(posed.real), max_depth=1).render_rays(origins, directions, [])
+    z = np.where(hit, dist.astype(np.float64) * directions[:, 2], np.nan).reshape(array.K, V, U)
+    return np.where(LightField.zeros(array, U, V).mask()[None], z, np.nan)
 
 
 def true_depths(scene, crop: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:

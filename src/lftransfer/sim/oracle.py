@@ -92,6 +92,21 @@ class Oracle:
         world = self.world.at(time_s)
         return view_distances(world.real, world.view, spp)
 
+    def lightfield_depth(self, model: RigModel, U: int, V: int, *, time_s: float = 0.0):
+        """(K, V, U) the real objects' true depth along each light field entry's centre ray of ``model`` (the
+        pipeline's rig model), metres (NaN: off the data or nothing there): the measured depth's oracle
+        (:func:`lftransfer.sim.ground_truth.lightfield_depths`)."""
+        from lftransfer.sim.ground_truth import lightfield_depths
+
+        return lightfield_depths(self.world, model, U, V, time_s=time_s)
+
+    def score_cross(self, gt, cross):
+        """A cross term ((H, W, 3) the composite minus the composite without the exchange) scored as the fidelity
+        floor scores a run: (real side, synthetic side), noise-corrected (:func:`lftransfer.sim.floor.score_cross`)."""
+        from lftransfer.sim.floor import score_cross
+
+        return score_cross(gt, cross)
+
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built
         (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`)."""
