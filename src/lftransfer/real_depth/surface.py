@@ -13,7 +13,7 @@ from lftransfer.lightfield import LightField
 
 __all__ = ["CELL_M", "MeasuredSurface", "NORMAL_NEIGHBOURS", "measured_surface"]
 
-CELL_M = 0.002              # the surface's sampling: one point per cell of this side, metres
+CELL_M = 0.003              # the surface's sampling: one point per cell of this side, metres
 NORMAL_NEIGHBOURS = 12      # points of the local plane fitted for a normal
 
 

@@ -52,7 +52,7 @@ from lftransfer.transfer.solver import RowBlocks, box_least_squares
 __all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolveRecord", "SolvingEncoder", "SurfaceSolve", "TargetedLightField",
            "TOLERANCE", "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
 
-APERTURE_SAMPLES = 16           # aperture points per lenslet of F and T
+APERTURE_SAMPLES = 32           # aperture points per lenslet of F and T
 ITERATIONS = 30                 # MFISTA steps from the box light field's encoding
 WARM_ITERATIONS = 1             # ... from the last solution, when the target changed little or in a live loop
 WARM_CHANGE = 0.2               # "changed little": |T - T_last| below this fraction of |T|

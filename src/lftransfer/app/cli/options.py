@@ -103,7 +103,7 @@ Projection = Annotated[Optional[str], option(
     "--projection", metavar=metavar(choices.Projection),
     callback=choice_check("--projection", choices.Projection),
     help=f"Area model: what the projector is sent: the box light field, the light field prefiltered from the "
-         f"real scene's depth measured through the rig, or the projector image solved against the surface that depth "
+         f"real scene's depth measured through the rig, or the light field solved against the surface that depth "
          f"measures (default: the scene's, {choices.DEFAULT_PROJECTION} unless the scene says).")]
 Window = Annotated[Optional[str], option(
     "--window", metavar=metavar(choices.Window), callback=choice_check("--window", choices.Window),
