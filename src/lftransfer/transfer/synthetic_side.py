@@ -336,6 +336,8 @@ class SyntheticSide:
             return lf
         with time_it("surface_target"):
             # the synthetic objects' irradiance at the measured surface, through the lenslets' apertures
+            if not solve.rays:                   # nothing measured that a lenslet lights: no rays to trace
+                return TargetedLightField(lf.data, lf.array, np.zeros((solve.points, 3), np.float32))
             radiance = self.renderer.render_samples(solve.origins, solve.directions, lights, 1, seed=seed).radiance
             return TargetedLightField(lf.data, lf.array, solve.target(radiance))
 
