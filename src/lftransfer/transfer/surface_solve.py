@@ -53,7 +53,7 @@ __all__ = ["APERTURE_SAMPLES", "ITERATIONS", "SolveRecord", "SolvingEncoder", "S
            "TOLERANCE", "VISIBILITY_TOLERANCE_M", "WARM_CHANGE", "WARM_ITERATIONS"]
 
 APERTURE_SAMPLES = 32           # aperture points per lenslet of F and T
-ITERATIONS = 30                 # MFISTA steps from the box light field's encoding
+ITERATIONS = 30                 # steps from the box light field (a cold solve)
 WARM_ITERATIONS = 1             # ... from the last solution, when the target changed little or in a live loop
 WARM_CHANGE = 0.2               # "changed little": |T - T_last| below this fraction of |T|
 TOLERANCE = 1e-3                # stop once a step's guaranteed decrease is below this fraction of the loss

@@ -325,7 +325,7 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         for i in range(options.iterations):
             say(f"live step {i + 1}/{options.iterations}")
             frames.append(step())
-        solves = _surface_solve(live.side.surface_solve, solved_before)
+        solves = _surface_solve(solve, solved_before)
         say("floor: the step's rays cast once against the synthetic scene")
         batches = recorder.batches
         floor = ray_floor(live.side.renderer.objects, batches, repeats=options.iterations,
