@@ -58,8 +58,7 @@ def test_overrides_win_and_only_the_area_model_has_reconstruction_projection_win
     # the comparisons: none equal to the run's own value; area-only choices dropped under another model
     every = resolve_settings(scene, Overrides.comparing_all())
     assert every.comparisons == (("lighting_model", "point"), ("reconstruction", "box"), ("projection", "box"),
-                                 ("projection", "solve"),
-                                 ("window", "cut"))
+                                 ("projection", "depth"), ("window", "cut"))
     assert resolve_settings(scene, Overrides.comparing_all(lighting_model="point")).comparisons == \
         (("lighting_model", "area"),)
     rerun = every.rerun("lighting_model", "point")
@@ -124,9 +123,13 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
     assert seen[-1] == count_run_steps(tiny, options)
     resolved = resolve_settings(tiny, options.settings)
     assert report["settings"] == json.loads(json.dumps(resolved.to_json()))
-    # what the transfers received: the run's settings, then each comparison's, then the control's
-    control = [dataclasses.replace(resolved.transfer, bounce_views=False)] if report["negative_control"] else []
-    assert given == [resolved.transfer, *resolved.reruns, *control]
+    # what the transfers received: the run's settings, then each comparison's, the solve's two ablations (the
+    # oracle's depth, the moved depth) and the control's, these without their bounce views
+    plain = dataclasses.replace(resolved.transfer, bounce_views=False)
+    ablations = [plain, plain] if report["surface_ablations"] else []
+    control = [plain] if report["negative_control"] else []
+    assert given == [resolved.transfer, *resolved.reruns, *ablations, *control]
+    assert (report["surface_ablations"] is not None) == (case == "compare_and_control")
     assert report["lighting_model"] == resolved.transfer.lighting_model
     if case == "compare_and_control":
         assert set(report["by_lighting_model"]) == {"area", "point"} and report["negative_control"] is not None

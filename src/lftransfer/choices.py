@@ -65,7 +65,7 @@ DIRECT_LIGHTS: tuple[str, ...] = get_args(DirectLight)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
-DEFAULT_PROJECTION: Projection = "depth"
+DEFAULT_PROJECTION: Projection = "solve"
 DEFAULT_WINDOW: Window = "edge"
 DEFAULT_RENDERER: Renderer = "auto"
 DEFAULT_COMPOSITE: Composite = "over"

@@ -197,13 +197,13 @@ def test_06_a_live_sequence_with_moving_real_objects_projects_the_box_light_fiel
     block["keyframes"] = [{"time_s": 0.0}, {"time_s": 0.5, "translate": [x, y + 0.01, z]}]
     moving = with_overrides(still, real=[block])
     settings = resolve_settings(still).transfer
-    assert settings.projection == "depth"                          # the scenes' default
+    assert settings.projection == "solve"                          # the scenes' default
     kept, note = _projection(still, SequenceOptions(), settings)
-    assert kept.projection == "depth" and "measured once" in note[0]
+    assert kept.projection == "solve" and "measured once" in note[0]
     box, note = _projection(moving, SequenceOptions(), settings)
     assert box.projection == "box" and "the real objects move" in note[0]
     converged, note = _projection(moving, SequenceOptions(mode="converged"), settings)
-    assert converged.projection == "depth" and "in every frame" in note[0]
+    assert converged.projection == "solve" and "in every frame" in note[0]
     plain, note = _projection(moving, SequenceOptions(), resolve_settings(moving, Overrides(projection="box")).transfer)
     assert plain.projection == "box" and note == []
 

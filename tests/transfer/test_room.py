@@ -7,6 +7,8 @@ What each test shows:
   the whole panel lies inside the window: factor 1. In between it falls with the distance.
 - test_02: per light field entry the factor is read where its centre ray lands at the measured depth; entries
   without a depth keep factor 1, and no factor exceeds MAX_GAIN.
+- test_03: per measured point (the solve's targets) the factor is the one an entry landing there gets: the same
+  function read at the same point; a point with no depth (NaN) or behind the array keeps factor 1.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import pytest
 
 from lftransfer.optics import LensArray
-from lftransfer.transfer.room import MAX_GAIN, _gain_at, steep_room_gain
+from lftransfer.transfer.room import MAX_GAIN, _gain_at, room_gain_at, steep_room_gain
 
 
 def test_01_the_factor_against_the_analytic_one():
@@ -41,3 +43,19 @@ def test_02_per_entry_where_it_lands():
     assert np.all(gain[0] == 1.0) and np.all(gain[1:] > 1.0) and gain.max() <= MAX_GAIN
     deeper = steep_room_gain(np.ones((64, 128, 3), np.float32), array, np.full((array.K, V, U), 0.3), u, v)
     assert np.all(deeper[1:] < gain[1:])
+
+
+def test_03_per_point_as_per_entry_landing_there():
+    array = LensArray(lattice="rect", rows=3, cols=4, pitch=0.0254, focal_length=0.0254)
+    U = V = 4
+    u = v = (np.arange(U) + 0.5) / U * 2 * array.half_width - array.half_width
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.01, 0.2, (array.K, V, U))
+    room = rng.uniform(0.5, 2.0, (64, 128, 3)).astype(np.float32)
+    per_entry = steep_room_gain(room, array, depth, u, v)
+    uu, vv = np.meshgrid(u, v)
+    points = np.stack([array.centres[:, 0, None, None] + depth * uu, array.centres[:, 1, None, None] + depth * vv,
+                       depth], -1).reshape(-1, 3)
+    np.testing.assert_array_equal(room_gain_at(room, array, points), per_entry.ravel())
+    unknown = room_gain_at(room, array, np.array([[0.0, 0.0, np.nan], [0.0, 0.0, -0.1], [np.nan, 0.0, 0.05]]))
+    np.testing.assert_array_equal(unknown, [1.0, 1.0, 1.0])

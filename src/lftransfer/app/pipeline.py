@@ -243,7 +243,9 @@ def count_run_steps(scene, options: RunOptions) -> int:
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
     floor = FLOOR_STEPS if floor_skipped(options) is None else 0
-    ablations = 2 * (count_steps(settings.transfer) - 1) if _runs_ablations(options, settings) else 0
+    # each ablation: the transfer without its bounce views, given a depth (no step to measure it)
+    ablations = 2 * (count_steps(replace(settings.transfer, bounce_views=False)) - 1) \
+        if _runs_ablations(options, settings) else 0
     return (1 + calibration + count_steps(settings.transfer) + (gt_steps(settings) if _verifies(options) else 0)
             + floor + reruns + ablations + control + 1)
 
@@ -532,7 +534,7 @@ class _Run:
 
         from lftransfer.sim.metrics import evaluate
 
-        oracle, s = self.opened.oracle, self.settings.transfer
+        oracle, s = self.opened.oracle, replace(self.settings.transfer, bounce_views=False)
         U = s.angular_samples
 
         def scored(res) -> dict:
@@ -605,7 +607,7 @@ class _Run:
             out["steep_room_light"] = ("the room behind the synthetic objects projected stronger for the steep room "
                                        "light the array's panel shades on the real side, as irradiance on surfaces "
                                        "facing the array (transfer/room.py)" if s.prefilters else
-                                       "not sent: it needs the measured depth of the depth projection")
+                                       "not sent: it needs a measured depth (projection \"depth\" or \"solve\")")
         if s.direct_light == "point":
             from lftransfer.scenes.frame import scene_in_frame
             from lftransfer.transfer.synthetic_side import probe_point_light

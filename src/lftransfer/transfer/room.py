@@ -11,7 +11,9 @@ The ratio depends on where the light lands: each light field entry's landing poi
 its centre ray (the projection prefilter's, :func:`~lftransfer.transfer.projection.measure_depth`); entries
 without a depth are not changed. The irradiance is taken on a surface facing the array (normal -z): the faces
 that receive light through the array face it, and the real objects' normals are not known. The ratio is found
-from the light probe's map on a grid of points in front of the array and read there trilinearly.
+from the light probe's map on a grid of points in front of the array and read there trilinearly. Under the
+projection solved against the measured surface (:mod:`~lftransfer.transfer.surface_solve`) the room's part of each
+measured point's target irradiance gets the factor at that point, and the solve finds the light field that gives it.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 
 from lftransfer.optics.geometry import crosses_rectangle, env_directions, env_solid_angles, in_window
 
-__all__ = ["MAX_GAIN", "steep_room_gain"]
+__all__ = ["MAX_GAIN", "room_gain_at", "steep_room_gain"]
 
 MAX_GAIN = 8.0                     # the room's window light is sent at most this much stronger
 GRID_XY = 9                        # grid points across the array's extent, per axis
@@ -43,8 +45,37 @@ def _gain_at(points: np.ndarray, radiance: np.ndarray, extent, a: float) -> np.n
     return np.where(e_win > 0, e_all / np.maximum(e_win, 1e-30), 1.0)
 
 
+def room_gain_at(radiance: np.ndarray, array, points: np.ndarray) -> np.ndarray:
+    """(P,) float32 factor for the room's light at ``points`` (P, 3) (array frame, metres; NaN or z <= 0: unknown,
+    factor 1): the ratio of the irradiance the whole panel passes to that the window passes, on a surface facing
+    the array, found on a grid in front of the array and read trilinearly, within [1, :data:`MAX_GAIN`].
+
+    Args:
+        radiance: (h, w, 3) the light probe's map in the lens array's frame (Mitsuba's ``envmap`` convention).
+        array: the lens array (its extent and angular half-width).
+        points: (P, 3) where the light lands.
+    """
+    from scipy.interpolate import RegularGridInterpolator
+
+    xmin, xmax, ymin, ymax = array.extent()
+    gx, gy = np.linspace(xmin, xmax, GRID_XY), np.linspace(ymin, ymax, GRID_XY)
+    X, Y, Z = np.meshgrid(gx, gy, GRID_DEPTHS, indexing="ij")
+    grid = _gain_at(np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1), np.asarray(radiance, np.float32),
+                    (xmin, xmax, ymin, ymax), array.half_width).reshape(X.shape)
+    look = RegularGridInterpolator((gx, gy, GRID_DEPTHS), grid, bounds_error=False, fill_value=None)
+    p = np.asarray(points, float).reshape(-1, 3)
+    z = p[:, 2]
+    known = np.isfinite(z) & (z > 0) & np.all(np.isfinite(p[:, :2]), axis=1)
+    pts = np.stack([np.clip(np.where(known, p[:, 0], xmin), xmin, xmax),
+                    np.clip(np.where(known, p[:, 1], ymin), ymin, ymax),
+                    np.clip(np.where(known, z, GRID_DEPTHS[0]), GRID_DEPTHS[0], GRID_DEPTHS[-1])], -1)
+    gain = look(pts)
+    return np.where(known, np.clip(gain, 1.0, MAX_GAIN), 1.0).astype(np.float32)
+
+
 def steep_room_gain(radiance: np.ndarray, array, depth: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(K, V, U) factor for the room's light in each projected light field entry (see the module).
+    """(K, V, U) factor for the room's light in each projected light field entry (see the module): the factor
+    (:func:`room_gain_at`) where the entry's centre ray meets the measured depth.
 
     Args:
         radiance: (h, w, 3) the light probe's map in the lens array's frame (Mitsuba's ``envmap`` convention).
@@ -56,21 +87,9 @@ def steep_room_gain(radiance: np.ndarray, array, depth: np.ndarray, u: np.ndarra
     Returns:
         (K, V, U) float32 in [1, :data:`MAX_GAIN`].
     """
-    from scipy.interpolate import RegularGridInterpolator
-
-    xmin, xmax, ymin, ymax = array.extent()
-    gx, gy = np.linspace(xmin, xmax, GRID_XY), np.linspace(ymin, ymax, GRID_XY)
-    X, Y, Z = np.meshgrid(gx, gy, GRID_DEPTHS, indexing="ij")
-    grid = _gain_at(np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1), np.asarray(radiance, np.float32),
-                    (xmin, xmax, ymin, ymax), array.half_width).reshape(X.shape)
-    look = RegularGridInterpolator((gx, gy, GRID_DEPTHS), grid, bounds_error=False, fill_value=None)
     c = array.centres                                                     # (K, 2)
     uu, vv = np.meshgrid(u, v)                                            # (V, U)
     z = np.asarray(depth, float)
     px = c[:, 0, None, None] + z * uu[None]
     py = c[:, 1, None, None] + z * vv[None]
-    known = np.isfinite(z) & (z > 0)
-    pts = np.stack([np.clip(px, xmin, xmax), np.clip(py, ymin, ymax),
-                    np.clip(np.where(known, z, GRID_DEPTHS[0]), GRID_DEPTHS[0], GRID_DEPTHS[-1])], -1)
-    gain = look(pts.reshape(-1, 3)).reshape(z.shape)
-    return np.where(known, np.clip(gain, 1.0, MAX_GAIN), 1.0).astype(np.float32)
+    return room_gain_at(radiance, array, np.stack([px, py, z], -1)).reshape(z.shape)

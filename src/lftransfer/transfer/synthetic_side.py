@@ -160,7 +160,7 @@ class SyntheticSide:
         self.prefilter: DepthPrefilter | None = None
         self.depth: np.ndarray | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
-        self._gain: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (the probe's map, the depth, the factor)
+        self._gain: tuple | None = None   # (the probe's map, the depth, (the entries' factor, the points'))
 
     @property
     def surface_solve(self) -> SurfaceSolve | None:
@@ -293,20 +293,24 @@ class SyntheticSide:
         set, carrying its measured surface's target where :attr:`surface_solve` is) and S (its view image) under
         ``lights``; ``timer(stage)`` is an optional context manager factory timing "render_lightfield", "prefilter",
         "surface_target", "steep_room" and "render_view". Under a visible light probe's map (the direct frame of a
-        light probe scene) with the prefilter's measured depth, the room behind the synthetic objects is sent
-        stronger for the steep room light the array's panel shades on the real side
-        (:mod:`~lftransfer.transfer.room`)."""
+        light probe scene) with a measured depth (the prefilter's or the solve's), the room behind the synthetic
+        objects is sent stronger for the steep room light the array's panel shades on the real side
+        (:mod:`~lftransfer.transfer.room`; under the solve, its part of the measured points' targets too)."""
         from contextlib import nullcontext
 
         time_it = timer or (lambda _stage: nullcontext())
         ls = self._lightfield(lights, seed, time_it)
         room = [light for light in lights if isinstance(light, EnvironmentLight) and light.visible]
-        if room and self.prefilter is not None:
+        if room and self.depth is not None:
             with time_it("steep_room"):
                 # the room behind the synthetic objects, sent stronger for the steep light the panel shades
-                # (transfer/room.py): only the entries whose landing point was measured change
+                # (transfer/room.py): only the entries whose landing point was measured change; under the solve,
+                # the measured points' targets too
                 behind = self._lightfield([room[0].seen_only()], seed, lambda _stage: nullcontext())
-                ls.data += (self._room_gain(ls)[..., None] - 1.0) * behind.data
+                entries, points = self._room_gain(ls)
+                ls.data += (entries[..., None] - 1.0) * behind.data
+                if isinstance(ls, TargetedLightField) and isinstance(behind, TargetedLightField):
+                    ls.target = ls.target + (points[:, None] - 1.0) * behind.target
         with time_it("render_view"):
             s = self.settings
             # the view is composited over the real one, which shows the room: the render shows the objects only
@@ -341,14 +345,17 @@ class SyntheticSide:
             radiance = self.renderer.render_samples(solve.origins, solve.directions, lights, 1, seed=seed).radiance
             return TargetedLightField(lf.data, lf.array, solve.target(radiance))
 
-    def _room_gain(self, ls: LightField) -> np.ndarray:
-        """(K, V, U) the steep room light's factor for the light probe's map and the measured depth
-        (:func:`~lftransfer.transfer.room.steep_room_gain`), found once per map and depth."""
-        from lftransfer.transfer.room import steep_room_gain
+    def _room_gain(self, ls: LightField) -> tuple[np.ndarray, np.ndarray | None]:
+        """The steep room light's factors for the light probe's map and the measured depth
+        (:mod:`~lftransfer.transfer.room`), found once per map and depth: (K, V, U) per light field entry, and (N,)
+        per point of the solve's measured surface (None without the solve)."""
+        from lftransfer.transfer.room import room_gain_at, steep_room_gain
 
-        depth = self.prefilter.depth
+        depth, solve = self.depth, self.encoder.solve
         if self._gain is None or self._gain[0] is not self.probe or self._gain[1] is not depth:
-            self._gain = (self.probe, depth, steep_room_gain(self.probe, self.model.array, depth, ls.u, ls.v))
+            entries = steep_room_gain(self.probe, self.model.array, depth, ls.u, ls.v)
+            points = None if solve is None else room_gain_at(self.probe, self.model.array, solve.surface.points)
+            self._gain = (self.probe, depth, (entries, points))
         return self._gain[2]
 
 

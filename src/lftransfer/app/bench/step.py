@@ -52,8 +52,10 @@ __all__ = ["BenchOptions", "BenchResult", "PIPELINE_STAGES", "RIG_STAGES", "Spre
 
 Progress = Callable[[str], None]
 RIG_STAGES = ("capture", "capture_view")
-PIPELINE_STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "render_view",
-                   "composite")
+PIPELINE_STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "surface_target",
+                   "steep_room", "render_view", "composite")
+"""The pipeline's stages in the order a frame takes them; a frame takes "prefilter" under ``projection = "depth"``,
+"surface_target" under ``"solve"`` and "steep_room" under a visible light probe's map with either."""
 NOT_WHAT_USERS_RUN = "not what users run: a run uses the calibrated model"
 
 
@@ -150,7 +152,8 @@ class BenchResult:
             it) and "decoupled" (the decoupled run's, or None); each None where nothing moved.
         decoupled: the decoupled loop's run (:class:`~lftransfer.app.bench.decoupled.DecoupledRun`), or None.
         surface_solve: the projection's solve against the measured surface (``projection = "solve"``; part of the
-            ``encode`` stage), or None: ``cold_ms`` and ``cold_iterations`` of the first solve after the depth was
+            ``encode`` stage), or None: ``points`` (the measured points it fits) and ``rays`` (the rays of their
+            target, stage "surface_target"); ``cold_ms`` and ``cold_iterations`` of the first solve after the depth was
             measured (in the warm-up), ``warm_ms`` (the spread over the timed frames' solves) and
             ``warm_iterations`` (median and most); ``last_frame``: the last timed frame's misfit at the measured
             points against the same target solved to convergence and the box light field's
@@ -413,7 +416,7 @@ def _surface_solve(solve, before: int) -> dict | None:
     cold = next((r for r in history if not r.warm), None)
     timed = history[before:] if before < len(history) else []
     warm = [r for r in timed if r.warm]
-    return {"last_frame": solve.last_misfit(),
+    return {"points": solve.points, "rays": solve.rays, "last_frame": solve.last_misfit(),
             "cold_ms": round(1000 * cold.seconds, 1) if cold else None,
             "cold_iterations": cold.iterations if cold else None,
             "warm_ms": asdict(Spread.of([r.seconds for r in warm])) if warm else None,
