@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lftransfer.app.cluster import ClusterSpec
-from lftransfer.app.pipeline import RunOptions, quick_scene
+from lftransfer.runs.cluster import ClusterSpec
+from lftransfer.runs.pipeline import RunOptions
+from lftransfer.scenes import quick_scene
 from lftransfer.settings import Overrides
-from lftransfer.app.sequence import SequenceOptions, render_sequence
+from lftransfer.runs.sequence import SequenceOptions, render_sequence
 from lftransfer.imageio_utils import read_exr
 from lftransfer.scenes import builtin_scene, load_scene
 

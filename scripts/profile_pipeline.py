@@ -96,10 +96,10 @@ def main() -> None:
         source = {"checkout": str(args.src), "commit": subprocess.run(
             ["git", "-C", str(args.src), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()}
 
-    from lftransfer.app.bench.step import transfer_settings
+    from lftransfer.runs.bench.step import transfer_settings
     from lftransfer.app.cli.common import load
-    from lftransfer.app.pipeline import RunOptions
-    from lftransfer.app.rigs import open_rig
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.rigs import open_rig
     from lftransfer.calibration.rig import load_calibration
     from lftransfer.transfer.live import LiveTransfer
 

@@ -1,6 +1,6 @@
 """Run the commands behind docs/results.md and store their JSON, with provenance, in docs/runs/ (``make runs``).
 
-    python scripts/store_runs.py                 # every run of lftransfer.app.results.RUNS (hours on 2 cores)
+    python scripts/store_runs.py                 # every run of lftransfer.reports.results.RUNS (hours on 2 cores)
     python scripts/store_runs.py --quick         # the quarter-resolution runs only (minutes)
     python scripts/store_runs.py demo bench      # these runs (and the runs they need: bench reads demo's calibration)
     python scripts/store_runs.py --list          # the runs, their commands, and which are stored
@@ -30,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from lftransfer.app.results import RUN_BY_NAME, RUNS, Run, load_run  # noqa: E402
+from lftransfer.reports.results import RUN_BY_NAME, RUNS, Run, load_run  # noqa: E402
 
 STORE = ROOT / "docs" / "runs"
 LOGS = ROOT / "out" / "runs" / "logs"

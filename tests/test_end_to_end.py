@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lftransfer.settings import Overrides
-from lftransfer.app.pipeline import RunOptions, run_scene
+from lftransfer.runs.pipeline import RunOptions, run_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 
@@ -57,7 +57,7 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
     calibration. Measured (llvm_ad_rgb, 512 ground-truth samples per pixel, truth seed 4): cross-transfer error
     0.242 calibrated, 0.356 nominal; psnr_objects_db 36.75 and 36.63 dB (the objects' PSNR is dominated by the
     direct light, which the rig model does not touch). The bound sits between them: 0.30, 0.06 from each."""
-    from lftransfer.app.pipeline import quick_scene
+    from lftransfer.scenes import quick_scene
 
     scene = quick_scene(load_scene(builtin_scene("fig4")))
     scene = with_overrides(scene, render={"gt_spp": 512})
@@ -91,7 +91,8 @@ def test_02_calibrated_run_on_a_hidden_rig(variant, tmp_path):
 def test_03_record_then_replay_is_bit_identical(variant, tmp_path):
     """A calibrated run on the simulated rig is recorded; the same run on the recording (``--rig replay:DIR``)
     reproduces its composite bit for bit, and a run that asks for something else gets a clear error."""
-    from lftransfer.app.pipeline import RigSpec, quick_scene
+    from lftransfer.runs.pipeline import RigSpec
+    from lftransfer.scenes import quick_scene
     from lftransfer.imageio_utils import read_exr
     from lftransfer.rig.replay import ReplayError
 
@@ -125,7 +126,7 @@ def test_04_two_point_lights(variant, tmp_path):
     to float rounding); the real view to the sensor's noise."""
     from dataclasses import replace
 
-    from lftransfer.app.pipeline import open_rig
+    from lftransfer.runs.pipeline import open_rig
     from lftransfer.rig.model import nominal_rig
     from lftransfer.transfer.bounce import TransferSettings, run_transfer
 

@@ -10,12 +10,12 @@ import pytest
 from typer.testing import CliRunner
 
 from lftransfer import choices
-from lftransfer.app.pipeline import RunOptions, count_run_steps, run_scene
+from lftransfer.runs.pipeline import RunOptions, count_run_steps, run_scene
 from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene, with_overrides
 from lftransfer.scenes.models import RenderConfig
 from lftransfer.settings import COMPARABLE, Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings
-from tests.app.small import nominal_calibration, write_tiny_scene
+from tests.small import nominal_calibration, write_tiny_scene
 
 
 def test_each_default_is_defined_once():
@@ -28,7 +28,7 @@ def test_each_default_is_defined_once():
     assert render.gt_spp == choices.DEFAULT_GT_SPP and render.aperture_samples == transfer.aperture_samples
     assert transfer.bounces == choices.DEFAULT_BOUNCES and transfer.renderer == choices.DEFAULT_RENDERER
     assert RunOptions().rig_model == choices.DEFAULT_RIG_MODEL
-    from lftransfer.app.study import StudyConfig
+    from lftransfer.runs.study import StudyConfig
 
     study = StudyConfig(scenes=["fig4"], setting=[{"name": "a"}])
     assert study.rig_model == choices.DEFAULT_RIG_MODEL and study.bounces == choices.DEFAULT_BOUNCES
@@ -85,7 +85,7 @@ def tiny(tmp_path):
 
 def _run_counting(scene, out, options, monkeypatch):
     """Run with a progress callback; also keep the settings each transfer of the run received."""
-    import lftransfer.app.pipeline as pipeline
+    import lftransfer.runs.pipeline as pipeline
 
     seen, given = [], []
     real = pipeline.run_transfer

@@ -31,9 +31,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from lftransfer.app.bench.step import transfer_settings
-from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
-from lftransfer.app.sequence import converged_frame, frame_ground_truth
+from lftransfer.runs.bench.step import transfer_settings
+from lftransfer.runs.pipeline import RunOptions, knowledge, open_rig
+from lftransfer.scenes import quick_scene
+from lftransfer.runs.sequence import converged_frame, frame_ground_truth
 from lftransfer.calibration.rig import load_calibration
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.sim.metrics import downsample, evaluate, metric_factor, psnr

@@ -26,8 +26,9 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
-from lftransfer.app.bench.step import transfer_settings
-from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
+from lftransfer.runs.bench.step import transfer_settings
+from lftransfer.runs.pipeline import RunOptions, knowledge, open_rig
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 from lftransfer.sim.ground_truth import render_ground_truth
 from lftransfer.sim.metrics import evaluate
@@ -45,7 +46,7 @@ def transfer(opened, known, settings, variant: str, time_s: float = 0.0, synthet
 
 
 def fig5_shadow(full: bool) -> None:
-    from lftransfer.app.effects import _without
+    from lftransfer.runs.effects import _without
     from lftransfer.composite import composite
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene
 
 HERE = Path(__file__).parent

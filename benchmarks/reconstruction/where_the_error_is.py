@@ -20,8 +20,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from lftransfer.app.bench.step import transfer_settings
-from lftransfer.app.pipeline import RunOptions, knowledge, open_rig, quick_scene
+from lftransfer.runs.bench.step import transfer_settings
+from lftransfer.runs.pipeline import RunOptions, knowledge, open_rig
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer

@@ -17,8 +17,8 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
-from lftransfer.app.bench.step import transfer_settings
-from lftransfer.app.pipeline import RunOptions, knowledge, open_rig
+from lftransfer.runs.bench.step import transfer_settings
+from lftransfer.runs.pipeline import RunOptions, knowledge, open_rig
 from lftransfer.sim.metrics import evaluate
 from lftransfer.transfer.bounce import run_transfer
 from study_scenes import GT_SPP, by_side_cells, study_scenes

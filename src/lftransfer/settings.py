@@ -104,6 +104,8 @@ class RunSettings:
             reconstruction, projection or window unless the area model.
         reruns: the transfer settings of each comparison, resolved as a run asking for that value would be
             (:meth:`rerun`).
+        adjustments: what the resolution changed from what the scene and the overrides asked for, and why, one
+            sentence each (a live loop's projection where the real objects move).
     """
 
     transfer: TransferSettings
@@ -111,6 +113,7 @@ class RunSettings:
     comparisons: tuple[tuple[str, str], ...] = ()
     reruns: tuple[TransferSettings, ...] = ()
     quiet_reference: bool = False
+    adjustments: tuple[str, ...] = ()
 
     @property
     def bounces(self) -> int:
@@ -130,17 +133,21 @@ class RunSettings:
                 "comparisons": [list(c) for c in self.comparisons]}
 
 
-def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_changes) -> RunSettings:
+def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = False,
+                     **transfer_changes) -> RunSettings:
     """The settings a run on ``scene`` uses with ``overrides``.
 
     In order: :mod:`lftransfer.choices`' defaults (through the scene model's defaults), the scene file's
     ``[render]`` and ``[rig] angular_samples`` (``render.lf_spp`` rays per light field entry, else
     ``render.spp``), then ``overrides``; under any lighting model but the area model, reconstruction, projection
-    and window become :data:`lftransfer.choices.NON_AREA`.
+    and window become :data:`lftransfer.choices.NON_AREA`. In a live loop (``live``) the real scene's depth is
+    measured once, so where the scene's real objects move a projection made from it ("depth", "solve") becomes
+    the box light field, and :attr:`RunSettings.adjustments` says so.
 
     Args:
         scene: ``SceneConfig`` (or its synthetic part).
         overrides: what the caller asks for (:class:`Overrides`).
+        live: the settings of a live loop (a live sequence), which measures the real scene's depth once.
         transfer_changes: further :class:`~lftransfer.transfer.bounce.TransferSettings` fields that are not
             choices (``bounce_views``, ``seed``, ``lf_spp``, ...), applied last.
 
@@ -164,6 +171,11 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
         values.update(choices.NON_AREA)
     values.update(transfer_changes)
     transfer = TransferSettings(**values)
+    adjustments = []
+    if live and transfer.prefilters and any(o.moves for o in getattr(scene, "real", ())):
+        adjustments.append(f"projection: the box light field, not the {transfer.projection} projection the scene "
+                           "asks for: the real objects move, and the live loop measures the depth once")
+        transfer = replace(transfer, projection="box")
     comparisons = []
     asked = dict(overrides.compare)
     for name in COMPARABLE:
@@ -177,4 +189,4 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), **transfer_chang
                    for name, value in comparisons)
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
-                       quiet_reference=bool(overrides.quiet_reference))
+                       quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments))

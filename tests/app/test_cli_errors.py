@@ -13,8 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from lftransfer.app.cli import app
-from tests.app.small import nominal_calibration, tiny_scene_text, write_tiny_scene
-from tests.app.test_paths import read_only_dir  # noqa: F401  (fixture)
+from tests.small import nominal_calibration, tiny_scene_text, write_tiny_scene
+from tests.runs.test_paths import read_only_dir  # noqa: F401  (fixture)
 
 runner = CliRunner()
 
@@ -30,9 +30,9 @@ def no_work(monkeypatch):
         raise WorkStarted()
 
     monkeypatch.setattr("lftransfer.app.cli.run._run", started)
-    monkeypatch.setattr("lftransfer.app.pipeline.open_rig", started)
-    monkeypatch.setattr("lftransfer.app.rigs.open_rig", started)
-    monkeypatch.setattr("lftransfer.app.sequence.open_rig", started)
+    monkeypatch.setattr("lftransfer.runs.pipeline.open_rig", started)
+    monkeypatch.setattr("lftransfer.runs.rigs.open_rig", started)
+    monkeypatch.setattr("lftransfer.runs.sequence.open_rig", started)
 
 
 @pytest.fixture
@@ -229,7 +229,7 @@ def test_15_a_calibration_that_cannot_measure_the_rig(scene, tmp_path, monkeypat
     def blind(*args, **kwargs):
         raise PoseError("the printed 7 x 5 chessboard was not found in the view camera image")
 
-    monkeypatch.setattr("lftransfer.app.rigs.calibrate_rig", blind)
+    monkeypatch.setattr("lftransfer.runs.rigs.calibrate_rig", blind)
     line = _one_line_error(_invoke(["calibrate", scene, "--out", tmp_path / "cal.json"]), code=1, progress=True)
     assert "calibration failed: the printed 7 x 5 chessboard was not found" in line
     assert "view camera 48 x 36" in line and "--rig-model nominal" in line

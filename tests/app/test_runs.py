@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from lftransfer.app.cli import app
 from lftransfer.scenes import load_scene
-from tests.app.small import nominal_calibration, write_tiny_scene
+from tests.small import nominal_calibration, write_tiny_scene
 
 runner = CliRunner()
 
@@ -137,7 +137,7 @@ def test_05_demo_reports_its_negative_control(tmp_path, monkeypatch):
 def test_06_negative_control_is_skipped_with_a_reason_where_it_cannot_tell_anything():
     from pathlib import Path
 
-    from lftransfer.app.pipeline import RigSpec, RunOptions, negative_control_skipped
+    from lftransfer.runs.pipeline import RigSpec, RunOptions, negative_control_skipped
 
     assert negative_control_skipped(RunOptions(negative_control=True), 2) is None
     assert negative_control_skipped(RunOptions(negative_control=True, rig_model="oracle"), 2) is None

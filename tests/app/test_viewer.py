@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

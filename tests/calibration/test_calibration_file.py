@@ -6,7 +6,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import re
 
 import numpy as np
 import pytest
@@ -16,7 +15,7 @@ from hypothesis import strategies as st
 from lftransfer.calibration.light import LightFit
 from lftransfer.calibration.rig import CalibrationFileError, load_calibration
 from lftransfer.scenes import load_scene
-from tests.app.small import nominal_calibration, write_tiny_scene
+from tests.small import nominal_calibration, write_tiny_scene
 from tests.mutations import mutated as mutated_file
 
 

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from lftransfer.calibration.distortion import calibrate_distortion, collimator_directions, fit_distortion
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.rig.model import nominal_rig
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig

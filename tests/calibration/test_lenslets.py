@@ -282,7 +282,7 @@ def test_10_simulated_rig(variant):
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 
     full = load_scene(builtin_scene("fig4"))
-    # The devices at a quarter size, as ``lftransfer.pipeline.quick_scene`` makes them (LF camera 512 x 384,
+    # The devices at a quarter size, as ``lftransfer.scenes.quick_scene`` makes them (LF camera 512 x 384,
     # 10 x 12 hex lenslets about 39 px apart); built here to keep this test off the pipeline's imports.
     scene = with_overrides(full, rig={"lf_camera": [v // 4 for v in full.rig.lf_camera],
                                       "projector": [v // 4 for v in full.rig.projector], "angular_samples": 16})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import (LIGHT_BOARDS, LightError, black_share, board_samples, calibrate_light,
                                           count_light_messages, fit_light, light_board_poses)
 from lftransfer.calibration.pose import chart_pose

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import (LIGHT_SPP, MIN_PIXELS, MIN_SQUARE_PX, LightError, board_samples,
                                           light_board_poses)
 from lftransfer.calibration.pose import CORNER_WINDOW_PX, chart_pose

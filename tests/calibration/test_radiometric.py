@@ -11,7 +11,7 @@ import pytest
 from lftransfer.calibration.radiometric import (Radiometry, RadiometryError, VignettingPolynomial,
                                                 calibrate_radiometry, response_error)
 from lftransfer.lightfield import LightField, ResponseCurve
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.rig.model import nominal_rig
 from lftransfer.rig.requests import FocalPlaneDiffuser, LFCapture
 from lftransfer.sim.rig import SimRig

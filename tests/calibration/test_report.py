@@ -12,12 +12,12 @@ import cv2
 import numpy as np
 import pytest
 
-from lftransfer.app.calibration_report import (REPORT_NAME, SECTIONS, render_calibration_report,
+from lftransfer.reports.calibration_report import (REPORT_NAME, SECTIONS, render_calibration_report,
                                                write_calibration_report)
-from lftransfer.app.templating import environment
+from lftransfer.reports.templating import environment
 from lftransfer.calibration.rig import calibrate_rig, load_calibration
 from lftransfer.calibration.targets import TARGETS
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.sim.rig import SimRig
 from lftransfer.sim.truth import perturbed_rig
 from lftransfer.scenes import builtin_scene, load_scene

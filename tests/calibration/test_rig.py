@@ -9,7 +9,7 @@ import pytest
 
 from lftransfer.calibration.targets import target
 from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import LIGHT_BOARDS
 from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS
 from lftransfer.rig.requests import RealScene

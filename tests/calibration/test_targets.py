@@ -28,8 +28,8 @@ def test_02_met_is_on_the_magnitude_and_never_nan():
 
 
 def test_03_the_report_and_the_seed_table_read_the_same_targets():
-    from lftransfer.app.bench.calibration import TARGETS as SEED_TARGETS
-    from lftransfer.app.calibration_report import TARGETS as REPORT_TARGETS
+    from lftransfer.runs.bench.calibration import TARGETS as SEED_TARGETS
+    from lftransfer.reports.calibration_report import TARGETS as REPORT_TARGETS
 
     assert {k: v[0] for k, v in SEED_TARGETS.items()} == {t.key: t.bound for t in TARGETS}
     assert {k: v.bound for k, v in REPORT_TARGETS.items()} == {t.key: t.bound for t in TARGETS}

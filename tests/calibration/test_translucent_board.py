@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.calibration.pose import (BOARD_CLEARANCE_M, CHART, POSE_DEPTHS, PoseError, board_pattern, chart_pose,
                                          panel_shift, sees_lit_side)
 from lftransfer.optics.geometry import project, rectangle_to_world

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import quick_scene
+from lftransfer.scenes import quick_scene
 from lftransfer.calibration.pose import board_pattern
 from lftransfer.optics.geometry import pixel_rays
 from lftransfer.real_depth import ViewDepth, decode_structured_light, fuse_depths

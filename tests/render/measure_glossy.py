@@ -93,7 +93,7 @@ def timing(material: dict, frames: int = 5, quick: bool = True) -> dict:
     """Median seconds of one live frame (relight for a new light field, light field out, view) on the Fig. 4
     scene at quarter (``quick``) or full resolution with its synthetic cube made of ``material``, fast and
     exact."""
-    from lftransfer.app.pipeline import quick_scene
+    from lftransfer.scenes import quick_scene
     from lftransfer.rig.model import nominal_rig
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lftransfer.scenes import SceneConfig, SceneError, builtin_scene, load_scene
-from tests.app.small import tiny_scene_text
+from tests.small import tiny_scene_text
 from tests.mutations import mutated
 
 EXAMPLES = int(os.environ.get("LFT_HYPOTHESIS_EXAMPLES", 60))

@@ -60,7 +60,7 @@ def test_04_render_ground_truth_rerenders_a_corrupt_entry_with_a_warning(variant
     repaired entry."""
     from lftransfer.scenes import load_scene, with_overrides
     from lftransfer.sim.ground_truth import _inputs_hash, render_ground_truth
-    from tests.app.small import write_tiny_scene
+    from tests.small import write_tiny_scene
 
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(16, 12)))
     scene = with_overrides(scene, render={"gt_spp": 2})

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.app.small import write_tiny_scene
+from tests.small import write_tiny_scene
 
 
 def tiny_run(tmp_path):

@@ -8,7 +8,8 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from lftransfer import backend, choices
-from lftransfer.app.pipeline import RunOptions, open_rig, quick_scene
+from lftransfer.runs.pipeline import RunOptions, open_rig
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer

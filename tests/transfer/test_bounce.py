@@ -165,7 +165,7 @@ def test_05_zero_bounces_project_nothing(variant, tmp_path, bounces):
     from lftransfer.rig.model import nominal_rig
     from lftransfer.scenes import load_scene
     from lftransfer.transfer.bounce import TransferSettings, run_transfer
-    from tests.app.small import write_tiny_scene
+    from tests.small import write_tiny_scene
 
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24)))
     rig = _SpyRig(scene)
@@ -191,7 +191,7 @@ def test_06_depth_projection_measures_the_real_scene_and_prefilters(variant, tmp
     from lftransfer.scenes import load_scene
     from lftransfer.sim.rig import SimRig
     from lftransfer.transfer.bounce import TransferSettings, run_transfer
-    from tests.app.small import write_tiny_scene
+    from tests.small import write_tiny_scene
 
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24)))
     results = {}

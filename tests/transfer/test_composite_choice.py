@@ -10,7 +10,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from lftransfer.app.pipeline import RunOptions, open_rig, quick_scene
+from lftransfer.runs.pipeline import RunOptions, open_rig
+
+from lftransfer.scenes import quick_scene
 from lftransfer.composite import composite
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.settings import Overrides, resolve_settings

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lftransfer.app.pipeline import RunOptions, open_rig, quick_scene
+from lftransfer.runs.pipeline import RunOptions, open_rig
+
+from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer

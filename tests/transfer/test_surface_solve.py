@@ -25,7 +25,7 @@ EDGE_X = 0.01       # m: its sharp edge (a shadow's), x = EDGE_X on that plane
 
 @pytest.fixture(scope="module")
 def encoder():
-    from lftransfer.app.pipeline import quick_scene
+    from lftransfer.scenes import quick_scene
 
     rig = quick_scene(load_scene(builtin_scene("fig4"))).rig       # 10 x 12 lenslets, projector 256 x 192
     return nominal_rig(rig).encoder(U, U, above_black=True)

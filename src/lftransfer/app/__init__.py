@@ -1,4 +1,6 @@
-"""The faces of lftransfer: the ``lft`` command, whole runs on a chosen rig, reports and benchmarks.
+"""The faces of lftransfer: the ``lft`` command (``cli``), the browser page (``viewer``) and the terminal's progress
+and tables (``terminal``).
 
-This is the only layer that imports both the core and the simulator (``lftransfer.sim``).
+They parse what a user types, call the use cases (:mod:`lftransfer.runs`) and show what those return; they compute
+nothing of their own.
 """

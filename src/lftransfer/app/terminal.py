@@ -67,8 +67,8 @@ def say(message: str) -> None:
 
 def input_error_types() -> tuple[type, ...]:
     """Exceptions that mean bad input: the project's file and option errors (exit code 2)."""
-    from lftransfer.app.memory import MemoryLimitError
-    from lftransfer.app.paths import OutputPathError
+    from lftransfer.runs.memory import MemoryLimitError
+    from lftransfer.runs.paths import OutputPathError
     from lftransfer.calibration.images import CalibrationImageError
     from lftransfer.calibration.intrinsics import IntrinsicsError
     from lftransfer.calibration.rig import CalibrationFileError

@@ -74,7 +74,7 @@ CHUNK = 200_000                # candidate points per batch (memory: CHUNK x len
 def structured_light_patterns(model, U: int, V: int, radiance: float,
                               sets: tuple[FringeSet, ...] = FRINGE_SETS) -> list[LightField]:
     """The light fields of every fringe set, :data:`SHIFTS` phase steps each (set-major), in the model frame."""
-    from lftransfer.calibration.pose import BoardPattern, fringe_lightfields
+    from lftransfer.lightfield.fringes import BoardPattern, fringe_lightfields
 
     out: list[LightField] = []
     drawn: dict[tuple[float, float], list[LightField]] = {}

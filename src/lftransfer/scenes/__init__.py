@@ -10,6 +10,7 @@ Example:
 from lftransfer.scenes.assets import read_mesh
 from lftransfer.scenes.builtins import builtin_scene, builtin_scenes
 from lftransfer.scenes.loader import SceneError, load_scene, with_overrides
+from lftransfer.scenes.resolution import QUICK_FACTOR, check_resolution, quick_scene
 from lftransfer.scenes.models import (
     DiffuseMaterial,
     EffectConfig,
@@ -26,6 +27,7 @@ from lftransfer.scenes.objects import ObjectConfig
 from lftransfer.scenes.scene import SceneConfig, SyntheticScene, check_synthetic
 
 __all__ = [
+    "QUICK_FACTOR",
     "DiffuseMaterial",
     "EffectConfig",
     "EmitterMaterial",
@@ -42,8 +44,10 @@ __all__ = [
     "ViewConfig",
     "builtin_scene",
     "builtin_scenes",
+    "check_resolution",
     "check_synthetic",
     "load_scene",
+    "quick_scene",
     "read_mesh",
     "with_overrides",
 ]

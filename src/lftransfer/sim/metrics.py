@@ -496,7 +496,7 @@ def probe_errors(probe, truth: np.ndarray, world_to_array: np.ndarray) -> dict:
     """A light probe's map against the true room (docs/architecture.md, "The light probe").
 
     Args:
-        probe: ``lftransfer.calibration.probe.ProbeMeasurement`` (its maps in the lens array's frame as the
+        probe: ``lftransfer.real_depth.probe.ProbeMeasurement`` (its maps in the lens array's frame as the
             pipeline knows it).
         truth: (H, W, 3) the room's true radiance map, world frame (any size; read along the probe's directions as
             Mitsuba reads it).
@@ -504,12 +504,12 @@ def probe_errors(probe, truth: np.ndarray, world_to_array: np.ndarray) -> dict:
 
     Returns:
         JSON: ``brightest_direction_error_deg`` (the measured map's brightest spot against the true map's, each
-        :meth:`~lftransfer.calibration.probe.EnvironmentMap.peak_direction`),
+        :meth:`~lftransfer.real_depth.probe.EnvironmentMap.peak_direction`),
         ``power_ratio`` (measured / true radiance integrated over the measured directions, per channel, then
         their mean), ``texel_rel_error_median`` (the measured texels away from the brightest 1 %, where a texel's
         share of a sun's edge dominates), ``measured_share`` (of the sphere, by solid angle).
     """
-    from lftransfer.calibration.probe import EnvironmentMap
+    from lftransfer.real_depth.probe import EnvironmentMap
     from lftransfer.optics.geometry import env_directions
     from lftransfer.render.lights import EnvironmentLight
 

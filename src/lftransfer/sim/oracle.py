@@ -75,7 +75,7 @@ class Oracle:
                               progress=progress)
 
     def probe_errors(self, probe, world_to_array) -> dict | None:
-        """How well a light probe's measurement (:class:`~lftransfer.calibration.probe.ProbeMeasurement`, in the
+        """How well a light probe's measurement (:class:`~lftransfer.real_depth.probe.ProbeMeasurement`, in the
         frame ``world_to_array`` (4, 4) takes for the array's) shows the room as it is
         (:func:`lftransfer.sim.metrics.probe_errors`); None where the world has no room light."""
         from lftransfer.sim.metrics import probe_errors

@@ -12,7 +12,7 @@ of two samples each (Mitsuba repeats a render bit for bit only then).
 
 A later round may be split into ``parts`` renders of its samples with seeds of their own, averaged in one after
 another in their order: each part is a job (:data:`Job`) that any process can render (:func:`render_jobs` here,
-or the workers of a Ray cluster, ``lftransfer.app.reference_pool``), and the result depends on the number of parts
+or the workers of a Ray cluster, ``lftransfer.runs.reference_pool``), and the result depends on the number of parts
 only, never on where or in which order they ran.
 """
 

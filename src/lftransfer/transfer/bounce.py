@@ -23,7 +23,7 @@ import numpy as np
 
 from lftransfer import choices
 from lftransfer.backend import bound_blas
-from lftransfer.calibration.probe import ProbeMeasurement
+from lftransfer.real_depth.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light, view_depth_from_lightfield
@@ -62,7 +62,7 @@ class TransferSettings:
             projection measures it, carried into the view camera; :mod:`lftransfer.real_depth`).
         direct_light: what lights the synthetic objects directly: "point" (the point lights' virtual twins; on a
             light probe scene one point light at the probe's brightest direction) or "probe" (the environment the
-            light probe shows; :mod:`lftransfer.calibration.probe`).
+            light probe shows; :mod:`lftransfer.real_depth.probe`).
         lf_spp: rays per light field sample when rendering the outgoing light field.
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
@@ -88,6 +88,13 @@ class TransferSettings:
     bounce_views: bool = True
     renderer: choices.Renderer = choices.DEFAULT_RENDERER
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        # final as built: under any lighting model but the area model, reconstruction, projection and window are
+        # the lenslets' own (choices.NON_AREA), whoever builds the settings
+        if self.lighting_model != "area":
+            for name, value in choices.NON_AREA.items():
+                object.__setattr__(self, name, value)
 
     @property
     def measures_depth(self) -> bool:
@@ -289,10 +296,6 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     side = SyntheticSide(model, scene, settings, time_s=time_s)
     decoder, encoder = side.decoder, side.encoder
     black = rig.info.black()
-
-    def render_synthetic(lights, seed: int) -> tuple[LightField, ViewImage]:
-        return side.render(lights, seed, timer)
-
     if scene.probe is not None:
         if probe is None:
             step("photograph the light probe (the mirror ball)")
@@ -311,76 +314,106 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
-    structured = None
-    if not settings.measures_depth:
-        depth = None                        # nothing needs it: the result carries no depth
-    else:
-        if depth is None and settings.composite == "depth":
-            step("measure the real scene's depth in the view camera (structured light)")
-            with timer("structured_light"):
-                structured = measure_structured_light(rig, model, scene.view, encoder, settings.angular_samples)
-        else:
-            step("the real scene's depth in the view camera: from the LF camera alone")
-        if depth is None:
-            step("measure the real scene's depth (projector white)")
-            with timer("measure_depth"):
-                depth = measure_depth(rig, decoder, encoder, model.projector.max_radiance, settings.angular_samples,
-                                      settings.angular_samples, r0)
-        if settings.prefilters:
-            side.set_depth(depth)
+    depth, structured = _real_depth(rig, model, scene, settings, side, r0, depth, step, timer)
     step("render synthetic direct")
-    ls0, s0 = render_synthetic(side.direct_lights, settings.seed)
+    ls0, s0 = side.render(side.direct_lights, settings.seed, timer)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
     step("direct done")
 
     for n in range(1, settings.bounces + 1):
-        prev = bounces[n - 1]
-        # Real side: project g Ls_{n-1}, capture, difference.
-        gain = projector_gain(prev.synthetic_lf, model.projector.max_radiance, settings.projector_fill)
-        step(f"bounce {n}: project Ls_{n - 1} (gain {gain:.3g}), capture the real response")
-        rn = real_response(rig, decoder, encoder, prev.synthetic_lf, r0, gain, timer=timer)
-        real_view_n = None
-        if settings.bounce_views:
-            step(f"bounce {n}: capture real view")
-            with timer("capture_view"):
-                real_view_n = (rig.capture_view().radiance - real_view_direct) / gain
-        # Synthetic side: lit by R_{n-1} only.
-        step(f"bounce {n}: render synthetic lit by R_{n - 1}")
-        with timer("incident_light"):
-            incident = side.incident_light(prev.real_lf, settings.seed + n)
-        lsn, sn = render_synthetic([incident], settings.seed + 1000 * n)
-        bounces.append(Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain))
-        step(f"bounce {n} done")
+        bounces.append(_bounce(n, bounces[n - 1], rig, model, settings, side, r0, real_view_direct, step, timer))
 
     # Final frame: the projector shows Ls_0 + ... + Ls_{N-1}, an empty sum for N = 0.
     step("final frame: project the sum of the synthetic light fields")
     projected = final_projection(bounces)
-    if settings.bounces == 0:
-        # Nothing crosses to the real side: the final frame is the direct frame, projector black.
-        pattern, real_view, clipped = black, real_view_direct, 0.0
-    else:
-        with timer("encode"):
-            pattern = encoder(projected)
-        lit = projected.data[projected.data > 0]
-        clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
-        rig.project(pattern)
-        with timer("capture_view"):
-            real_view = rig.capture_view().radiance
-        rig.project(black)
+    pattern, real_view, clipped = _final_frame(rig, model, settings, encoder, projected, real_view_direct, timer)
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
-    given, view_depth, sources = view_depth, None, ()
-    if settings.composite == "depth" and given is not None:
-        view_depth, sources = given, (given,)
-    elif settings.composite == "depth":
-        with timer("view_depth"):
-            view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
-            sources = (view_depth,) if structured is None else (view_depth, structured)
-            view_depth = fuse_depths(*sources) if structured is not None else view_depth
+    view_depth, sources = _view_depth(model, scene, settings, depth, structured, view_depth, r0, timer)
     return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
                           clipped_fraction=clipped, captured_raw=raw0,
                           saturated_fraction=float(np.mean(raw0 >= 2 ** rig.info.lf_camera_bits - 1)),
                           timings_s=timer.totals, depth=depth, view_depth=view_depth,
                           depth_sources=sources, probe=probe)
+
+
+def _real_depth(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings, side: SyntheticSide,
+                r0: LightField, depth: np.ndarray | None, step: Progress, timer: StageTimer):
+    """The real scene's depth where the transfer needs it (the projection from a measured depth, the depth
+    composite): ``depth`` as given, else measured with one extra frame (projector white); for the depth composite
+    without a given depth also the view camera's by structured light. Returns (depth or None, the structured-light
+    :class:`~lftransfer.real_depth.ViewDepth` or None); the synthetic side projects from the depth."""
+    structured = None
+    if not settings.measures_depth:
+        return None, None                   # nothing needs it: the result carries no depth
+    if depth is None and settings.composite == "depth":
+        step("measure the real scene's depth in the view camera (structured light)")
+        with timer("structured_light"):
+            structured = measure_structured_light(rig, model, scene.view, side.encoder, settings.angular_samples)
+    else:
+        step("the real scene's depth in the view camera: from the LF camera alone")
+    if depth is None:
+        step("measure the real scene's depth (projector white)")
+        with timer("measure_depth"):
+            depth = measure_depth(rig, side.decoder, side.encoder, model.projector.max_radiance,
+                                  settings.angular_samples, settings.angular_samples, r0)
+    if settings.prefilters:
+        side.set_depth(depth)
+    return depth, structured
+
+
+def _bounce(n: int, prev: Bounce, rig: Rig, model: RigModel, settings: TransferSettings, side: SyntheticSide,
+            r0: LightField, real_view_direct: np.ndarray, step: Progress, timer: StageTimer) -> Bounce:
+    """Bounce n: the real side answers g Ls_{n-1} projected (R_n, and its view where asked for); the synthetic side
+    is lit by R_{n-1} only (Ls_n, S_n)."""
+    gain = projector_gain(prev.synthetic_lf, model.projector.max_radiance, settings.projector_fill)
+    step(f"bounce {n}: project Ls_{n - 1} (gain {gain:.3g}), capture the real response")
+    rn = real_response(rig, side.decoder, side.encoder, prev.synthetic_lf, r0, gain, timer=timer)
+    real_view_n = None
+    if settings.bounce_views:
+        step(f"bounce {n}: capture real view")
+        with timer("capture_view"):
+            real_view_n = (rig.capture_view().radiance - real_view_direct) / gain
+    step(f"bounce {n}: render synthetic lit by R_{n - 1}")
+    with timer("incident_light"):
+        incident = side.incident_light(prev.real_lf, settings.seed + n)
+    lsn, sn = side.render([incident], settings.seed + 1000 * n, timer)
+    bounce = Bounce(n, rn, lsn, sn, real_view=real_view_n, projector_gain=gain)
+    step(f"bounce {n} done")
+    return bounce
+
+
+def _final_frame(rig: Rig, model: RigModel, settings: TransferSettings, encoder, projected: LightField,
+                 real_view_direct: np.ndarray, timer: StageTimer) -> tuple[np.ndarray, np.ndarray, float]:
+    """The final frame's projector image, real view and the share of projected light beyond the projector's
+    range. With no bounce nothing crosses to the real side: the direct frame, projector black."""
+    black = rig.info.black()
+    if settings.bounces == 0:
+        return black, real_view_direct, 0.0
+    with timer("encode"):
+        pattern = encoder(projected)
+    lit = projected.data[projected.data > 0]
+    clipped = float(np.mean(lit > model.projector.max_radiance)) if lit.size else 0.0
+    rig.project(pattern)
+    with timer("capture_view"):
+        real_view = rig.capture_view().radiance
+    rig.project(black)
+    return pattern, real_view, clipped
+
+
+def _view_depth(model: RigModel, scene: SyntheticScene, settings: TransferSettings, depth, structured,
+                given: ViewDepth | None, r0: LightField, timer: StageTimer):
+    """The real scene's depth in the view camera for the depth composite and what it was made of: the one given,
+    else the LF camera's carried into the view, fused with structured light's where measured; (None, ()) for
+    the over composite."""
+    if settings.composite != "depth":
+        return None, ()
+    if given is not None:
+        return given, (given,)
+    with timer("view_depth"):
+        view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
+        if structured is None:
+            return view_depth, (view_depth,)
+        return fuse_depths(view_depth, structured), (view_depth, structured)

@@ -135,7 +135,7 @@ class LiveTransfer:
             docstring). A decoupled loop holds a thread: :meth:`close` it (or use it in a ``with``).
         depth_every_frame: measure the real scene's depth at every step, not once (two extra frames each), for
             the depth composite of real objects that move.
-        probe: on a scene lit by a light probe, its :class:`~lftransfer.calibration.probe.ProbeMeasurement` made
+        probe: on a scene lit by a light probe, its :class:`~lftransfer.real_depth.probe.ProbeMeasurement` made
             earlier; None: photographed when the loop is made.
 
     Example:

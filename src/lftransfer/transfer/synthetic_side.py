@@ -173,9 +173,9 @@ class SyntheticSide:
 
     def measure_probe(self, rig):
         """Photograph the scene's light probe through ``rig`` and recover the room's light
-        (:func:`~lftransfer.calibration.probe.photograph_probe`, the ball and view camera as this side knows them);
-        returns the :class:`~lftransfer.calibration.probe.ProbeMeasurement`. The scene must have a probe."""
-        from lftransfer.calibration.probe import MirrorBall, photograph_probe
+        (:func:`~lftransfer.real_depth.probe.photograph_probe`, the ball and view camera as this side knows them);
+        returns the :class:`~lftransfer.real_depth.probe.ProbeMeasurement`. The scene must have a probe."""
+        from lftransfer.real_depth.probe import MirrorBall, photograph_probe
 
         if self.scene.probe is None:
             raise ValueError("measure_probe: the scene has no light probe ([light] kind = 'probe')")
@@ -247,7 +247,7 @@ class SyntheticSide:
 
     def set_probe(self, radiance: np.ndarray | None) -> None:
         """Light the synthetic objects by the light probe's map ((h, w, 3) radiance in the lens array's frame,
-        :class:`~lftransfer.calibration.probe.ProbeMeasurement`), as the settings' ``direct_light`` says: the map
+        :class:`~lftransfer.real_depth.probe.ProbeMeasurement`), as the settings' ``direct_light`` says: the map
         itself (``"probe"``; the array blocks the directions its lenslets record, whose light arrives through it as
         the captured light field, and lenslet cameras see the map behind the objects) or one point light at its
         brightest direction (``"point"``, :func:`probe_point_light`)."""
@@ -267,14 +267,16 @@ class SyntheticSide:
         self.direct_lights = [*self.point_lights, *probe] \
             + ([EmitterLight(seed=self.settings.seed)] if posed.emitters else [])
 
-    def incident_light(self, real_lf: LightField, seed: int) -> LightFieldLight:
+    def incident_light(self, real_lf: LightField, seed: int, aperture_samples: int | None = None) -> LightFieldLight:
         """The captured real light field as a light of the synthetic half-space (the settings' lighting model
-        reconstruction and window; the steep light checked against the measured depth where there is one)."""
+        reconstruction and window; the steep light checked against the measured depth where there is one).
+        ``aperture_samples``: the area model's aperture points per shading point, None: the settings' (a denser
+        reference, the bench's exact path, asks for more)."""
         s = self.settings
-        area = s.lighting_model == "area"
-        return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=s.aperture_samples,
-                               seed=seed, reconstruction=s.reconstruction if area else "box",
-                               window=s.window if area else "cut", steep=self.steep_rays(real_lf))
+        samples = s.aperture_samples if aperture_samples is None or s.lighting_model != "area" else aperture_samples
+        return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=int(samples),
+                               seed=seed, reconstruction=s.reconstruction, window=s.window,
+                               steep=self.steep_rays(real_lf))
 
     def steep_rays(self, real_lf: LightField) -> SteepRays | None:
         """Which samples beyond the lenslets' window the synthetic side reads from their edge
@@ -368,7 +370,7 @@ def probe_point_light(radiance: np.ndarray, posed: SyntheticScene) -> PointLight
     brightest direction, :data:`PROBE_POINT_DISTANCE_M` from the centre of the synthetic objects' boxes, with the
     intensity that gives a surface facing it there the irradiance the whole map gives it (W m^-2 times the
     distance squared). ``radiance``: (h, w, 3) in the lens array's frame; ``posed``: the scene in that frame."""
-    from lftransfer.calibration.probe import EnvironmentMap
+    from lftransfer.real_depth.probe import EnvironmentMap
 
     full = EnvironmentMap(np.asarray(radiance, np.float32), np.ones(np.shape(radiance)[:2], bool))
     d = full.brightest_direction()

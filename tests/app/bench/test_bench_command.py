@@ -6,11 +6,11 @@ import json
 
 from typer.testing import CliRunner
 
-from lftransfer.app import pipeline, rigs
+from lftransfer.runs import rigs
 from lftransfer.app.cli import app
 from lftransfer.scenes import load_scene
 from lftransfer.transfer.live import LiveTransfer
-from tests.app.small import nominal_calibration, write_tiny_scene
+from tests.small import nominal_calibration, write_tiny_scene
 
 runner = CliRunner()
 

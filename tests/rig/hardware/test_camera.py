@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from lftransfer.rig.base import RigError
-from lftransfer.rig.hardware.camera import GenICamCamera, OpenCVCamera, open_camera
+from lftransfer.rig.hardware.camera import GenICamCamera, OpenCVCamera
+from lftransfer.rig.hardware.cameras import open_camera
 from lftransfer.rig.hardware.config import CameraConfig
 
 SLACK_S = 1.5        # a bound on a hang, not a speed benchmark

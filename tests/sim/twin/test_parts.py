@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lftransfer.rig.base import RigError
-from lftransfer.rig.hardware.camera import StreamCamera
+from lftransfer.rig.hardware.stream import StreamCamera
 from lftransfer.rig.hardware.config import RigFileError, parse_rig_file
 from lftransfer.rig.hardware.operator import arranger
 from lftransfer.rig.requests import Board, RealScene

@@ -16,12 +16,11 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.app.small import write_tiny_scene
+from tests.small import write_tiny_scene
 
 from .conftest import start_twin
 

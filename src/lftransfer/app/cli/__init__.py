@@ -2,7 +2,7 @@
 
 Everything that can be checked before the work starts is checked first: options and their ranges, the scene
 file, a calibration file, the output paths, the ground-truth cache folder and the memory the run needs
-(:mod:`lftransfer.app.paths`, :mod:`lftransfer.app.memory`). Errors are one line on stderr with exit code 2 for
+(:mod:`lftransfer.runs.paths`, :mod:`lftransfer.runs.memory`). Errors are one line on stderr with exit code 2 for
 bad input (:mod:`lftransfer.app.terminal`); ``lft --debug ...`` shows tracebacks.
 
 One module per command group: :mod:`~lftransfer.app.cli.run` (demo, run, record),

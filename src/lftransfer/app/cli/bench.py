@@ -21,88 +21,89 @@ from lftransfer.settings import Overrides
 __all__ = ["register"]
 
 
+def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE.toml",
+                                                       help="Scene TOML (default: Fig. 4).")] = None,
+          json_out: Annotated[Optional[Path], option("--json", metavar="FILE",
+                                                     help="Write the results and the settings used as JSON "
+                                                          "here.")] = None,
+          iterations: Annotated[int, option("--iterations", min=1, metavar="N",
+                                            help="Timed frames of the live step (>= 1), after two warm-up "
+                                                 "frames (the first compiles the kernels, the second builds "
+                                                 "the culling tiles).")] = 10,
+          calibration: Calibration = None,
+          rig_model: Annotated[str, option(
+              "--rig-model", metavar=metavar(choices.RigModel),
+              callback=choice_check("--rig-model", choices.RigModel),
+              help="The rig model the step uses: calibrated (what a run uses, default: the bench calibrates "
+                   "the simulated rig first) | nominal | oracle (neither is what users run; the output says "
+                   "so).")] = choices.DEFAULT_RIG_MODEL,
+          truth: TruthArgs = None, lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
+          projection: Projection = None, renderer: Renderer = choices.DEFAULT_RENDERER,
+          accuracy: Annotated[bool, option("--accuracy/--no-accuracy", metavar="", help=(
+              "Also render the last frame with the exact path and report the fast path's PSNR against it."))
+          ] = True,
+          peer: Annotated[bool, option("--peer/--no-peer", metavar="", help=(
+              "Also time Mitsuba's path integrator on the light field job (point model), at equal RMSE."))
+          ] = True,
+          quick: Quick = False,
+          live: Annotated[bool, flag("--live", (
+              "Time the step with a synthetic object moving (a still scene's first synthetic object slides 2 cm "
+              "and turns 20 degrees and back over the frames; an animated scene moves as its keyframes "
+              "say), and then run the decoupled loop as lft live does: frames per second with the capture "
+              "beside them, capture rate and age, motion-to-composite latency."))] = False,
+          sync: Annotated[bool, flag("--sync", "With --live: time the synchronous loop only (no decoupled "
+                                               "run).")] = False,
+          max_memory: MaxMemory = None) -> None:
+    """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and
+    the scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the
+    step's rays once."""
+    from lftransfer.runs.bench.step import BenchOptions, count_bench_steps, run_bench, with_moving_object
+    from lftransfer.reports.report import write_json
+    from lftransfer.runs.rigs import CalibrationFailedError
+    from lftransfer.app.terminal import say
+    from lftransfer.rig.base import RigError
+
+    scene = load(scene_file, quick)
+    if live:
+        try:
+            scene = with_moving_object(scene, iterations + 1)
+        except ValueError as exc:
+            fail(str(exc))
+    rig_opts = rig_options(scene, truth, RigArgs(rig="sim", rig_model=rig_model, calibration=calibration))
+    calibrates = calibration is None and rig_model == "calibrated"
+    check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
+                      max_memory=max_memory)
+    settings = Overrides(lighting_model=lighting_model, reconstruction=reconstruction, projection=projection,
+                         renderer=renderer)
+    options = BenchOptions(iterations=iterations, settings=settings, truth_seed=rig_opts["truth_seed"],
+                           rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer,
+                           decoupled=live and not sync)
+    if calibrates:
+        say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
+            "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."
+            + _demo_calibration_hint(scene))
+    try:
+        with step_bar(count_bench_steps(scene, options)) as progress:
+            result = run_bench(scene, options, progress=progress)
+    except CalibrationFailedError as exc:
+        fail(str(exc), FAILED)
+    except RigError as exc:
+        fail(f"bench failed: {exc}", FAILED)
+    data = result.to_json()
+    data["settings"]["quick"] = quick
+    data["settings"]["live"] = live
+    data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model,
+                                                 truth, lighting_model, reconstruction, renderer,
+                                                 accuracy, peer, live, projection, sync)
+    _bench_table(result)
+    if json_out is not None:
+        write_json(json_out, data)
+        say(f"wrote {json_out}")
+
+
 def register(app: typer.Typer) -> None:
     """Add ``bench`` to ``app``."""
-
-    @command(app)
-    def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE.toml",
-                                                           help="Scene TOML (default: Fig. 4).")] = None,
-              json_out: Annotated[Optional[Path], option("--json", metavar="FILE",
-                                                         help="Write the results and the settings used as JSON "
-                                                              "here.")] = None,
-              iterations: Annotated[int, option("--iterations", min=1, metavar="N",
-                                                help="Timed frames of the live step (>= 1), after two warm-up "
-                                                     "frames (the first compiles the kernels, the second builds "
-                                                     "the culling tiles).")] = 10,
-              calibration: Calibration = None,
-              rig_model: Annotated[str, option(
-                  "--rig-model", metavar=metavar(choices.RigModel),
-                  callback=choice_check("--rig-model", choices.RigModel),
-                  help="The rig model the step uses: calibrated (what a run uses, default: the bench calibrates "
-                       "the simulated rig first) | nominal | oracle (neither is what users run; the output says "
-                       "so).")] = choices.DEFAULT_RIG_MODEL,
-              truth: TruthArgs = None, lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
-              projection: Projection = None, renderer: Renderer = choices.DEFAULT_RENDERER,
-              accuracy: Annotated[bool, option("--accuracy/--no-accuracy", metavar="", help=(
-                  "Also render the last frame with the exact path and report the fast path's PSNR against it."))
-              ] = True,
-              peer: Annotated[bool, option("--peer/--no-peer", metavar="", help=(
-                  "Also time Mitsuba's path integrator on the light field job (point model), at equal RMSE."))
-              ] = True,
-              quick: Quick = False,
-              live: Annotated[bool, flag("--live", (
-                  "Time the step with a synthetic object moving (a still scene's first synthetic object slides 2 cm "
-                  "and turns 20 degrees and back over the frames; an animated scene moves as its keyframes "
-                  "say), and then run the decoupled loop as lft live does: frames per second with the capture "
-                  "beside them, capture rate and age, motion-to-composite latency."))] = False,
-              sync: Annotated[bool, flag("--sync", "With --live: time the synchronous loop only (no decoupled "
-                                                   "run).")] = False,
-              max_memory: MaxMemory = None) -> None:
-        """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and
-        the scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the
-        step's rays once."""
-        from lftransfer.app.bench.step import BenchOptions, count_bench_steps, run_bench, with_moving_object
-        from lftransfer.app.report import write_json
-        from lftransfer.app.rigs import CalibrationFailedError
-        from lftransfer.app.terminal import say
-        from lftransfer.rig.base import RigError
-
-        scene = load(scene_file, quick)
-        if live:
-            try:
-                scene = with_moving_object(scene, iterations + 1)
-            except ValueError as exc:
-                fail(str(exc))
-        rig_opts = rig_options(scene, truth, RigArgs(rig="sim", rig_model=rig_model, calibration=calibration))
-        calibrates = calibration is None and rig_model == "calibrated"
-        check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
-                          max_memory=max_memory)
-        settings = Overrides(lighting_model=lighting_model, reconstruction=reconstruction, projection=projection,
-                             renderer=renderer)
-        options = BenchOptions(iterations=iterations, settings=settings, truth_seed=rig_opts["truth_seed"],
-                               rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer,
-                               decoupled=live and not sync)
-        if calibrates:
-            say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
-                "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."
-                + _demo_calibration_hint(scene))
-        try:
-            with step_bar(count_bench_steps(scene, options)) as progress:
-                result = run_bench(scene, options, progress=progress)
-        except CalibrationFailedError as exc:
-            fail(str(exc), FAILED)
-        except RigError as exc:
-            fail(f"bench failed: {exc}", FAILED)
-        data = result.to_json()
-        data["settings"]["quick"] = quick
-        data["settings"]["live"] = live
-        data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model,
-                                                     truth, lighting_model, reconstruction, renderer,
-                                                     accuracy, peer, live, projection, sync)
-        _bench_table(result)
-        if json_out is not None:
-            write_json(json_out, data)
-            say(f"wrote {json_out}")
+    command(app)(bench)
 
 
 def _solve_cell(solve: dict) -> str:

@@ -54,8 +54,8 @@ def calibrate_rig_cmd(scene_file: Annotated[Path, typer.Argument(metavar="SCENE.
     Also reachable as ``lft calibrate SCENE.toml``. Beside ``--out`` it writes ``calibration_report.html`` and,
     where the rig is simulated and knows its truth, ``calibration_errors.json``.
     """
-    from lftransfer.app.pipeline import RunOptions
-    from lftransfer.app.rigs import CalibrationFailedError, calibrate, open_rig, write_calibration
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.rigs import CalibrationFailedError, calibrate, open_rig, write_calibration
     from lftransfer.calibration.rig import count_calibration_steps
     from lftransfer.rig.base import RigError
 
@@ -124,12 +124,12 @@ def calibrate_seeds_cmd(seeds: Annotated[str, option("--seeds", metavar="N,N,...
                                        ] = Path("out/calibration"),
                         cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None) -> None:
     """Calibration accuracy over several hidden truths (writes calibration_errors.json and a Markdown table)."""
-    from lftransfer.app.bench.calibration import calibration_seeds, markdown_table
-    from lftransfer.app.report import write_json
+    from lftransfer.runs.bench.calibration import calibration_seeds, markdown_table
+    from lftransfer.reports.report import write_json
     from lftransfer.calibration.rig import count_calibration_steps
     from lftransfer.imageio_utils import write_text
 
-    from lftransfer.app.cluster import ClusterError
+    from lftransfer.runs.cluster import ClusterError
 
     seed_list = _parse_seeds(seeds)
     spec = cluster_spec(cluster, workers)
@@ -158,7 +158,7 @@ def calibrate_lenslets(image: Path = typer.Argument(..., metavar="IMAGE",
                        out: Path = typer.Option(Path("centres.csv"), metavar="FILE.csv",
                                                 help="CSV of lenslet centres (header x,y).")) -> None:
     """Find every lenslet's centre (sub-pixel spot or sub-image detection) and fit the lattice."""
-    from lftransfer.app.paths import check_output_file
+    from lftransfer.runs.paths import check_output_file
     from lftransfer.calibration.images import CalibrationImageError, read_image
     from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres, write_centres_csv
 
@@ -222,7 +222,7 @@ def calibrate_intrinsics_cmd(images: list[Path] = typer.Argument(..., metavar="I
                              out: Path = typer.Option(Path("intrinsics.json"), metavar="FILE.json",
                                                       help="Output JSON.")) -> None:
     """Camera matrix and distortion (k1 k2 p1 p2 k3) by Zhang's method from chessboard photographs."""
-    from lftransfer.app.paths import check_output_file
+    from lftransfer.runs.paths import check_output_file
     from lftransfer.calibration.intrinsics import (IntrinsicsError, calibrate_intrinsics, parse_pattern,
                                                    write_intrinsics_json)
 

@@ -62,14 +62,14 @@ def row(table: Table, *cells: object) -> None:
 
 def parse_memory(text: Optional[str]) -> Optional[int]:
     """``--max-memory`` in bytes (None: not given)."""
-    from lftransfer.app.memory import parse_size
+    from lftransfer.runs.memory import parse_size
 
     return None if text is None else parse_size(text)
 
 
 def cluster_spec(cluster: Optional[str], workers: Optional[int]):
     """``--cluster`` and ``--workers`` -> ClusterSpec, or None for one process (a usage error names the option)."""
-    from lftransfer.app.cluster import ClusterSpec
+    from lftransfer.runs.cluster import ClusterSpec
 
     if cluster is None:
         if workers is not None:
@@ -83,7 +83,7 @@ def cluster_spec(cluster: Optional[str], workers: Optional[int]):
 
 def rig_spec(rig: str):
     """``--rig`` -> RigSpec (a usage error names what is wrong)."""
-    from lftransfer.app.rigs import RigSpec
+    from lftransfer.runs.rigs import RigSpec
 
     try:
         return RigSpec.parse(rig)
@@ -135,7 +135,7 @@ def operator(bar: Progress | None = None):
 def load(path: Optional[Path], quick: bool):
     """The scene (the built-in Fig. 4 scene for None; a built-in scene's name, e.g. ``fig6``, for a path that does
     not exist and has no suffix), at quarter size with ``quick``; sizes checked."""
-    from lftransfer.app.pipeline import check_resolution, quick_scene
+    from lftransfer.scenes import check_resolution, quick_scene
     from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene
 
     if path is not None and not path.exists():
@@ -153,8 +153,8 @@ def check_before_work(scene, *, out_dir: Optional[Path] = None, out_file: Option
                       out_option: str = "--out", example: Optional[str] = None, cache: bool = False,
                       bounces: Optional[int] = None, calibrate: bool = True, max_memory: Optional[str] = None) -> None:
     """Output paths, the ground-truth cache and the memory estimate, before any work (one line, exit code 2)."""
-    from lftransfer.app.memory import check_memory, estimate_memory
-    from lftransfer.app.paths import check_cache_dir, check_output_dir, check_output_file
+    from lftransfer.runs.memory import check_memory, estimate_memory
+    from lftransfer.runs.paths import check_cache_dir, check_output_dir, check_output_file
 
     if out_dir is not None:
         check_output_dir(out_dir, out_option)

@@ -53,7 +53,7 @@ def choice_check(name: str, choice):
 
 
 def _memory_check(value: Optional[str]) -> Optional[str]:
-    from lftransfer.app.memory import parse_size
+    from lftransfer.runs.memory import parse_size
 
     if value is not None:
         try:

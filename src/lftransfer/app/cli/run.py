@@ -1,4 +1,4 @@
-"""``lft demo``, ``lft run`` and ``lft record``: one complete run (:func:`lftransfer.app.pipeline.run_scene`)
+"""``lft demo``, ``lft run`` and ``lft record``: one complete run (:func:`lftransfer.runs.pipeline.run_scene`)
 with a progress bar and a summary table."""
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ METRICS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db
 def _run(scene, out: Path, options) -> dict:
     """Run the pipeline with a progress bar; a fault, a calibration file that does not fit or Ctrl-C ends in one
     line that says where the run folder stands."""
-    from lftransfer.app.pipeline import count_run_steps, run_scene
-    from lftransfer.app.rigs import CalibrationFailedError
+    from lftransfer.runs.pipeline import count_run_steps, run_scene
+    from lftransfer.runs.rigs import CalibrationFailedError
     from lftransfer.calibration.rig import CalibrationFileError
     from lftransfer.rig.base import RigError
 
@@ -132,84 +132,87 @@ def summary(report: dict, out: Path) -> None:
         Console().print(escape(f"{key} is undefined: {reason}"), soft_wrap=True, highlight=False)
 
 
+def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
+         no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+         rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False,
+         quiet_reference: QuietReference = False) -> None:
+    """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
+    transfer, check against ground truth (both lighting models, both reconstructions, every projection, both
+    windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
+    from lftransfer.runs.pipeline import RunOptions
+
+    scene = load(None, quick)
+    rig_opts = rig_options(scene, truth, rig)
+    options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer,
+                                                          quiet_reference=quiet_reference or None),
+                         use_cache=not no_cache, negative_control=True, floor=not no_floor, **rig_opts)
+    check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
+                      bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+    _run(scene, out, options)
+
+
+def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
+        lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
+        projection: Projection = None, window: Window = None, composite: Composite = None,
+        direct_light: DirectLight = None,
+        compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
+                                                          "point), the other reconstruction, the other "
+                                                          "projections and the other window, each a full "
+                                                          "re-run.")] = False,
+        gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
+        renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+        max_memory: MaxMemory = None, no_floor: NoFloor = False,
+        quiet_reference: QuietReference = False, cluster: Cluster = None, workers: Workers = None) -> None:
+    """Run light field transfer on any scene file with a rig (calibrating it first); --cluster spreads a quiet
+    reference's rounds over a Ray cluster."""
+    from lftransfer.runs.pipeline import RunOptions
+
+    spec = cluster_spec(cluster, workers)
+    if spec is not None and not quiet_reference:
+        fail("--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference")
+
+    scene = load(scene_file, quick)
+    rig_opts = rig_options(scene, truth, rig)
+    asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
+                 projection=projection, window=window, composite=composite, direct_light=direct_light,
+                 gt_spp=gt_spp, renderer=renderer, quiet_reference=quiet_reference or None)
+    settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
+    options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,
+                         **rig_opts)
+    check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
+                      bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+    _run(scene, out, options)
+
+
+def record(scene_file: SceneArg,
+           out: Annotated[Path, option("--out", metavar="DIR", help="Session folder: the recording, and the "
+                                                                   "run's outputs in run/.")],
+           rig_spec: Annotated[str, option("--rig", metavar="SPEC", help="Which rig to record: sim | "
+                                                                       "hardware:RIG.toml.")] = "sim",
+           bounces: Bounces = choices.DEFAULT_BOUNCES, quick: Quick = False,
+           renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+           calibration: Calibration = None, max_memory: MaxMemory = None) -> None:
+    """Calibrate and run transfer on a rig (sim or hardware:RIG.toml) while storing every request and image
+    it answers (replay it with lft run SCENE.toml --rig replay:SESSION)."""
+    from lftransfer.runs.pipeline import RunOptions
+
+    rig = RigArgs(rig=rig_spec, rig_model=choices.DEFAULT_RIG_MODEL, calibration=calibration)
+    if rig.rig.startswith("replay"):
+        fail("--rig: a recording is recorded already; record from sim or hardware:RIG.toml")
+    if (out / "manifest.json").exists():
+        fail(f"--out {out}: holds a recording already; choose an empty folder")
+    scene = load(scene_file, quick)
+    rig_opts = rig_options(scene, truth, rig)
+    options = RunOptions(settings=Overrides(bounces=bounces, renderer=renderer), record=out, **rig_opts)
+    check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=bounces,
+                      calibrate=calibrates(rig), max_memory=max_memory)
+    _run(scene, out / "run", options)
+    Console().print(escape(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
+                           f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)
+
+
 def register(app: typer.Typer) -> None:
     """Add ``demo``, ``run`` and ``record`` to ``app``."""
-
-    @command(app)
-    def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
-             no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-             rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False,
-             quiet_reference: QuietReference = False) -> None:
-        """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
-        transfer, check against ground truth (both lighting models, both reconstructions, every projection, both
-        windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
-        from lftransfer.app.pipeline import RunOptions
-
-        scene = load(None, quick)
-        rig_opts = rig_options(scene, truth, rig)
-        options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer,
-                                                              quiet_reference=quiet_reference or None),
-                             use_cache=not no_cache, negative_control=True, floor=not no_floor, **rig_opts)
-        check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                          bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
-        _run(scene, out, options)
-
-    @command(app)
-    def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
-            lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
-            projection: Projection = None, window: Window = None, composite: Composite = None,
-            direct_light: DirectLight = None,
-            compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
-                                                              "point), the other reconstruction, the other "
-                                                              "projections and the other window, each a full "
-                                                              "re-run.")] = False,
-            gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
-            renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-            max_memory: MaxMemory = None, no_floor: NoFloor = False,
-            quiet_reference: QuietReference = False, cluster: Cluster = None, workers: Workers = None) -> None:
-        """Run light field transfer on any scene file with a rig (calibrating it first); --cluster spreads a quiet
-        reference's rounds over a Ray cluster."""
-        from lftransfer.app.pipeline import RunOptions
-
-        spec = cluster_spec(cluster, workers)
-        if spec is not None and not quiet_reference:
-            fail("--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference")
-
-        scene = load(scene_file, quick)
-        rig_opts = rig_options(scene, truth, rig)
-        asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                     projection=projection, window=window, composite=composite, direct_light=direct_light,
-                     gt_spp=gt_spp, renderer=renderer, quiet_reference=quiet_reference or None)
-        settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
-        options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,
-                             **rig_opts)
-        check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                          bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
-        _run(scene, out, options)
-
-    @command(app)
-    def record(scene_file: SceneArg,
-               out: Annotated[Path, option("--out", metavar="DIR", help="Session folder: the recording, and the "
-                                                                       "run's outputs in run/.")],
-               rig_spec: Annotated[str, option("--rig", metavar="SPEC", help="Which rig to record: sim | "
-                                                                           "hardware:RIG.toml.")] = "sim",
-               bounces: Bounces = choices.DEFAULT_BOUNCES, quick: Quick = False,
-               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-               calibration: Calibration = None, max_memory: MaxMemory = None) -> None:
-        """Calibrate and run transfer on a rig (sim or hardware:RIG.toml) while storing every request and image
-        it answers (replay it with lft run SCENE.toml --rig replay:SESSION)."""
-        from lftransfer.app.pipeline import RunOptions
-
-        rig = RigArgs(rig=rig_spec, rig_model=choices.DEFAULT_RIG_MODEL, calibration=calibration)
-        if rig.rig.startswith("replay"):
-            fail("--rig: a recording is recorded already; record from sim or hardware:RIG.toml")
-        if (out / "manifest.json").exists():
-            fail(f"--out {out}: holds a recording already; choose an empty folder")
-        scene = load(scene_file, quick)
-        rig_opts = rig_options(scene, truth, rig)
-        options = RunOptions(settings=Overrides(bounces=bounces, renderer=renderer), record=out, **rig_opts)
-        check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=bounces,
-                          calibrate=calibrates(rig), max_memory=max_memory)
-        _run(scene, out / "run", options)
-        Console().print(escape(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
-                               f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)
+    command(app)(demo)
+    command(app)(run)
+    command(app)(record)

@@ -86,133 +86,144 @@ def _range(summary: dict, key: str, spec: str = ".3f") -> str:
     return a if a == b else f"{a} .. {b}"
 
 
+def live(scene_file: SceneArg,
+         port: Annotated[int, option("--port", min=1, max=65535, metavar="PORT",
+                                     help="Port of the page on localhost.")] = 8080,
+         out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
+                        ] = Path("out/live"),
+         quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER,
+         sync: Annotated[bool, flag("--sync", "One capture inside every frame (for measurement); default: "
+                                              "captures on their own thread at the devices' rate, frames at the "
+                                              "renderer's rate with the newest capture.")] = False,
+         truth: TruthArgs = None, rig: RigArgs = None) -> None:
+    """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
+    layers, the light field images, the time of every stage, the capture rate, each frame's capture age and
+    the motion-to-composite latency, and, on demand, the layers of each bounce with their display gains, an
+    A/B comparison with the ground truth (simulated rig) and a recording to MP4; move and edit the synthetic
+    objects (and the real ones on the simulated rig), change the bounces and the lighting model, pause, step,
+    reset, save."""
+    try:
+        from lftransfer.app.viewer.server import serve
+    except ImportError as exc:
+        fail(f"lft live needs the viewer's packages ({exc.name} is missing): pip install 'lftransfer[viewer]'")
+    from lftransfer.app.viewer.command import open_session
+
+    scene = load(scene_file, quick)
+    rig_opts = rig_options(scene, truth, rig)
+    check_before_work(scene, out_dir=out, calibrate=calibrates(rig))
+    with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
+        session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
+                               calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
+                               renderer=renderer, loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
+                               progress=lambda msg: status.update(escape(msg[:70])),
+                               warn=warn)
+    console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
+    serve(session, port=port)
+    console.print("lft live: stopped")
+
+
+def _render_with_progress(scene, out: Path, options, seq) -> tuple[dict, object]:
+    """Render the sequence and check its exchange under a progress bar (frames per second, each frame's PSNR); a
+    failure is one line with its exit code, naming where the finished frames are."""
+    from lftransfer.calibration.rig import CalibrationFileError
+    from lftransfer.rig.base import RigError
+    from lftransfer.runs.cluster import ClusterError
+    from lftransfer.runs.effects import verify_exchange
+    from lftransfer.runs.rigs import CalibrationFailedError
+    from lftransfer.runs.sequence import SequenceError, render_sequence
+
+    status = out / "status.json"
+    with progress_bar(40, TextColumn("{task.fields[rate]}")) as bar:
+        task = bar.add_task("set-up", total=None, rate="")
+        started = [None, 0]
+
+        def step(msg: str) -> None:
+            bar.update(task, description=escape(msg[:40]))
+
+        def progress(record, done: int, total: int) -> None:
+            import time
+
+            if started[0] is None:
+                started[0], started[1] = time.perf_counter() - record.seconds, done - 1
+            elapsed = time.perf_counter() - started[0]
+            rate = (done - started[1]) / elapsed if elapsed > 0 else 0.0
+            psnr = (record.metrics or {}).get("psnr_objects_db")
+            bar.update(task, total=total, completed=done, rate=f"{rate:.2f} frames/s",
+                       description=escape(f"frame {record.index} (t = {record.time_s:.2f} s)"
+                                          + (f", {psnr:.1f} dB" if psnr is not None else "")))
+
+        try:
+            report = render_sequence(scene, out, options, seq, progress=progress, step=step)
+            check = verify_exchange(scene, out, options, report, step=step)
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
+        except (SequenceError, CalibrationFileError) as exc:
+            bar.stop()
+            fail(str(exc))
+        except (RigError, CalibrationFailedError, ClusterError) as exc:
+            bar.stop()
+            fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
+    return report, check
+
+
+def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
+               frames: Annotated[Optional[int], option(
+                   "--frames", min=1, metavar="N",
+                   help="Frames to render (default: every frame of the scene's [animation]; a still scene: 8 "
+                        "live frames or 1 converged frame).")] = None,
+               mode: Annotated[str, option(
+                   "--mode", metavar="live|converged",
+                   help="live: the paper's loop, one capture and one render per frame, bounces accumulating "
+                        "over frames | converged: every frame an independent N-bounce transfer.")] = "live",
+               loop: Annotated[str, option(
+                   "--loop", metavar=metavar(choices.LiveLoop), callback=choice_check("--loop", choices.LiveLoop),
+                   help="Live mode: sync: one capture inside every frame (the same frames on every run) | "
+                        "decoupled: captures on their own thread at the rig's rate, every frame rendered with "
+                        "the newest (the report says how far behind each frame's capture was).")
+               ] = choices.DEFAULT_SEQUENCE_LOOP,
+               bounces: Bounces = choices.DEFAULT_BOUNCES,
+               resume: Annotated[bool, flag("--resume", "Continue after the last finished frame in DIR (same "
+                                                        "settings).")] = False,
+               verify_every: Annotated[int, option(
+                   "--verify-every", min=0, metavar="K",
+                   help="Path trace the ground truth of every K-th frame and report its PSNR (0: none; "
+                        "simulated rig).")] = 0,
+               gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
+               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+               cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
+               no_floor: NoFloor = False, quiet_reference: QuietReference = False,
+               composite: Composite = None, direct_light: DirectLight = None) -> None:
+    """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
+    report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
+    error and fidelity floor)."""
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.sequence import MODES, SequenceError, SequenceOptions
+
+    if mode not in MODES:
+        fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    scene = load(scene_file, quick)
+    rig_opts = rig_options(scene, truth, rig)
+    spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
+    options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
+                                            composite=composite, direct_light=direct_light,
+                                            quiet_reference=quiet_reference or None),
+                         use_cache=not no_cache, floor=not no_floor,
+                         cluster=spec if quiet_reference else None, **rig_opts)
+    try:
+        seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
+                              cluster=spec if mode == "converged" or not quiet_reference else None)
+    except SequenceError as exc:
+        fail(str(exc))
+    if resume and not (out / "report.json").is_file():
+        fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
+    check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
+                      calibrate=calibrates(rig), max_memory=max_memory)
+    report, check = _render_with_progress(scene, out, options, seq)
+    _sequence_table(report, out, mode, check)
+
+
 def register(app: typer.Typer) -> None:
     """Add ``live`` and ``render`` to ``app``."""
-
-    @command(app, "live")
-    def live(scene_file: SceneArg,
-             port: Annotated[int, option("--port", min=1, max=65535, metavar="PORT",
-                                         help="Port of the page on localhost.")] = 8080,
-             out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
-                            ] = Path("out/live"),
-             quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER,
-             sync: Annotated[bool, flag("--sync", "One capture inside every frame (for measurement); default: "
-                                                  "captures on their own thread at the devices' rate, frames at the "
-                                                  "renderer's rate with the newest capture.")] = False,
-             truth: TruthArgs = None, rig: RigArgs = None) -> None:
-        """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
-        layers, the light field images, the time of every stage, the capture rate, each frame's capture age and
-        the motion-to-composite latency, and, on demand, the layers of each bounce with their display gains, an
-        A/B comparison with the ground truth (simulated rig) and a recording to MP4; move and edit the synthetic
-        objects (and the real ones on the simulated rig), change the bounces and the lighting model, pause, step,
-        reset, save."""
-        try:
-            from lftransfer.app.viewer.server import serve
-        except ImportError as exc:
-            fail(f"lft live needs the viewer's packages ({exc.name} is missing): pip install 'lftransfer[viewer]'")
-        from lftransfer.app.viewer.command import open_session
-
-        scene = load(scene_file, quick)
-        rig_opts = rig_options(scene, truth, rig)
-        check_before_work(scene, out_dir=out, calibrate=calibrates(rig))
-        with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
-            session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
-                                   calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
-                                   renderer=renderer, loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
-                                   progress=lambda msg: status.update(escape(msg[:70])),
-                                   warn=warn)
-        console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
-        serve(session, port=port)
-        console.print("lft live: stopped")
-
-    @command(app, "render")
-    def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
-                   frames: Annotated[Optional[int], option(
-                       "--frames", min=1, metavar="N",
-                       help="Frames to render (default: every frame of the scene's [animation]; a still scene: 8 "
-                            "live frames or 1 converged frame).")] = None,
-                   mode: Annotated[str, option(
-                       "--mode", metavar="live|converged",
-                       help="live: the paper's loop, one capture and one render per frame, bounces accumulating "
-                            "over frames | converged: every frame an independent N-bounce transfer.")] = "live",
-                   loop: Annotated[str, option(
-                       "--loop", metavar=metavar(choices.LiveLoop), callback=choice_check("--loop", choices.LiveLoop),
-                       help="Live mode: sync: one capture inside every frame (the same frames on every run) | "
-                            "decoupled: captures on their own thread at the rig's rate, every frame rendered with "
-                            "the newest (the report says how far behind each frame's capture was).")
-                   ] = choices.DEFAULT_SEQUENCE_LOOP,
-                   bounces: Bounces = choices.DEFAULT_BOUNCES,
-                   resume: Annotated[bool, flag("--resume", "Continue after the last finished frame in DIR (same "
-                                                            "settings).")] = False,
-                   verify_every: Annotated[int, option(
-                       "--verify-every", min=0, metavar="K",
-                       help="Path trace the ground truth of every K-th frame and report its PSNR (0: none; "
-                            "simulated rig).")] = 0,
-                   gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
-                   renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-                   cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
-                   no_floor: NoFloor = False, quiet_reference: QuietReference = False,
-                   composite: Composite = None, direct_light: DirectLight = None) -> None:
-        """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
-        report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
-        error and fidelity floor)."""
-        from lftransfer.app.cluster import ClusterError
-        from lftransfer.app.effects import verify_exchange
-        from lftransfer.app.pipeline import RunOptions
-        from lftransfer.app.rigs import CalibrationFailedError
-        from lftransfer.app.sequence import MODES, SequenceError, SequenceOptions, render_sequence
-        from lftransfer.calibration.rig import CalibrationFileError
-        from lftransfer.rig.base import RigError
-
-        if mode not in MODES:
-            fail(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
-        scene = load(scene_file, quick)
-        rig_opts = rig_options(scene, truth, rig)
-        spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
-        options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
-                                                composite=composite, direct_light=direct_light,
-                                                quiet_reference=quiet_reference or None),
-                             use_cache=not no_cache, floor=not no_floor,
-                             cluster=spec if quiet_reference else None, **rig_opts)
-        try:
-            seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
-                                  cluster=spec if mode == "converged" or not quiet_reference else None)
-        except SequenceError as exc:
-            fail(str(exc))
-        if resume and not (out / "report.json").is_file():
-            fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
-        check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
-                          calibrate=calibrates(rig), max_memory=max_memory)
-        status = out / "status.json"
-        with progress_bar(40, TextColumn("{task.fields[rate]}")) as bar:
-            task = bar.add_task("set-up", total=None, rate="")
-            started = [None, 0]
-
-            def step(msg: str) -> None:
-                bar.update(task, description=escape(msg[:40]))
-
-            def progress(record, done: int, total: int) -> None:
-                import time
-
-                if started[0] is None:
-                    started[0], started[1] = time.perf_counter() - record.seconds, done - 1
-                elapsed = time.perf_counter() - started[0]
-                rate = (done - started[1]) / elapsed if elapsed > 0 else 0.0
-                psnr = (record.metrics or {}).get("psnr_objects_db")
-                bar.update(task, total=total, completed=done, rate=f"{rate:.2f} frames/s",
-                           description=escape(f"frame {record.index} (t = {record.time_s:.2f} s)"
-                                              + (f", {psnr:.1f} dB" if psnr is not None else "")))
-
-            try:
-                report = render_sequence(scene, out, options, seq, progress=progress, step=step)
-                check = verify_exchange(scene, out, options, report, step=step)
-            except KeyboardInterrupt:
-                bar.stop()
-                fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
-            except (SequenceError, CalibrationFileError) as exc:
-                bar.stop()
-                fail(str(exc))
-            except (RigError, CalibrationFailedError, ClusterError) as exc:
-                bar.stop()
-                fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
-        _sequence_table(report, out, mode, check)
+    command(app, "live")(live)
+    command(app, "render")(render_cmd)

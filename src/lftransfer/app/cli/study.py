@@ -31,10 +31,10 @@ def register(app: typer.Typer) -> None:
                   max_memory: MaxMemory = None) -> None:
         """Scenes x hidden truths x settings -> one table: each cell a converged transfer on the simulated rig,
         measured against its ground truth (study.json, study.md, study.png, study.html)."""
-        from lftransfer.app.cluster import ClusterError
-        from lftransfer.app.study import StudyError, load_study, run_study
+        from lftransfer.runs.cluster import ClusterError
+        from lftransfer.runs.study import StudyError, load_study, run_study
 
-        from lftransfer.app.study import builtin_study, builtin_studies
+        from lftransfer.runs.study import builtin_study, builtin_studies
 
         spec = cluster_spec(cluster, workers)
         if not study_file.is_file() and str(study_file) in builtin_studies():

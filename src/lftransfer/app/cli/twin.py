@@ -25,6 +25,30 @@ twin_app = sub_app(help="The device twin: the simulated world in its own process
                  "--rig hardware:twin.toml; and the scoring of a run made through it.")
 
 
+def _serve_table(twin, scene_file: Path, rig_file: Path, quick: bool, options) -> Table:
+    """What ``lft twin serve`` serves, and how to use it."""
+    from lftransfer.sim.twin import manifest_path
+
+    table = Table(title=escape(f"lft twin serve {scene_file}"))
+    table.add_column("")
+    table.add_column("")
+    row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
+    row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
+    row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
+                          "both as three stacked GRAY16LE planes in FFV1 (lossless; OpenCV's FFmpeg reader "
+                          "returns 16-bit colour as 8 bits), planar = true in the rig file")
+    row(table, "operator endpoint", f"{twin.server.url}/operator")
+    row(table, "projector", "missing (--projector-missing)" if options.projector_missing else
+         f"display 0 of X display {twin.display}")
+    o = options
+    row(table, "cameras", f"LF {o.lf_fps:g} fps, view {o.view_fps:g} fps; "
+                          f"latency {o.latency_ms:g} +- {o.jitter_ms:g} ms"
+         + (f"; drop {o.drop_rate:g}" if o.drop_rate else "")
+         + (f"; {o.stop_camera} stops after {o.stop_after_s:g} s" if o.stop_after_s is not None else ""))
+    row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{rig_file}")
+    return table
+
+
 @command(twin_app, "serve")
 def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
                                                 help="Scene TOML file, or a built-in scene by name (fig4, ...)."),
@@ -67,7 +91,7 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
     """Run the simulated world as a device: it watches the projector window on an X display, streams the LF and
     view cameras over HTTP (opened by OpenCV's VideoCapture) with a real device's timing and faults, and answers
     the rig's operator requests. Writes the rig file that --rig hardware:RIG.toml opens."""
-    from lftransfer.sim.twin import Twin, TwinOptions, manifest_path
+    from lftransfer.sim.twin import Twin, TwinOptions
 
     if stop_camera not in ("lf", "view", "both"):
         fail(f"--stop-camera: expected lf, view or both, got {stop_camera!r}")
@@ -89,22 +113,7 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        table = Table(title=escape(f"lft twin serve {scene_file}"))
-        table.add_column("")
-        table.add_column("")
-        row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
-        row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
-        row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
-                              "both as three stacked GRAY16LE planes in FFV1 (lossless; OpenCV's FFmpeg reader "
-                              "returns 16-bit colour as 8 bits), planar = true in the rig file")
-        row(table, "operator endpoint", f"{twin.server.url}/operator")
-        row(table, "projector", "missing (--projector-missing)" if projector_missing else
-             f"display 0 of X display {twin.display}")
-        row(table, "cameras", f"LF {lf_fps:g} fps, view {view_fps:g} fps; latency {latency_ms:g} +- {jitter_ms:g} ms"
-             + (f"; drop {drop_rate:g}" if drop_rate else "")
-             + (f"; {stop_camera} stops after {stop_after_s:g} s" if stop_after_s is not None else ""))
-        row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{rig_file}")
-        console.print(table)
+        console.print(_serve_table(twin, scene_file, rig_file, quick, options))
         console.print("serving; Ctrl-C stops the twin", highlight=False)
         stop.wait(serve_for_s)
         console.print(escape(json.dumps(twin.status())), soft_wrap=True, highlight=False)
@@ -120,8 +129,8 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
               gt_spp: GtSpp = None) -> None:
     """Render the ground truth of the twin's hidden world and write the run's metrics into its report.json, the
     same metrics lft run writes on the in-process rig (and the calibration's errors against the true rig)."""
-    from lftransfer.app.pipeline import VIEWS_FILE
-    from lftransfer.app.report import display_scale
+    from lftransfer.runs.pipeline import VIEWS_FILE
+    from lftransfer.reports.report import display_scale
     from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
     from lftransfer.sim.twin import manifest_path
     from lftransfer.settings import Overrides, resolve_settings

@@ -16,9 +16,9 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     """A :class:`~lftransfer.app.viewer.session.LiveSession` for a scene on a rig: the rig opened, its model had
     (calibrated, a calibration file, nominal or oracle), the live loop built with the scene's render settings,
     decoupled (captures at the devices' rate) or synchronous (``loop``)."""
-    from lftransfer.app.pipeline import RunOptions
-    from lftransfer.app.rigs import RigSpec, open_rig
-    from lftransfer.app.sequence import acquire_model
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.rigs import RigSpec, open_rig
+    from lftransfer.runs.sequence import acquire_model
     from lftransfer.app.viewer.session import LiveSession
     from lftransfer.settings import Overrides
     from lftransfer.transfer.live import LiveTransfer

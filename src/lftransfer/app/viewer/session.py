@@ -9,7 +9,7 @@ In the live loop a frame is one exchange, so its bounces cannot be told apart. O
 "bounces") the loop thread itself runs the bounce loop (:func:`lftransfer.transfer.bounce.run_transfer`, with
 ``bounce_views``) on the scene as it stands, between two frames: the live loop waits meanwhile (one thread uses
 the rig) and goes on afterwards as it was (paused or running, its accumulated light kept), and the per-bounce
-layers R_n and S_n, each at its own display gain (:func:`lftransfer.app.report.bounce_layers`), go to a callback
+layers R_n and S_n, each at its own display gain (:func:`lftransfer.reports.report.bounce_layers`), go to a callback
 (:class:`ViewerBounces`). Nothing of this runs unless asked for.
 """
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from lftransfer.app.viewer.compare import GT_SPP, GroundTruthCompare
 from lftransfer.app.viewer.recorder import Recorder
-from lftransfer.app.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
+from lftransfer.reports.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.scenes import SceneError, with_overrides
@@ -384,8 +384,9 @@ class LiveSession:
                 self._record(value)
             elif kind == "lighting_model":
                 settings: TransferSettings = resolve_settings(
-                    self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer),
-                    bounces=self.live.settings.bounces, bounce_views=self.live.settings.bounce_views).transfer
+                    self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer,
+                                          bounces=self.live.settings.bounces),
+                    bounce_views=self.live.settings.bounce_views).transfer
                 self.live.set_scene(self.synthetic(), settings)
             elif kind == "object":
                 side, index, edited, asked_at = value

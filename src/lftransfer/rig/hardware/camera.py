@@ -12,7 +12,8 @@ sets it; OpenCV reads it once per process).
 
 Sources (:attr:`CameraConfig.source`): a device index or a V4L2 path (live cameras), a video file or an
 image-sequence pattern (recordings, for tests and replays: the end of the recording is an error at once, with no
-wait), or ``genicam:SERIAL``; stream URLs are read by :class:`StreamCamera` (:mod:`.stream`, re-exported here).
+wait), or ``genicam:SERIAL``; stream URLs are read by :class:`~lftransfer.rig.hardware.stream.StreamCamera`;
+:func:`~lftransfer.rig.hardware.cameras.open_camera` opens the kind a rig file names.
 
 Code conversion (:attr:`CameraConfig.bits`): uint8 frames are scaled to full scale of ``bits``; uint16 frames
 hold ``bits``-bit codes in the low bits (or, with ``msb_aligned``, the high bits); float frames are taken as
@@ -34,7 +35,7 @@ from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware._worker import Worker, WorkerStuck, WorkerTimeout
 from lftransfer.rig.hardware.config import CameraConfig
 
-__all__ = ["Camera", "GenICamCamera", "OpenCVCamera", "StreamCamera", "open_camera"]
+__all__ = ["Camera", "GenICamCamera", "OpenCVCamera"]
 
 _log = logging.getLogger(__name__)
 
@@ -515,29 +516,3 @@ class GenICamCamera(Camera):
         if self._harvester is not None:
             self._harvester.reset()
             self._harvester = None
-
-
-def open_camera(config: CameraConfig, role: str = "camera") -> Camera:
-    """Open the camera a rig file's table names.
-
-    Args:
-        config: the camera's table.
-        role: how messages name it ("LF camera", "view camera").
-
-    Returns:
-        An open :class:`GenICamCamera` for ``genicam:`` sources, else an open :class:`OpenCVCamera`.
-
-    Raises:
-        RigError: the camera cannot be opened (names the source), or its extra is not installed.
-    """
-    cam: Camera = GenICamCamera(config, role) if config.kind == "genicam" else \
-        StreamCamera(config, role) if config.kind == "stream" else OpenCVCamera(config, role)
-    try:
-        return cam.open()
-    except BaseException:
-        cam.close()
-        raise
-
-
-# StreamCamera subclasses Camera, so its module is imported once Camera exists; re-exported for importers here
-from lftransfer.rig.hardware.stream import StreamCamera  # noqa: E402

@@ -241,7 +241,7 @@ def calibrate_latency(rig_file: str | Path, tries: int = 20, *, timeout_s: float
         RigFileError: an invalid rig file.
         RigError: a device fault, or the camera never saw the marker.
     """
-    from lftransfer.rig.hardware.camera import open_camera
+    from lftransfer.rig.hardware.cameras import open_camera
     from lftransfer.rig.hardware.config import load_rig_file, write_rig_value
     from lftransfer.rig.hardware.projector import ProjectorWindow
 

@@ -37,7 +37,8 @@ from typing import Callable
 import numpy as np
 
 from lftransfer.rig.base import RigError
-from lftransfer.rig.hardware.camera import Camera, open_camera
+from lftransfer.rig.hardware.camera import Camera
+from lftransfer.rig.hardware.cameras import open_camera
 from lftransfer.rig.hardware.config import HardwareRigConfig, load_rig_file
 from lftransfer.rig.hardware.operator import arranger
 from lftransfer.rig.hardware.projector import ProjectorWindow

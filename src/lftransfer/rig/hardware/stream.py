@@ -2,7 +2,7 @@
 thread that notes every frame's arrival (the device twin's cameras and IP cameras).
 
 It is a :class:`~lftransfer.rig.hardware.camera.Camera` (bounded waits, code conversion, exposure scale);
-:func:`~lftransfer.rig.hardware.camera.open_camera` opens one for a rig file's stream URL source, and
+:func:`~lftransfer.rig.hardware.cameras.open_camera` opens one for a rig file's stream URL source, and
 :mod:`.camera` re-exports it.
 """
 

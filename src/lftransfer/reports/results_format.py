@@ -1,0 +1,51 @@
+"""Number and table formatting of docs/results.md (:mod:`lftransfer.reports.results`)."""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["db", "fixed", "median_p95", "num", "table"]
+
+
+def num(v, digits: int = 3) -> str:
+    """A number to ``digits`` significant digits (no exponent between 1e-4 and 1e6); '-' for None / NaN."""
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int):
+        return str(v)
+    if not isinstance(v, float):
+        return str(v)
+    if not math.isfinite(v):
+        return "-" if math.isnan(v) else str(v)
+    if v == 0:
+        return "0"
+    if 0.999 <= abs(v) < 1:                    # an agreement of 0.99997 is not 1.000
+        return f"{v:.{digits + 3}f}"
+    mag = math.floor(math.log10(abs(v)))
+    if -4 <= mag < 6:
+        return f"{v:.{max(digits - 1 - mag, 0)}f}"
+    return f"{v:.{digits - 1}e}"
+
+
+def fixed(v, decimals: int, unit: str = "") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v:.{decimals}f}{unit}"
+
+
+def db(v) -> str:
+    return fixed(v, 2, " dB")
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    cell = lambda s: str(s).replace("|", "\\|").replace("\n", " ")  # noqa: E731
+    out = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in rows]
+    return out + [""]
+
+
+def median_p95(x) -> str:
+    """``median (p95)`` in whole units of a {"median", "p95"} spread; '-' for none."""
+    return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"

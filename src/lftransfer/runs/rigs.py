@@ -1,0 +1,249 @@
+"""Opening the rig a run asks for, and what the pipeline knows of it before a transfer.
+
+A *rig spec* picks the rig: ``sim`` (the digital twin), ``hardware:RIG.toml`` (a physical rig, or the device
+twin behind real device interfaces) or ``replay:DIR`` (a recording). An opened rig may come with an
+:class:`~lftransfer.sim.oracle.Oracle` (the simulated rig, or a recording of one): the only way the faces read
+the hidden truth, to verify a run or to run the ``oracle`` baseline. What the pipeline itself knows
+(:class:`Knowledge`) is calibrated through the rig, read from a calibration file, or the rig file's nominal values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+from lftransfer.reports.report import write_json
+from lftransfer.calibration.rig import calibrate_rig
+from lftransfer.rig.base import Rig
+from lftransfer.rig.model import RigModel, nominal_rig
+
+if TYPE_CHECKING:
+    from lftransfer.sim.oracle import Oracle
+
+__all__ = ["NOMINAL", "CalibrationFailedError", "Knowledge", "OpenedRig", "RigSpec", "calibrate", "knowledge",
+           "open_rig", "write_calibration"]
+
+Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
+NOMINAL = "nominal (rig file)"          # the report's rig_model for the rig file's values
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """Which rig a run uses: ``sim``, ``hardware:RIG.toml`` or ``replay:DIR``.
+
+    Attributes:
+        kind: "sim", "hardware" or "replay".
+        path: the rig file (hardware) or the recording's folder (replay).
+    """
+
+    kind: str = "sim"
+    path: Path | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> "RigSpec":
+        """``"sim"``, ``"hardware:RIG.toml"`` or ``"replay:DIR"`` -> RigSpec (ValueError naming what is wrong)."""
+        kind, _, rest = str(text).partition(":")
+        if kind == "sim" and not rest:
+            return cls("sim")
+        if kind in ("hardware", "replay") and rest:
+            path = Path(rest).expanduser()
+            if kind == "hardware" and not path.is_file():
+                raise ValueError(f"--rig {text}: the rig file {path} does not exist")
+            if kind == "replay" and not (path / "manifest.json").is_file():
+                raise ValueError(f"--rig {text}: {path} is not a recording (no manifest.json; make one with lft record)")
+            return cls(kind, path)
+        raise ValueError(f"--rig {text!r}: expected 'sim', 'hardware:RIG.toml' or 'replay:DIR'")
+
+    def __str__(self) -> str:
+        return self.kind if self.path is None else f"{self.kind}:{self.path}"
+
+
+class CalibrationFailedError(RuntimeError):
+    """A calibration step could not measure the rig from its images; the message names the step, why, and the
+    sizes that matter."""
+
+
+def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None):
+    """:func:`lftransfer.calibration.rig.calibrate_rig`, its failures (other than a rig fault) as one
+    :class:`CalibrationFailedError` that says what to try.
+
+    Args:
+        rig: the rig.
+        scene: the synthetic part of the scene.
+        progress: called with a message per capture or step.
+    """
+    from lftransfer.rig.base import RigError
+
+    try:
+        return calibrate_rig(rig, scene, progress=progress)
+    except RigError:
+        raise
+    except (ValueError, RuntimeError) as exc:
+        r, v = scene.rig, scene.view
+        raise CalibrationFailedError(
+            f"calibration failed: {exc} (view camera {v.resolution[0]} x {v.resolution[1]}, LF camera "
+            f"{r.lf_camera[0]} x {r.lf_camera[1]}, projector {r.projector[0]} x {r.projector[1]} pixels for "
+            f"{r.rows} x {r.cols} lenslets; small devices may be too coarse to calibrate: try a larger scene or "
+            f"no --quick, a calibration file, or --rig-model nominal)") from exc
+
+
+def write_calibration(path: Path, calibration, oracle: Oracle | None = None, source: Path | None = None):
+    """Write a calibration file, its HTML report and (where the rig has an oracle) its errors against the truth.
+
+    Args:
+        path: the calibration file; ``calibration_report.html`` and ``calibration_errors.json`` go beside it (a
+            ``calibration_errors.json`` there is removed when there is no truth to compare with).
+        calibration: :class:`lftransfer.calibration.rig.Calibration`.
+        oracle: the simulated rig's :class:`~lftransfer.sim.oracle.Oracle`, or None (a physical rig: no errors).
+        source: the file the calibration was read from, if any: it is not written over with the (shorter)
+            calibration read from it.
+
+    Returns:
+        The errors (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`), or None without an oracle.
+    """
+    from lftransfer.reports.calibration_report import write_calibration_report
+
+    path = Path(path)
+    if not (source is not None and path.exists() and path.resolve() == Path(source).resolve()):
+        calibration.write(path)
+    errors = None
+    errors_path = path.parent / "calibration_errors.json"
+    if oracle is not None:
+        errors = oracle.calibration_errors(calibration)
+        write_json(errors_path, errors.to_json())
+    else:
+        errors_path.unlink(missing_ok=True)            # an earlier calibration's, which this one does not match
+    write_calibration_report(path.parent / "calibration_report.html", calibration, errors)
+    return errors
+
+
+@dataclass
+class OpenedRig:
+    """A rig opened for a run.
+
+    Attributes:
+        rig: the rig the pipeline talks to (wrapped in a recorder when recording).
+        oracle: the hidden truth behind it (:class:`~lftransfer.sim.oracle.Oracle`: the simulated rig, or a replay
+            of a recording made on it), for verification and the oracle baseline only; None for a physical rig.
+    """
+
+    rig: Rig
+    oracle: Oracle | None = None
+
+    @property
+    def truth_seed(self) -> int | None:
+        """The hidden truth's seed (None: no oracle, or a rig built exactly as its file says)."""
+        return None if self.oracle is None else self.oracle.truth_seed
+
+    def start_frame(self, index: int) -> None:
+        """Begin frame ``index`` of a sequence of independent frames: the simulated rig draws the frame's sensor
+        noise from its seed and the index alone (:meth:`lftransfer.sim.SimRig.start_frame`), so the frame is the
+        same whichever process renders it and whatever it rendered before. Other rigs have no seed to set."""
+        start = getattr(self.rig, "start_frame", None)
+        if start is not None:
+            start(index)
+
+
+def open_rig(scene, options, *, operator: Operator | None = None) -> OpenedRig:
+    """Open the rig a run asks for (:class:`RigSpec`), wrapped in a recorder when ``options.record`` is set.
+
+    Args:
+        scene: the whole scene file (the simulated rig takes its real objects; other rigs ignore them).
+        options: :class:`lftransfer.runs.pipeline.RunOptions` (its rig, truth seed, capture rays, recording).
+        operator: shows an instruction to the person at a physical rig and waits (hardware rigs only).
+    """
+    spec = options.rig
+    if spec.kind == "sim":
+        from lftransfer.sim.oracle import open_simulated_rig
+
+        rig, oracle = open_simulated_rig(scene, options.truth_seed, capture_spp=options.capture_spp)
+        opened = OpenedRig(rig=rig, oracle=oracle)
+    elif spec.kind == "hardware":
+        from lftransfer.rig.hardware import HardwareRig, load_rig_file
+
+        kwargs = {"operator": operator} if operator is not None else {}
+        opened = OpenedRig(rig=HardwareRig(load_rig_file(spec.path), **kwargs))
+    elif spec.kind == "replay":
+        from lftransfer.rig.replay import ReplayRig
+        from lftransfer.sim.oracle import oracle_of_recording
+
+        rig = ReplayRig(spec.path)
+        opened = OpenedRig(rig=rig, oracle=oracle_of_recording(scene, rig.meta or {}))
+    else:
+        raise ValueError(f"unknown rig kind {spec.kind!r}")
+    if options.record is not None:
+        from lftransfer.rig.replay import RecordingRig
+
+        meta = {"rig": spec.kind, "truth_seed": opened.truth_seed if spec.kind == "sim" else None,
+                "scene": str(scene.source) if scene.source else None,
+                "options": {k: str(v) for k, v in options.__dict__.items()}}
+        opened.rig = RecordingRig(opened.rig, options.record, meta=meta)
+    return opened
+
+
+@dataclass(frozen=True)
+class Knowledge:
+    """What the pipeline knows of a rig before a transfer.
+
+    Attributes:
+        model: the rig model (calibrated, nominal or the simulated rig's truth).
+        scene: the synthetic part of the scene, its point light where the calibration measured the real one (where
+            it really stands for the oracle; the scene file's position for the nominal model).
+        calibration: the calibration the model came from, or None.
+        rig_model: how the model was had, for reports (``"calibrated"``, ``"true (oracle)"``, :data:`NOMINAL`).
+        warnings: lines to show and report (a calibration that did not measure the scene's point lights).
+        lights_from: where the synthetic side's point lights stand, for reports: "measured by the calibration",
+            "the oracle (where they really stand)" or "the scene file".
+    """
+
+    model: RigModel
+    scene: object
+    calibration: object | None
+    rig_model: str
+    warnings: tuple[str, ...] = ()
+    lights_from: str = "the scene file"
+
+
+def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, source=None,
+              progress: Callable[[str], None] | None = None) -> Knowledge:
+    """The rig model and synthetic scene a transfer works with (shared by ``lft run`` and ``lft study``).
+
+    Args:
+        opened: the rig.
+        scene: the whole scene (only its synthetic part is used).
+        rig_model: ``"calibrated"`` (calibrate through the rig now, unless ``calibration`` is given),
+            ``"nominal"`` or ``"oracle"`` (:data:`lftransfer.choices.RigModel`).
+        calibration: a calibration already made or loaded (it wins over ``rig_model``).
+        source: where ``calibration`` was read from, for a warning that names it.
+        progress: called with a message per calibration step.
+
+    Raises:
+        ValueError: the oracle on a rig without a known truth.
+        CalibrationFailedError: the calibration could not measure the rig.
+    """
+    ps = scene.synthetic_part()
+    label = "calibrated"
+    if calibration is None and rig_model == "calibrated":
+        calibration = calibrate(opened.rig, ps, progress=progress)
+    if calibration is not None:
+        model = calibration.model
+    elif rig_model == "oracle":
+        if opened.oracle is None:
+            raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
+        model, label = opened.oracle.model, "true (oracle)"
+    else:
+        model, label = nominal_rig(scene.rig), NOMINAL
+    lights_at = calibration.light_positions(ps) if calibration is not None else \
+        opened.oracle.true_lights() if rig_model == "oracle" else None
+    note = None if calibration is None else calibration.unmeasured_light_note(ps, source or "the calibration")
+    lights_from = "the scene file" if not ps.lights or note is not None else \
+        "measured by the calibration" if calibration is not None else \
+        "the oracle (where they really stand)" if rig_model == "oracle" else "the scene file"
+    if lights_at:
+        from lftransfer.scenes import with_overrides
+
+        ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
+                                        for lt, at in zip(ps.lights, lights_at)])
+    return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label,
+                     warnings=(note,) if note else (), lights_from=lights_from)
