@@ -230,34 +230,14 @@ def _object_points(pattern: tuple[int, int], square_size_m: float) -> np.ndarray
     return obj
 
 
-def calibrate_intrinsics(paths: list, pattern: tuple[int, int], square_size_m: float) -> Intrinsics:
-    """Calibrate a camera's intrinsics and distortion from chessboard photographs.
-
-    Every image is read and checked for size first; views where the full pattern is not found are skipped and
-    recorded with the reason. The 5-coefficient OpenCV model (k1 k2 p1 p2 k3) is fitted.
-
-    Args:
-        paths: image files (any format OpenCV reads; 8/16-bit, grey or colour), all of the same size.
-        pattern: inner-corner counts ``(cols, rows)``.
-        square_size_m: side of one chessboard square, metres (> 0). It scales only the extrinsics, not K.
-
-    Returns:
-        The calibration.
+def _find_corners(paths: list, pattern: tuple[int, int]):
+    """Each image's chessboard corners: the images' common size (w, h), the files used, those skipped with the
+    reason, and the corners found, (N, 1, 2) per file used (the same file listed twice counts once).
 
     Raises:
-        IntrinsicsError: no images, an unreadable file, images of different sizes, fewer than 3 views with the
-            pattern found, or the calibration failed.
-        ValueError: bad pattern or square size.
+        IntrinsicsError: an unreadable file, or images of different sizes.
     """
-    cols, rows = _check_pattern(pattern)
-    square = float(square_size_m)
-    if not (math.isfinite(square) and square > 0):
-        raise ValueError(f"square size must be a positive number of metres, got {square_size_m!r}")
-    paths = list(paths)
-    if not paths:
-        raise IntrinsicsError("no calibration images given")
-
-    obj = _object_points((cols, rows), square)
+    cols, rows = pattern
     size: tuple[int, int] | None = None
     size_from = ""
     used: list[str] = []
@@ -288,6 +268,38 @@ def calibrate_intrinsics(paths: list, pattern: tuple[int, int], square_size_m: f
         used.append(name)
         img_points.append(corners.reshape(-1, 1, 2))
 
+    return size, used, skipped, img_points
+
+
+def calibrate_intrinsics(paths: list, pattern: tuple[int, int], square_size_m: float) -> Intrinsics:
+    """Calibrate a camera's intrinsics and distortion from chessboard photographs.
+
+    Every image is read and checked for size first; views where the full pattern is not found are skipped and
+    recorded with the reason. The 5-coefficient OpenCV model (k1 k2 p1 p2 k3) is fitted.
+
+    Args:
+        paths: image files (any format OpenCV reads; 8/16-bit, grey or colour), all of the same size.
+        pattern: inner-corner counts ``(cols, rows)``.
+        square_size_m: side of one chessboard square, metres (> 0). It scales only the extrinsics, not K.
+
+    Returns:
+        The calibration.
+
+    Raises:
+        IntrinsicsError: no images, an unreadable file, images of different sizes, fewer than 3 views with the
+            pattern found, or the calibration failed.
+        ValueError: bad pattern or square size.
+    """
+    cols, rows = _check_pattern(pattern)
+    square = float(square_size_m)
+    if not (math.isfinite(square) and square > 0):
+        raise ValueError(f"square size must be a positive number of metres, got {square_size_m!r}")
+    paths = list(paths)
+    if not paths:
+        raise IntrinsicsError("no calibration images given")
+
+    obj = _object_points((cols, rows), square)
+    size, used, skipped, img_points = _find_corners(paths, (cols, rows))
     if len(used) < 3:
         detail = "; ".join(f"{k}: {v}" for k, v in skipped.items()) or "none skipped"
         raise IntrinsicsError(

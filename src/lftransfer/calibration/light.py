@@ -539,6 +539,44 @@ def black_share(projector) -> np.ndarray:
     return b / projector.cross_talk_matrix.sum(axis=1)
 
 
+def _light_board(rig: Rig, scene, asked, where: str, name: str, start: np.ndarray, intensity: tuple,
+                 share: np.ndarray, spp: int):
+    """One board of :func:`calibrate_light`: photographed lit by the point light with the projector black, then
+    white too (the black level's light taken out), its pose from the chart, its lit pixels' samples checked for
+    number and brightness. Returns (the board's samples, its diagnostics)."""
+    eye = np.asarray(scene.view.origin, np.float64)
+    black = rig.info.black()
+    white = np.full_like(black, 2 ** rig.info.projector_bits - 1)
+    rig.setup(asked)
+    rig.project(black)
+    lit = rig.capture_view(ViewCapture(quality=spp)).radiance
+    rig.project(white)
+    flood = rig.capture_view(ViewCapture(quality=max(1, spp // 4))).radiance   # scales a ~1 % correction
+    rig.project(black)
+    image = lit - (flood - lit) * share                  # the point light alone: the black level's light out
+    try:
+        m, chart_rms = chart_pose(lit, asked.chart, scene.view)
+    except PoseError as exc:
+        raise LightError(f"{where}: {exc}; is the point light on and the board in view, facing it?") from None
+    if m[:3, 2] @ (eye - m[:3, 3]) < 0:                     # the normal towards the view camera (and the light)
+        m[:3, 1:3] *= -1
+    s = board_samples(image, scene.view, m, asked.size, asked.chart)
+    if len(s.points) < MIN_PIXELS:
+        raise LightError(f"{where}: only {len(s.points)} view camera pixels on the board are lit and usable "
+                         f"(at least {MIN_PIXELS} needed); is the point light on and the board in view?")
+    # as bright as the scene file's light would make it (its intensity, the board's albedo), within a factor
+    g, _, _ = _log_model(start, s.points, s.normal)
+    expected = np.exp(g)[:, None] * np.asarray(intensity) * LIGHT_BOARD_ALBEDO / np.pi \
+        * np.where(s.dark, DARK_RATIO, 1.0)[:, None]
+    brightness = float(np.median(s.radiance.sum(1) / np.maximum(expected.sum(1), 1e-30)))
+    if not MIN_BRIGHTNESS <= brightness <= 1 / MIN_BRIGHTNESS:
+        raise LightError(f"{where}: the board is {brightness:.3g} times as bright as the scene file's light "
+                         f"(intensity {intensity} W/sr) would make it; is the {name} on, and the only light?")
+    return s, {"asked_centre_m": list(asked.centre), "asked_normal": list(asked.normal),
+               "centre_m": m[:3, 3].tolist(), "normal": m[:3, 2].tolist(), "chart_rms_px": chart_rms,
+               "black_level_share": float(np.mean((flood - lit) * share) / max(float(np.mean(lit)), 1e-30))}
+
+
 def calibrate_light(rig: Rig, model, scene, *, light: int = 0, boards: int = LIGHT_BOARDS, spp: int = LIGHT_SPP,
                     progress: Progress | None = None) -> tuple[LightFit, dict]:
     """Measure one point light's position through the rig (module docstring).
@@ -575,43 +613,14 @@ def calibrate_light(rig: Rig, model, scene, *, light: int = 0, boards: int = LIG
     name = _light_name(scene, light)
     start = np.asarray(scene.lights[light].position, np.float64)
     intensity = tuple(scene.lights[light].intensity)
-    eye = np.asarray(scene.view.origin, np.float64)
     share = black_share(model.projector).astype(np.float32)
-    black = rig.info.black()
-    white = np.full_like(black, 2 ** rig.info.projector_bits - 1)
     samples, per_board = [], []
     for i, asked in enumerate(poses, 1):
         where = f"{name}: board {i} of {len(poses)} at ({', '.join(f'{100 * v:+.0f}' for v in asked.centre)}) cm"
         say(f"{where}, lit by the {name} (projector black, then white)")
-        rig.setup(asked)
-        rig.project(black)
-        lit = rig.capture_view(ViewCapture(quality=spp)).radiance
-        rig.project(white)
-        flood = rig.capture_view(ViewCapture(quality=max(1, spp // 4))).radiance   # scales a ~1 % correction
-        rig.project(black)
-        image = lit - (flood - lit) * share                  # the point light alone: the black level's light out
-        try:
-            m, chart_rms = chart_pose(lit, asked.chart, scene.view)
-        except PoseError as exc:
-            raise LightError(f"{where}: {exc}; is the point light on and the board in view, facing it?") from None
-        if m[:3, 2] @ (eye - m[:3, 3]) < 0:                     # the normal towards the view camera (and the light)
-            m[:3, 1:3] *= -1
-        s = board_samples(image, scene.view, m, asked.size, asked.chart)
-        if len(s.points) < MIN_PIXELS:
-            raise LightError(f"{where}: only {len(s.points)} view camera pixels on the board are lit and usable "
-                             f"(at least {MIN_PIXELS} needed); is the point light on and the board in view?")
-        # as bright as the scene file's light would make it (its intensity, the board's albedo), within a factor
-        g, _, _ = _log_model(start, s.points, s.normal)
-        expected = np.exp(g)[:, None] * np.asarray(intensity) * LIGHT_BOARD_ALBEDO / np.pi \
-            * np.where(s.dark, DARK_RATIO, 1.0)[:, None]
-        brightness = float(np.median(s.radiance.sum(1) / np.maximum(expected.sum(1), 1e-30)))
-        if not MIN_BRIGHTNESS <= brightness <= 1 / MIN_BRIGHTNESS:
-            raise LightError(f"{where}: the board is {brightness:.3g} times as bright as the scene file's light "
-                             f"(intensity {intensity} W/sr) would make it; is the {name} on, and the only light?")
-        samples.append(s)
-        per_board.append({"asked_centre_m": list(asked.centre), "asked_normal": list(asked.normal),
-                          "centre_m": m[:3, 3].tolist(), "normal": m[:3, 2].tolist(), "chart_rms_px": chart_rms,
-                          "black_level_share": float(np.mean((flood - lit) * share) / max(float(np.mean(lit)), 1e-30))})
+        sample, entry = _light_board(rig, scene, asked, where, name, start, intensity, share, spp)
+        samples.append(sample)
+        per_board.append(entry)
     say(f"{name}: fit of its position to the boards' shading")
     fit = fit_light(samples, start)
     for entry, fitted in zip(per_board, fit.per_board):

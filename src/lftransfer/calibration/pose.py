@@ -326,6 +326,67 @@ def _drawn_on(board: BoardPattern, point: np.ndarray, normal: np.ndarray) -> Boa
     return BoardPattern(centre, n, ex, ey, board.squares, board.square_m)
 
 
+@dataclass(frozen=True)
+class _Shot:
+    """How each pose board is lit and photographed: the lit rectangle (width, height, metres), the printed chart,
+    the fringes' peak radiance, the photographs' samples per pixel, the model's encoder and the flood light field
+    (half the peak) the chart is photographed under."""
+
+    size: tuple[float, float]
+    chart: tuple
+    level: float
+    spp: int
+    encoder: object
+    flood: LightField
+
+
+def _photograph_board(rig: Rig, model: RigModel, scene, asked: BoardPattern, pose: "ArrayPose | None",
+                      screen: bool, shot: _Shot, say: Callable[[str], None]) -> dict:
+    """One board of a pose round: asked for, its plane found from the chart under a flood light field, the fringes
+    drawn on it (on its measured plane, carried into the model frame by ``pose``, from the second round on) and
+    decoded into view pixels and the model-frame points drawn there."""
+    n = scene.rig.angular_samples
+    size, chart, encoder, flood = shot.size, shot.chart, shot.encoder, shot.flood
+    rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart),
+                    translucent=screen))
+    images = {}
+    say("photographed with the flood light field")
+    rig.project(encoder(flood))
+    images["flood"] = rig.capture_view(ViewCapture(quality=shot.spp)).radiance
+    point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
+    board = asked if pose is None else _drawn_on(asked, pose.world_to_model(point[None])[0],
+                                                pose.direction_to_model(normal[None])[0])
+    fringes = fringe_lightfields(model.array, n, n, board, size, shot.level)
+    shots = []
+    for j, lf in enumerate(fringes):
+        say(f"photographed with fringes {j + 1} of {len(fringes)}")
+        rig.project(encoder(lf))
+        shots.append(rig.capture_view(ViewCapture(quality=shot.spp)).radiance)
+    rig.project(rig.info.black())
+    images["fringes"] = shots[0]
+    dec = decode_fringes(shots, board, size, scene.view, None if pose is None else pose.model_to_world)
+    px, coords = _sample_valid(dec)
+    if len(px) < 50:
+        raise PoseError(f"board at {100 * asked.centre[2]:.0f} cm: only {len(px)} view camera pixels saw the "
+                        "projected fringes clearly; is the board in view and lit?")
+    drawn = board.centre + coords[:, :1] * board.ex + coords[:, 1:] * board.ey
+    # found: (H, W) bool, normalised: (H, W) cos(phase), for the report
+    return {"asked": asked, "board": board, "point": point, "normal": normal, "chart_rms": chart_rms, "px": px,
+            "found": dec.valid, "images": images, "normalised": dec.wrapped,
+            "world": backproject(scene.view, px, point, normal), "drawn": drawn}
+
+
+def _board_diagnostics(b: dict, pose: "ArrayPose") -> dict:
+    """A board's entry of the report: its photographs, decoded pixels and its placement error as measured."""
+    n_m = pose.direction_to_model(b["normal"][None])[0]
+    if n_m @ b["asked"].normal < 0:                   # the chart's normal may face either way
+        n_m = -n_m
+    placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["asked"].centre) @ n_m),
+                 "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["asked"].normal, -1.0, 1.0))))}
+    return {"images": b["images"], "normalised": b["normalised"], "found": b["found"],
+            "board_placement": placement, "depth_m": float(b["asked"].centre[2])}
+
+
 def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, rounds: int = POSE_ROUNDS,
                    chart=CHART, spp: int = 16,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
@@ -369,10 +430,10 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
         raise ValueError(f"rounds: expected at least 1, got {rounds}")
     n = scene.rig.angular_samples
     level = 0.9 * model.projector.max_radiance
-    encoder = model.encoder(n, n)
     flood = LightField.zeros(model.array, n, n)
     flood.data[...] = 0.5 * level
     size = ((chart[0] + 2) * chart[2], (chart[1] + 2) * chart[2])
+    shot = _Shot(size, chart, level, spp, model.encoder(n, n), flood)
     pose: ArrayPose | None = None
     history = []
     # a view camera in front of the boards sees them through translucent screens, which may have to move away from
@@ -385,49 +446,14 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
         boards = []
         for depth in depths:
             asked = board_pattern(scene.view, depth + shift, translucent=screen, extent=size)
-            rig.setup(Board(centre=tuple(asked.centre), normal=tuple(asked.normal), size=size, chart=tuple(chart),
-                            translucent=screen))
             tag = f"pose round {r + 1}: board at {100 * asked.centre[2]:.0f} cm" if rounds > 1 else \
                 f"pose: board at {100 * asked.centre[2]:.0f} cm"
-            images = {}
-            if progress:
-                progress(f"{tag} photographed with the flood light field")
-            rig.project(encoder(flood))
-            images["flood"] = rig.capture_view(ViewCapture(quality=spp)).radiance
-            point, normal, chart_rms = board_plane(images["flood"], tuple(chart), scene.view)
-            board = asked if pose is None else _drawn_on(asked, pose.world_to_model(point[None])[0],
-                                                        pose.direction_to_model(normal[None])[0])
-            fringes = fringe_lightfields(model.array, n, n, board, size, level)
-            shots = []
-            for j, lf in enumerate(fringes):
-                if progress:
-                    progress(f"{tag} photographed with fringes {j + 1} of {len(fringes)}")
-                rig.project(encoder(lf))
-                shots.append(rig.capture_view(ViewCapture(quality=spp)).radiance)
-            rig.project(rig.info.black())
-            images["fringes"] = shots[0]
-            dec = decode_fringes(shots, board, size, scene.view, None if pose is None else pose.model_to_world)
-            px, coords = _sample_valid(dec)
-            if len(px) < 50:
-                raise PoseError(f"board at {100 * asked.centre[2]:.0f} cm: only {len(px)} view camera pixels saw the "
-                                "projected fringes clearly; is the board in view and lit?")
-            found, norm = dec.valid, dec.wrapped                  # (H, W) bool, (H, W) cos(phase) for the report
-            drawn = board.centre + coords[:, :1] * board.ex + coords[:, 1:] * board.ey
-            boards.append({"asked": asked, "board": board, "point": point, "normal": normal, "chart_rms": chart_rms,
-                           "px": px, "found": found, "images": images, "normalised": norm,
-                           "world": backproject(scene.view, px, point, normal), "drawn": drawn})
+            boards.append(_photograph_board(rig, model, scene, asked, pose, screen, shot,
+                                            lambda msg: progress and progress(f"{tag} {msg}")))
         pose = _solve_boards(model.array, boards, scene.view, start=pose)
         history.append(pose.to_json())
 
-    per_board = []
-    for b in boards:
-        n_m = pose.direction_to_model(b["normal"][None])[0]
-        if n_m @ b["asked"].normal < 0:                   # the chart's normal may face either way
-            n_m = -n_m
-        placement = {"depth_mm": float(1000 * (pose.world_to_model(b["point"][None])[0] - b["asked"].centre) @ n_m),
-                     "tilt_deg": float(np.degrees(np.arccos(np.clip(n_m @ b["asked"].normal, -1.0, 1.0))))}
-        per_board.append({"images": b["images"], "normalised": b["normalised"], "found": b["found"],
-                          "board_placement": placement, "depth_m": float(b["asked"].centre[2])})
+    per_board = [_board_diagnostics(b, pose) for b in boards]
     shown = np.concatenate([np.linspace(0, len(b["px"]) - 1, 24).round().astype(int) + sum(len(c["px"]) for c in
                                                                                           boards[:i])
                             for i, b in enumerate(boards)])

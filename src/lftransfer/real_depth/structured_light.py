@@ -170,6 +170,44 @@ def _score(pred: np.ndarray, obs: np.ndarray) -> np.ndarray:
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), -np.inf)
 
 
+def _searched_stretch(view, model, xs: np.ndarray, ys: np.ndarray):
+    """Each pixel's ray in the array's frame and the stretch of it searched, where lo < z < hi
+    (:data:`DEPTH_RANGE_M`), at most :data:`MAX_STRETCH_M` long.
+
+    Returns:
+        o (3,): the camera's centre; d (P, 3): the rays, per world metre along them (the frames may scale);
+        s_lo (P,): where the stretch starts, metres along the ray; span (P,): its length (0 where none); ok (P,):
+        whether the ray has one.
+    """
+    origin, rays = pixel_rays(view, np.stack([xs, ys], -1).astype(np.float64))
+    m = np.asarray(model.world_to_array(), np.float64)
+    o = m[:3, :3] @ np.asarray(origin, np.float64).reshape(3) + m[:3, 3]
+    d = rays @ m[:3, :3].T
+    lo_z, hi_z = DEPTH_RANGE_M
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo_z - o[2]) / d[:, 2], (hi_z - o[2]) / d[:, 2]
+    s_lo = np.clip(np.minimum(t1, t2), 0.0, None)
+    s_hi = np.minimum(np.maximum(t1, t2), s_lo + MAX_STRETCH_M)      # a ray along the array's plane: its first part
+    ok = np.isfinite(s_lo) & np.isfinite(s_hi) & (s_hi > s_lo)
+    return o, d, s_lo, np.where(ok, s_hi - s_lo, 0.0), ok
+
+
+def _depth_sigma(o: np.ndarray, s_best: np.ndarray, d: np.ndarray, model, sets, amplitude: np.ndarray,
+                 noise: np.ndarray) -> np.ndarray:
+    """(P,) each pixel's depth sigma, metres: each fringe set's phase noise (noise over its modulation amplitude,
+    ``amplitude`` (S, P) and ``noise`` (P,) in radiance) over its phase's rate along the ray (``o + s d``) at
+    ``s_best``, combined over the sets, with :data:`MODEL_SIGMA_M` and :data:`MIN_SIGMA_M`."""
+    P = len(s_best)
+    pts = o + (s_best[:, None] + np.array([-0.5, 0.5])[None] * COARSE_STEP_M)[..., None] * d[:, None, :]
+    pr = predicted_phasors(pts.reshape(-1, 3), model, sets).reshape(len(sets), P, 2)
+    rate = np.angle(pr[..., 1] * np.conj(pr[..., 0])) / COARSE_STEP_M          # (S, P) radians per metre
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sig_phase = noise[None] / (np.sqrt(2.0) * amplitude)
+        info = np.nansum(np.where(np.isfinite(sig_phase) & (sig_phase > 0), np.square(rate / sig_phase), 0.0), 0)
+        sig = np.where(info > 0, 1.0 / np.sqrt(info), np.inf)
+    return np.sqrt(np.square(sig) + MODEL_SIGMA_M ** 2 + MIN_SIGMA_M ** 2)
+
+
 def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeSet, ...] = FRINGE_SETS) -> ViewDepth:
     """Each view pixel's real depth from its photographs of the fringes (see the module's docstring).
 
@@ -202,20 +240,9 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
     sigma = np.full((h, w), np.nan, np.float32)
     if len(ys) == 0:
         return ViewDepth(depth, sigma, "structured_light")
-    origin, rays = pixel_rays(view, np.stack([xs, ys], -1).astype(np.float64))
-    m = np.asarray(model.world_to_array(), np.float64)
-    o = m[:3, :3] @ np.asarray(origin, np.float64).reshape(3) + m[:3, 3]
-    d = rays @ m[:3, :3].T          # (P, 3) in the array frame, per world metre along the ray (the frames may scale)
-    # the stretch of each ray with lo < z < hi
-    lo_z, hi_z = DEPTH_RANGE_M
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1, t2 = (lo_z - o[2]) / d[:, 2], (hi_z - o[2]) / d[:, 2]
-    s_lo = np.clip(np.minimum(t1, t2), 0.0, None)
-    s_hi = np.minimum(np.maximum(t1, t2), s_lo + MAX_STRETCH_M)      # a ray along the array's plane: its first part
-    ok = np.isfinite(s_lo) & np.isfinite(s_hi) & (s_hi > s_lo)
+    o, d, s_lo, span, ok = _searched_stretch(view, model, xs, ys)
     P = len(ys)
     ob = obs[:, ys, xs]                                       # (S, P)
-    span = np.where(ok, s_hi - s_lo, 0.0)
 
     def sweep(centre: np.ndarray, half: np.ndarray, steps: int, which: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Scores of ``steps`` distances across centre +- half along each ray, for the sets ``which``: (P, steps)
@@ -246,16 +273,7 @@ def decode_structured_light(images: np.ndarray, model, view, sets: tuple[FringeS
         curv = y0 - 2 * y1 + y2
         shift = np.where(curv < 0, 0.5 * (y0 - y2) / curv, 0.0)
     s_best = fine[rows, b] + np.clip(shift, -1.0, 1.0) * (fine[:, 1] - fine[:, 0])
-    # sigma: each set's phase noise (noise / modulation amplitude) over its phase's rate along the ray
-    pts = o + (s_best[:, None] + np.array([-0.5, 0.5])[None] * COARSE_STEP_M)[..., None] * d[:, None, :]
-    pr = predicted_phasors(pts.reshape(-1, 3), model, sets).reshape(n, P, 2)
-    rate = np.angle(pr[..., 1] * np.conj(pr[..., 0])) / COARSE_STEP_M          # (S, P) radians per metre
-    amp = np.abs(ob) * mean[:, ys, xs]                                          # b of a + b cos
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sig_phase = noise[ys, xs][None] / (np.sqrt(2.0) * amp)
-        info = np.nansum(np.where(np.isfinite(sig_phase) & (sig_phase > 0), np.square(rate / sig_phase), 0.0), 0)
-        sig = np.where(info > 0, 1.0 / np.sqrt(info), np.inf)
-    sig = np.sqrt(np.square(sig) + MODEL_SIGMA_M ** 2 + MIN_SIGMA_M ** 2)
+    sig = _depth_sigma(o, s_best, d, model, sets, np.abs(ob) * mean[:, ys, xs], noise[ys, xs])
     # how well the model explains the pixel's fringes at its best distance (cosine of the phasors, 1: exactly):
     # light that reaches a surface after a bounce off another carries the coarse fringes but blurs the fine ones
     mid = o + s_best[:, None] * d

@@ -28,7 +28,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from lftransfer.reports.results_format import db, fixed, median_p95, num, table
+from lftransfer.reports.results_demo import demo_tables
+from lftransfer.reports.results_format import db, fixed, median_p95, num, resolution_text, table
 from lftransfer.reports.results_live import live_fps_tables, paired_tables, profile_tables, soak_tables
 from lftransfer.reports.results_occlusion import occlusion_tables
 from lftransfer.reports.results_probe import probe_tables
@@ -297,120 +298,6 @@ def provenance_lines(run: Run | None, stored: StoredRun) -> list[str]:
 
 # --------------------------------------------------------------------------------------------------- kinds
 
-METRICS = (("cross_transfer_rel_error", "cross-transfer error", num), ("psnr_db", "psnr_db", db),
-           ("psnr_objects_db", "psnr_objects_db", db))
-
-
-def demo_tables(s: StoredRun) -> list[str]:
-    d = s.data
-    for key, _, _ in METRICS:
-        s.need(key)
-    out: list[str] = []
-    rows = [[f"`{k}`", f(d[k])] for k, _, f in METRICS]
-    for key, f in (("psnr_db_direct_only", db), ("psnr_objects_db_direct_only", db), ("gt_noise_psnr_db", db),
-                   ("cross_gt_noise_rel", num), ("cross_term_rel_size", num), ("projector_clipped_fraction", num),
-                   ("lf_camera_saturated_fraction", num)):
-        if key in d:
-            rows.append([f"`{key}`", f(d[key])])
-    res = d.get("resolution") or {}
-    settings = ", ".join(f"{k} {d[k]}" for k in ("lighting_model", "reconstruction", "projection", "window",
-                                                  "rig_model", "renderer", "variant", "gt_spp", "truth_seed")
-                         if d.get(k) is not None)
-    if res:
-        out += [f"Resolution: {_resolution(res)}. Settings: {settings}.", ""]
-    out += table(["quantity", "value"], rows)
-    if d.get("undefined_metrics"):
-        out += table(["undefined metric", "why"], [[f"`{k}`", v] for k, v in d["undefined_metrics"].items()])
-
-    comp = []
-    for key, label, used in (("by_lighting_model", "lighting model", "lighting_model"),
-                             ("by_reconstruction", "reconstruction", "reconstruction"),
-                             ("by_projection", "projection", "projection"), ("by_window", "window", "window")):
-        for choice, m in (d.get(key) or {}).items():
-            tag = " (the run's)" if choice == d.get(used) else ""
-            comp.append([f"{label}: {choice}{tag}",
-                         *(f(s.need(key, choice, k)) for k, _, f in METRICS)])
-    if comp:
-        out += ["Each choice against its alternative, the rest as in the run "
-                "(`by_lighting_model`, `by_reconstruction`, `by_projection`, `by_window`):", ""]
-        out += table(["choice", "cross-transfer error", "psnr_db", "psnr_objects_db"], comp)
-
-    nc = d.get("negative_control")
-    if isinstance(nc, dict):
-        out += ["Negative control (`negative_control`: the same rig run with the rig file's nominal values, "
-                "no calibration):", ""]
-        out += table(["rig model", "cross-transfer error", "psnr_objects_db", "run better by (cross error)",
-                      "run better by (psnr_objects_db)", "measurably worse"],
-                     [[s.need("negative_control", "rig_model"), num(s.need("negative_control",
-                                                                            "cross_transfer_rel_error")),
-                       db(s.need("negative_control", "psnr_objects_db")), num(nc.get("cross_error_margin")),
-                       db(nc.get("psnr_objects_margin_db")), num(nc.get("measurably_worse"))]])
-    elif "negative_control" in d:
-        why = (d.get("undefined_metrics") or {}).get("negative_control", "not run")
-        out += [f"Negative control: not run ({why}).", ""]
-
-    ref = d.get("reference")
-    if isinstance(ref, dict):
-        out += [f"Quiet reference (`reference`): {num(ref.get('spp'))} samples per pixel in the objects' box over "
-                f"{num(ref.get('rounds'))} rounds ({num(ref.get('samples'))} camera samples in all); the ground "
-                f"truth's noise on the cross term {num(ref.get('noise'))}, {num(ref.get('ratio'))} of the error "
-                f"(target {num(ref.get('target'))}: {'met' if ref.get('met') else 'not met'}).", ""]
-    floor = d.get("fidelity_floor")
-    if isinstance(floor, dict):
-        out += ["The fidelity floor (`fidelity_floor`, docs/architecture.md \"The fidelity floor\"): each side's best "
-                "through this rig against the transfer, both scored against the ground truth's second seed with its "
-                "noise taken off, in the cross-transfer error's units:", ""]
-        rows = []
-        for side in ("real", "synthetic"):
-            v = floor.get(side)
-            if isinstance(v, dict):
-                rows.append([side, num(v.get("floor")), num(v.get("transfer")), num(v.get("relaxed")),
-                             num(v.get("noise")), num(v.get("pixels"))])
-        rows.append(["both (root sum of squares)", num(floor.get("floor")), num(floor.get("transfer")), "", "", ""])
-        out += table(["side", "floor", "transfer", "relaxed optimum (real)", "reference noise", "pixels"], rows)
-        out += [f"Transfer / floor (`transfer_over_floor`): {num(floor.get('transfer_over_floor'))}.", ""]
-    elif "fidelity_floor" in d:
-        why = (d.get("undefined_metrics") or {}).get("fidelity_floor", "not found")
-        out += [f"Fidelity floor: not found ({why}).", ""]
-
-    sides = d.get("cross_by_side") or {}
-    if sides:
-        out += ["The cross term by side (`cross_by_side`; real: light the synthetic objects sent through the "
-                "projector; synthetic: light of the captured light field):", ""]
-        out += table(["side", "rel_error", "energy_ratio", "rel_error_shape", "gt_noise_rel", "pixels"],
-                     [[side, *(num(v.get(k)) for k in ("rel_error", "energy_ratio", "rel_error_shape",
-                                                       "gt_noise_rel", "pixels"))]
-                      for side, v in sides.items()])
-    if d.get("bounces"):
-        out += ["Energy per bounce (W through the array; `bounces`):", ""]
-        out += table(["bounce", "real_energy", "synthetic_energy", "projector_gain"],
-                     [[num(b.get("index", i)), num(b.get("real_energy")), num(b.get("synthetic_energy")),
-                       num(b.get("projector_gain"))] for i, b in enumerate(d["bounces"])])
-    cal = d.get("calibration_errors")
-    if isinstance(cal, dict) and cal:
-        out += ["Calibration against the simulated rig's hidden truth (`calibration_errors`):", ""]
-        out += table(["quantity", "error"], [[f"`{k}`", num(v)] for k, v in cal.items()])
-    if d.get("timings_s"):
-        out += ["Wall time by stage (`timings_s`, seconds):", ""]
-        out += table(["stage", "s"], [[f"`{k}`", fixed(v, 2)] for k, v in d["timings_s"].items()])
-    if d.get("warnings"):
-        out += ["Warnings of the run:", ""] + [f"- {w}" for w in d["warnings"]] + [""]
-    return out
-
-
-def _resolution(res: dict) -> str:
-    parts = []
-    if "lenslets" in res:
-        parts.append(f"{res['lenslets'][0]} x {res['lenslets'][1]} {res.get('lattice', '')} lenslets".replace("  ",
-                                                                                                           " "))
-    for key, label in (("lf_camera", "LF camera"), ("projector", "projector"), ("view", "view")):
-        if key in res:
-            parts.append(f"{label} {res[key][0]} x {res[key][1]}")
-    if "angular_samples" in res:
-        parts.append(f"{res['angular_samples']} x {res['angular_samples']} directions per lenslet")
-    return ", ".join(parts)
-
-
 def _spread(v) -> str:
     if isinstance(v, dict):
         return f"{fixed(v.get('median'), 1)} ({fixed(v.get('min'), 1)} to {fixed(v.get('max'), 1)})"
@@ -436,7 +323,7 @@ def bench_tables(s: StoredRun) -> list[str]:
         if isinstance(renderer, dict):
             named += f", renderer {renderer.get('used')}"
         moving = settings.get("animated") or d.get("frames_moved")
-        out += [f"Resolution: {_resolution(res)}. Settings: {named}; "
+        out += [f"Resolution: {resolution_text(res)}. Settings: {named}; "
                 f"{'a synthetic object moving in every frame' if moving else 'a still scene'}.", ""]
     pi = d.get("pipeline_iteration") or {}
     rows = [["`pipeline_iteration_ms` (median; min to max)",
@@ -561,7 +448,7 @@ def calibration_seeds_tables(s: StoredRun) -> list[str]:
     names = list(seeds)
     out: list[str] = []
     if s.data.get("resolution"):
-        out += [f"Resolution: {_resolution(s.data['resolution'])}.", ""]
+        out += [f"Resolution: {resolution_text(s.data['resolution'])}.", ""]
     keys: list[str] = []
     for errors in seeds.values():
         keys += [k for k in errors if k not in keys]

@@ -49,3 +49,17 @@ def table(header: list[str], rows: list[list[str]]) -> list[str]:
 def median_p95(x) -> str:
     """``median (p95)`` in whole units of a {"median", "p95"} spread; '-' for none."""
     return "-" if not isinstance(x, dict) else f"{fixed(x.get('median'), 0)} ({fixed(x.get('p95'), 0)})"
+
+
+def resolution_text(res: dict) -> str:
+    """A run's ``resolution`` in words: lenslets, devices, directions per lenslet."""
+    parts = []
+    if "lenslets" in res:
+        parts.append(f"{res['lenslets'][0]} x {res['lenslets'][1]} {res.get('lattice', '')} lenslets".replace("  ",
+                                                                                                           " "))
+    for key, label in (("lf_camera", "LF camera"), ("projector", "projector"), ("view", "view")):
+        if key in res:
+            parts.append(f"{label} {res[key][0]} x {res[key][1]}")
+    if "angular_samples" in res:
+        parts.append(f"{res['angular_samples']} x {res['angular_samples']} directions per lenslet")
+    return ", ".join(parts)

@@ -137,6 +137,88 @@ class ExchangeCheck:
     effect: EffectCurve | None = None
 
 
+@dataclass(frozen=True)
+class _Checking:
+    """What every verified frame's check shares (:func:`verify_exchange`)."""
+
+    opened: object
+    model: object
+    scene: object              # the synthetic part, posed by the sequence's model
+    depth: object              # the live frames' own depth, or None
+    out: Path
+    options: RunOptions
+    spp: int
+    quiet: bool                # a quiet reference per frame
+    settings: TransferSettings
+    direct: TransferSettings
+    effect: object
+    render: object
+    parts: object
+    step: Callable[[str], None]
+
+
+def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
+    """One verified frame: its cross-transfer error by side into its metrics, its fidelity floor where asked for,
+    and the effect's point where the scene has one (:func:`verify_exchange`)."""
+    from lftransfer.runs.sequence import read_frame_depth
+    from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
+    from lftransfer.sim.metrics import cross_transfer_error
+
+    opened, oracle, model, ps, out, options = ctx.opened, ctx.opened.oracle, ctx.model, ctx.scene, ctx.out, ctx.options
+    spp, settings, direct, effect, depth, step = ctx.spp, ctx.settings, ctx.direct, ctx.effect, ctx.depth, ctx.step
+    render, parts = ctx.render, ctx.parts
+    i, t = int(f["index"]), float(f["time_s"])
+    step(f"check the exchange: frame {i}")
+    world = oracle.world.at(t)
+    frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
+    # a depth composite: the frame's own depth, so that both composites hide the same pixels
+    kept = read_frame_depth(out, i)
+    same = {} if kept is None else {"depth": kept[0], "view_depth": kept[1]}
+    alone = run_transfer(opened.rig, model, ps, direct, time_s=t, **same)
+    no_exchange = alone.composite_direct()
+    if ctx.quiet:
+        gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
+                                render=render, parts=parts)
+    else:
+        gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
+    cross = cross_transfer_error(frame, no_exchange, gt)
+    check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
+    f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
+    for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
+        f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
+        f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
+    if floor_skipped(options) is None:
+        step(f"fidelity floor: frame {i}")
+        converged = run_transfer(opened.rig, model, ps, settings, time_s=t,
+                                 **(same or {"depth": depth}))
+        _frame_floor(oracle, getattr(opened.rig, "inner", opened.rig), converged, gt, settings, f,
+                     frame - no_exchange)
+    if effect is None:
+        return
+    truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
+                                        use_cache=options.use_cache).image
+    result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t,
+                          **(same or {"depth": depth}))
+    transfer_without = result.composite()
+    pixels = object_pixels(world, effect.on)
+    check.effect.points.append(EffectPoint(
+        index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
+        transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
+        truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
+
+
+def _summarise(report: dict, check: ExchangeCheck, verified: list[dict]) -> None:
+    """The verified frames' cross errors and their noise into the report's summary (the PSNRs again: a quiet
+    reference changes them)."""
+    values = [v for v in check.cross_errors.values() if v is not None]
+    noise = [f["metrics"]["cross_gt_noise_rel"] for f in verified if f["metrics"].get("cross_gt_noise_rel") is not None]
+    if values and isinstance(report.get("summary"), dict):
+        report["summary"]["cross_transfer_rel_error_min"] = min(values)
+        report["summary"]["cross_transfer_rel_error_max"] = max(values)
+        report["summary"]["cross_gt_noise_rel_max"] = max(noise) if noise else None
+        report["summary"].update(sequence_summary(report["frames"]))   # the PSNRs again: a quiet reference
+
+
 def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *,
                     step: Callable[[str], None] | None = None) -> ExchangeCheck | None:
     """Check the light exchange at every verified frame of a rendered sequence, against the ground truth.
@@ -168,9 +250,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     Returns:
         The :class:`ExchangeCheck`, or None when no frame was verified (or the rig has no ground truth).
     """
-    from lftransfer.runs.sequence import acquire_model, read_depth, read_frame_depth
-    from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
-    from lftransfer.sim.metrics import cross_transfer_error
+    from lftransfer.runs.sequence import acquire_model, read_depth
 
     effect = scene.effect
     warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0
@@ -194,54 +274,13 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
         depth = read_depth(out)         # the live frames' own depth: both sides prefilter alike
         with reference_renderer(options.cluster if resolved.quiet_reference else None,
                                 use_cache=options.use_cache, step=step) as (render, parts):
+            ctx = _Checking(opened, model, ps, depth, out, options, spp, resolved.quiet_reference, settings, direct,
+                            effect, render, parts, step)
             for f in verified:
-                i, t = int(f["index"]), float(f["time_s"])
-                step(f"check the exchange: frame {i}")
-                world = oracle.world.at(t)
-                frame = read_exr(out / "frames" / f"{i:04d}.exr")[..., :3]
-                # a depth composite: the frame's own depth, so that both composites hide the same pixels
-                kept = read_frame_depth(out, i)
-                same = {} if kept is None else {"depth": kept[0], "view_depth": kept[1]}
-                alone = run_transfer(opened.rig, model, ps, direct, time_s=t, **same)
-                no_exchange = alone.composite_direct()
-                if resolved.quiet_reference:
-                    gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
-                                            render=render, parts=parts)
-                else:
-                    gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
-                cross = cross_transfer_error(frame, no_exchange, gt)
-                check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
-                f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
-                for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
-                    f["metrics"][f"cross_{side}_rel_error"] = part.rel_error
-                    f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
-                if floor_skipped(options) is None:
-                    step(f"fidelity floor: frame {i}")
-                    converged = run_transfer(opened.rig, model, ps, settings, time_s=t,
-                                             **(same or {"depth": depth}))
-                    _frame_floor(oracle, getattr(opened.rig, "inner", opened.rig), converged, gt, settings, f,
-                                 frame - no_exchange)
-                if effect is None:
-                    continue
-                truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
-                                                    use_cache=options.use_cache).image
-                result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t,
-                                      **(same or {"depth": depth}))
-                transfer_without = result.composite()
-                pixels = object_pixels(world, effect.on)
-                check.effect.points.append(EffectPoint(
-                    index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
-                    transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
-                    truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
+                _check_frame(ctx, f, check)
     finally:
         opened.rig.close()
-    values = [v for v in check.cross_errors.values() if v is not None]
-    noise = [f["metrics"]["cross_gt_noise_rel"] for f in verified if f["metrics"].get("cross_gt_noise_rel") is not None]
-    if values and isinstance(report.get("summary"), dict):
-        report["summary"]["cross_transfer_rel_error_min"] = min(values)
-        report["summary"]["cross_transfer_rel_error_max"] = max(values)
-        report["summary"]["cross_gt_noise_rel_max"] = max(noise) if noise else None
-        report["summary"].update(sequence_summary(report["frames"]))   # the PSNRs again: a quiet reference
+    _summarise(report, check, verified)
     write_json(out / "report.json", report)
     if check.effect is not None:
         write_json(out / EFFECT_JSON, check.effect.to_json())

@@ -324,6 +324,47 @@ class FrameWorker(Worker):
         return ConvergedFrame(index, time_s, result, gt, seconds)
 
 
+def _resumed(out: Path, seq: SequenceOptions, key: dict) -> tuple[list[dict], float | None]:
+    """With ``--resume``, the finished frames of the sequence in ``out`` (its settings must match ``key``; a live
+    loop continues after its last unbroken frame) and its display scale; else ([], None), with an earlier
+    sequence's frames, state and outputs removed from ``out``."""
+    report_path = out / "report.json"
+    done: list[dict] = []
+    scale = None
+    if seq.resume:
+        if not report_path.is_file():
+            raise SequenceError(f"--resume: {report_path} does not exist: nothing to resume")
+        old = read_json(report_path, "sequence report", SequenceError)
+        if not isinstance(old, dict):
+            raise SequenceError(f"--resume: {report_path}: not a sequence report")
+        if old.get("key") != key:
+            raise SequenceError(f"--resume: {out} holds a sequence with other settings ({old.get('key')}); "
+                                f"run without --resume to start again")
+        done = [f for f in old.get("frames", []) if (out / "frames" / f"{f['index']:04d}.exr").is_file()]
+        if seq.mode == "live":       # the live loop continues after its last unbroken frame
+            done = done[:next((i for i, f in enumerate(done) if f["index"] != i), len(done))]
+        scale = old.get("display_scale")
+    else:
+        for sub in ("frames", "state"):
+            shutil.rmtree(out / sub, ignore_errors=True)
+        for name in ("report.json", "composite.mp4", "bounces.mp4", "calibration.json", "calibration_report.html",
+                     "calibration_errors.json"):
+            (out / name).unlink(missing_ok=True)
+    return done, scale
+
+
+def _stale_captures(report: dict, rig) -> None:
+    """On a hardware rig, the captures that saw frames still changing after the rig file's ``settle_s`` into the
+    report's summary, and a warning where there were any."""
+    stale = getattr(getattr(rig, "inner", rig), "stale_captures", None)
+    if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
+        report["summary"]["stale_captures"] = int(stale)
+        if stale:
+            report["warnings"] += [f"{stale} capture(s) saw frames that still changed after the rig file's "
+                                  "settle_s: they were dropped, not averaged, and the captures waited; "
+                                  "settle_s is too short (lft calibrate latency)"]
+
+
 def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), seq: SequenceOptions = SequenceOptions(),
                     *, progress: FrameProgress | None = None,
                     step: Callable[[str], None] | None = None) -> dict:
@@ -355,27 +396,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                             f"recording is one device whose frames come one after another")
     key = _settings_key(scene, options, seq, settings, n)
     report_path = out / "report.json"
-    done: list[dict] = []
-    scale = None
-    if seq.resume:
-        if not report_path.is_file():
-            raise SequenceError(f"--resume: {report_path} does not exist: nothing to resume")
-        old = read_json(report_path, "sequence report", SequenceError)
-        if not isinstance(old, dict):
-            raise SequenceError(f"--resume: {report_path}: not a sequence report")
-        if old.get("key") != key:
-            raise SequenceError(f"--resume: {out} holds a sequence with other settings ({old.get('key')}); "
-                                f"run without --resume to start again")
-        done = [f for f in old.get("frames", []) if (out / "frames" / f"{f['index']:04d}.exr").is_file()]
-        if seq.mode == "live":       # the live loop continues after its last unbroken frame
-            done = done[:next((i for i, f in enumerate(done) if f["index"] != i), len(done))]
-        scale = old.get("display_scale")
-    else:
-        for sub in ("frames", "state"):
-            shutil.rmtree(out / sub, ignore_errors=True)
-        for name in ("report.json", "composite.mp4", "bounces.mp4", "calibration.json", "calibration_report.html",
-                     "calibration_errors.json"):
-            (out / name).unlink(missing_ok=True)
+    done, scale = _resumed(out, seq, key)
     (out / "frames").mkdir(parents=True, exist_ok=True)
     write_status(out, "running", rig=str(options.rig))
     with tracked_run(out, str(options.rig), interrupted="interrupted (Ctrl-C); --resume continues"):
@@ -410,13 +431,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                                                               settings, todo, step)
             step("write the videos")
             report["summary"] = sequence_summary(report["frames"])
-            stale = getattr(getattr(opened.rig, "inner", opened.rig), "stale_captures", None)
-            if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
-                report["summary"]["stale_captures"] = int(stale)
-                if stale:
-                    report["warnings"] += [f"{stale} capture(s) saw frames that still changed after the rig file's "
-                                          "settle_s: they were dropped, not averaged, and the captures waited; "
-                                          "settle_s is too short (lft calibrate latency)"]
+            _stale_captures(report, opened.rig)
             _write_videos(out, n, report["fps"])
             write_json(report_path, report)
         finally:

@@ -419,6 +419,33 @@ class StudyWorker(Worker):
         return StudyCell(scene=label, seed=int(seed), setting=setting_name, metrics=values, seconds=seconds)
 
 
+def _resumed(study: Study, out: Path, resume: bool, result: StudyResult) -> float:
+    """With ``resume`` on a folder of the same study, its finished cells into ``result`` and the seconds its earlier
+    runs took; else 0, with an earlier study's cells and outputs removed from ``out``.
+
+    Raises:
+        StudyError: ``resume`` on a folder of another study.
+    """
+    cells_dir, marker = out / CELLS, out / "study_key.json"
+    before = 0.0                                   # seconds the earlier runs of a resumed study took
+    if resume and marker.is_file():
+        key = read_json(marker, "study key", StudyError)
+        before = float(key.get("seconds", 0.0))
+        if key.get("digest") != study.digest:
+            raise StudyError(f"--resume: {out} holds another study (or the study or its scenes changed); run "
+                             f"without --resume to start again")
+        for path in sorted(cells_dir.glob("*.json")):
+            data = read_json(path, "study cell", StudyError)
+            result.cells.append(StudyCell(**data))
+    else:
+        if cells_dir.is_dir():
+            for path in cells_dir.glob("*.json"):
+                path.unlink()
+        for name in ("study.json", "study.md", "study.png", "study.html"):
+            (out / name).unlink(missing_ok=True)
+    return before
+
+
 def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = None, resume: bool = False,
               use_cache: bool = True, progress: Callable[[str, int, int], None] | None = None) -> StudyResult:
     """Run every cell of a study (module docstring) and write the outputs into ``out``.
@@ -446,22 +473,7 @@ def run_study(study: Study, out: str | Path, *, cluster: ClusterSpec | None = No
                          floor=c.floor, pitches={s.name: s.array_pitch_mm for s in c.setting if s.array_pitch_mm})
     cells_dir = out / CELLS
     marker = out / "study_key.json"
-    before = 0.0                                   # seconds the earlier runs of a resumed study took
-    if resume and marker.is_file():
-        key = read_json(marker, "study key", StudyError)
-        before = float(key.get("seconds", 0.0))
-        if key.get("digest") != study.digest:
-            raise StudyError(f"--resume: {out} holds another study (or the study or its scenes changed); run "
-                             f"without --resume to start again")
-        for path in sorted(cells_dir.glob("*.json")):
-            data = read_json(path, "study cell", StudyError)
-            result.cells.append(StudyCell(**data))
-    else:
-        if cells_dir.is_dir():
-            for path in cells_dir.glob("*.json"):
-                path.unlink()
-        for name in ("study.json", "study.md", "study.png", "study.html"):
-            (out / name).unlink(missing_ok=True)
+    before = _resumed(study, out, resume, result)
     cells_dir.mkdir(parents=True, exist_ok=True)
     def mark() -> None:
         write_json(marker, {"digest": study.digest, "study": str(study.path),

@@ -196,6 +196,29 @@ def _clean_fit(points: np.ndarray, idx_rel: np.ndarray, ok: np.ndarray, lattice:
     return model, limit
 
 
+def _indices(idx_rel: np.ndarray, lattice: str, expected_shape: tuple[int, int] | None, what: str):
+    """The nodes' final (row, column) indices, and the expected array shape checked: a hex lattice whose top
+    detected row is an odd row is shifted to fit it.
+
+    Raises:
+        NoSpotsError: the nodes span more rows or columns than the expected array.
+    """
+    indices = _final_indices(idx_rel, lattice, 0)
+    if expected_shape is None:
+        return indices, None
+    rows_e, cols_e = _check_shape(expected_shape)
+    span = indices.max(axis=0) + 1
+    if lattice == "hex" and span[1] > cols_e and span[0] < rows_e:
+        shifted = _final_indices(idx_rel, lattice, 1)             # the top detected row is an odd row
+        if np.all(shifted.max(axis=0) + 1 <= (rows_e, cols_e)):
+            indices = shifted
+    span = indices.max(axis=0) + 1
+    if span[0] > rows_e or span[1] > cols_e:
+        raise NoSpotsError(f"the {what} span {span[0]} rows x {span[1]} columns, more than the expected "
+                           f"{rows_e} x {cols_e} array")
+    return indices, (rows_e, cols_e)
+
+
 def _fit_lattice(points: np.ndarray, lattice: str, shape: tuple[int, int], sigma: float,
                  expected_shape: tuple[int, int] | None, kind: str = "spots") -> LatticeFit:
     n = len(points)
@@ -253,19 +276,7 @@ def _fit_lattice(points: np.ndarray, lattice: str, shape: tuple[int, int], sigma
         if more.any():
             _clean_fit(points, idx_rel, ok, lattice, shape, what)
     kept, idx_rel = points[ok], idx_rel[ok]
-    indices = _final_indices(idx_rel, lattice, 0)
-    if expected_shape is not None:
-        rows_e, cols_e = _check_shape(expected_shape)
-        span = indices.max(axis=0) + 1
-        if lattice == "hex" and span[1] > cols_e and span[0] < rows_e:
-            shifted = _final_indices(idx_rel, lattice, 1)             # the top detected row is an odd row
-            if np.all(shifted.max(axis=0) + 1 <= (rows_e, cols_e)):
-                indices = shifted
-        span = indices.max(axis=0) + 1
-        if span[0] > rows_e or span[1] > cols_e:
-            raise NoSpotsError(f"the {what} span {span[0]} rows x {span[1]} columns, more than the expected "
-                               f"{rows_e} x {cols_e} array")
-        expected_shape = (rows_e, cols_e)
+    indices, expected_shape = _indices(idx_rel, lattice, expected_shape, what)
     order = np.lexsort((indices[:, 1], indices[:, 0]))
     kept, indices = kept[order], indices[order]
     ideal = lattice_coordinates(indices, lattice)

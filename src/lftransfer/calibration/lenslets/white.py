@@ -264,6 +264,42 @@ def _envelope(img: np.ndarray, pitch: float) -> np.ndarray:
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR).astype(np.float64)
 
 
+def _patches(pad: np.ndarray, b: np.ndarray, half: int, gamma: np.ndarray | None, rel: np.ndarray) -> np.ndarray:
+    """(n, 2 half + 1, 2 half + 1) float32 patches of the padded image ``pad`` (padded by ``half``, NaN outside:
+    taken as 0) around the integer positions ``b`` (n, 2) (x, y); with ``gamma`` (n, 2) the brightness gradient
+    divided out, relative to the start ``b - rel``."""
+    offi = np.arange(-half, half + 1)
+    off = offi.astype(np.float32)
+    patch = pad[(b[:, 1] + half)[:, None, None] + offi[None, :, None],
+                (b[:, 0] + half)[:, None, None] + offi[None, None, :]]
+    patch = np.where(np.isfinite(patch), patch, np.float32(0.0))
+    if gamma is None:
+        return patch
+    g = gamma.astype(np.float32)
+    rel = rel.astype(np.float32)
+    tilt = 1.0 + g[:, 0, None, None] * (off[None, None, :] + rel[:, 0, None, None]) \
+        + g[:, 1, None, None] * (off[None, :, None] + rel[:, 1, None, None])
+    return patch / np.maximum(tilt, np.float32(0.1))
+
+
+def _window(qa: np.ndarray, off: np.ndarray, outer2: np.ndarray, inv_ramp: np.ndarray,
+            cell: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """(n, P, P) float32 window weights around the centres ``qa`` (n, 2) (patch offsets ``off``): the disk's soft
+    edge (``outer2``, ``inv_ramp`` (n, 1, 1)), cut to the lattice cell where ``cell`` gives its axes (n, K, 2)
+    and apothems less 1 (n, K)."""
+    r2 = (off[None, None, :] - qa[:, 0, None, None]) ** 2 + (off[None, :, None] - qa[:, 1, None, None]) ** 2
+    wgt = np.clip((outer2 - r2) * inv_ramp, 0.0, 1.0)
+    if cell is None:
+        return wgt
+    ax, ap = cell
+    dxa = off[None, None, :] - qa[:, 0, None, None]
+    dya = off[None, :, None] - qa[:, 1, None, None]
+    for k in range(ax.shape[1]):
+        proj = np.abs(ax[:, k, 0, None, None] * dxa + ax[:, k, 1, None, None] * dya)
+        wgt = np.minimum(wgt, np.clip(0.5 * (ap[:, k, None, None] - proj), 0.0, 1.0))
+    return wgt
+
+
 def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius, gamma: np.ndarray | None = None,
                     axes: np.ndarray | None = None, apothem: np.ndarray | None = None, iterations: int = 60,
                     chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
@@ -311,33 +347,17 @@ def _disk_centroids(img: np.ndarray, xy: np.ndarray, radius, gamma: np.ndarray |
     for s in range(0, len(p), chunk):
         sl = slice(s, s + chunk)
         b = base[sl]
-        patch = pad[(b[:, 1] + half)[:, None, None] + offi[None, :, None],
-                    (b[:, 0] + half)[:, None, None] + offi[None, None, :]]
-        patch = np.where(np.isfinite(patch), patch, np.float32(0.0))
-        if gamma is not None:
-            g = gamma[sl].astype(np.float32)
-            rel = (b - start[sl]).astype(np.float32)
-            tilt = 1.0 + g[:, 0, None, None] * (off[None, None, :] + rel[:, 0, None, None]) \
-                + g[:, 1, None, None] * (off[None, :, None] + rel[:, 1, None, None])
-            patch = patch / np.maximum(tilt, np.float32(0.1))
+        patch = _patches(pad, b, half, None if gamma is None else gamma[sl], b - start[sl])
         q = p[sl] - b
-        step = np.zeros_like(q)
-        prev = np.zeros_like(q)
-        active = np.ones(len(q), bool)
-        good = np.ones(len(q), bool)
+        step, prev = np.zeros_like(q), np.zeros_like(q)
+        active, good = np.ones(len(q), bool), np.ones(len(q), bool)
         for it in range(iterations):
             a = np.flatnonzero(active)
             if not len(a):
                 break
             qa = q[a].astype(np.float32)
-            r2 = (off[None, None, :] - qa[:, 0, None, None]) ** 2 + (off[None, :, None] - qa[:, 1, None, None]) ** 2
-            wgt = np.clip((outer2[sl][a] - r2) * inv_ramp[sl][a], 0.0, 1.0)
-            if axes is not None:                                 # cut to the cell
-                dxa = off[None, None, :] - qa[:, 0, None, None]
-                dya = off[None, :, None] - qa[:, 1, None, None]
-                for k in range(ax32.shape[1]):
-                    proj = np.abs(ax32[sl][a, k, 0, None, None] * dxa + ax32[sl][a, k, 1, None, None] * dya)
-                    wgt = np.minimum(wgt, np.clip(0.5 * (ap32[sl][a, k, None, None] - proj), 0.0, 1.0))
+            wgt = _window(qa, off, outer2[sl][a], inv_ramp[sl][a],
+                          None if axes is None else (ax32[sl][a], ap32[sl][a]))
             wv = wgt * patch[a]
             cols = wv.sum(axis=1, dtype=np.float64)          # (n, P): sums over rows
             rows = wv.sum(axis=2, dtype=np.float64)

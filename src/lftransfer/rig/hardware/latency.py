@@ -104,6 +104,94 @@ def _marker_never_seen(camera: _Camera, projector: _Projector, timeout_s: float,
                     "array / is the projector on?")
 
 
+def _level(camera: _Camera, step: str) -> tuple[float, float]:
+    """The camera's next frame's mean code and its arrival (monotonic seconds)."""
+    frame, t = camera.read_frame(step)
+    return float(np.mean(frame)), t
+
+
+def _levels(projector: _Projector, camera: _Camera, black: np.ndarray, marker: np.ndarray, timeout_s: float,
+            prime_s: float, min_contrast: float, step: str) -> tuple[float, float, float]:
+    """The camera's mean code on black and on the marker, and its frame period (0 where unknown), from frames
+    watched for ``prime_s`` on each.
+
+    Raises:
+        RigError: the camera never saw the marker within ``timeout_s``.
+    """
+    arrivals: list[float] = []
+
+    def watch(seconds: float, at_least: int = 3) -> float:
+        values: list[float] = []
+        end = time.monotonic() + seconds
+        while time.monotonic() < end or len(values) < at_least:
+            v, t = _level(camera, step)
+            values.append(v)
+            arrivals.append(t)
+        return float(np.mean(values[-at_least:]))
+
+    projector.show(black, step=step)
+    b = watch(prime_s)
+    projector.show(marker, step=step)
+    deadline = time.monotonic() + timeout_s
+    peak = b
+    while True:
+        v, t = _level(camera, step)
+        peak = max(peak, v)
+        if v - b > min_contrast * max(v, 1.0):
+            break
+        if t > deadline:
+            raise _marker_never_seen(camera, projector, timeout_s, f"mean code {b:.1f} on black, at most "
+                                     f"{peak:.1f} on the marker")
+    w = max(watch(prime_s), v)
+    if not w - b > min_contrast * max(w, 1.0):
+        raise _marker_never_seen(camera, projector, timeout_s, f"mean code {b:.1f} on black, {w:.1f} on the "
+                                 "marker")
+    _log.info("latency: black level %.1f, marker level %.1f", b, w)
+    # the camera's frame period: each marker is shown at a random phase of it, so that the delays sample the whole
+    # frame interval instead of locking to the frame clock (reading a frame, then showing, would always land at
+    # the same phase and round every delay up to the same frame)
+    gaps = np.diff(np.asarray(arrivals))
+    gaps = gaps[gaps > 0.25 * gaps.max()] if gaps.size else gaps      # not the frames a driver had buffered
+    return b, w, float(np.median(gaps)) if gaps.size else 0.0
+
+
+def _one_delay(projector: _Projector, camera: _Camera, black: np.ndarray, marker: np.ndarray,
+               levels: tuple[float, float, float], period: float, rng: np.random.Generator, timeout_s: float,
+               step: str) -> float:
+    """One delay, seconds: black until the camera sees it, one more dark frame, a random phase of the frame period,
+    then the marker until the camera's mean code crosses the middle of ``levels`` (black, middle, marker).
+
+    Raises:
+        RigError: the camera never saw black again, or never the marker, within ``timeout_s``.
+    """
+    b, mid, w = levels
+    projector.show(black, step=step)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        v, t = _level(camera, step)
+        if v < mid:
+            break
+        if t > deadline:
+            raise RigError(f"{camera.label}: the camera never saw the projector go black again within "
+                           f"{timeout_s:g} s (latency measurement, {projector.label}; mean code {v:.1f}, "
+                           f"black is {b:.1f})")
+    _level(camera, step)                        # one more dark frame: the next one starts from black
+    if period > 0:
+        time.sleep(rng.uniform(0.0, min(period, timeout_s / 4)))
+    t0 = projector.show(marker, step=step)
+    if t0 is None:
+        t0 = time.monotonic()
+    deadline = t0 + timeout_s
+    while True:
+        v, t = _level(camera, step)
+        if v > mid:
+            break
+        if t > deadline:
+            raise _marker_never_seen(camera, projector, timeout_s, f"mean code {v:.1f}, marker is "
+                                     f"{w:.1f}, black {b:.1f}")
+    return max(0.0, t - t0)
+
+
 def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, timeout_s: float = 2.0,
                     marker: np.ndarray | None = None, prime_s: float = 0.3, min_contrast: float = 0.02,
                     progress: Callable[[int, int, float], None] | None = None) -> LatencyResult:
@@ -136,77 +224,12 @@ def measure_latency(projector: _Projector, camera: _Camera, tries: int = 20, *, 
     if marker is None:
         marker = np.full(projector.shape, np.iinfo(dtype).max, dtype)
     step = "latency measurement"
-
-    def level() -> tuple[float, float]:
-        frame, t = camera.read_frame(step)
-        return float(np.mean(frame)), t
-
-    arrivals: list[float] = []
-
-    def watch(seconds: float, at_least: int = 3) -> float:
-        values: list[float] = []
-        end = time.monotonic() + seconds
-        while time.monotonic() < end or len(values) < at_least:
-            v, t = level()
-            values.append(v)
-            arrivals.append(t)
-        return float(np.mean(values[-at_least:]))
-
-    # the two levels
-    projector.show(black, step=step)
-    b = watch(prime_s)
-    projector.show(marker, step=step)
-    deadline = time.monotonic() + timeout_s
-    peak = b
-    while True:
-        v, t = level()
-        peak = max(peak, v)
-        if v - b > min_contrast * max(v, 1.0):
-            break
-        if t > deadline:
-            raise _marker_never_seen(camera, projector, timeout_s, f"mean code {b:.1f} on black, at most "
-                                     f"{peak:.1f} on the marker")
-    w = max(watch(prime_s), v)
-    if not w - b > min_contrast * max(w, 1.0):
-        raise _marker_never_seen(camera, projector, timeout_s, f"mean code {b:.1f} on black, {w:.1f} on the "
-                                 "marker")
+    b, w, period = _levels(projector, camera, black, marker, timeout_s, prime_s, min_contrast, step)
     mid = 0.5 * (b + w)
-    _log.info("latency: black level %.1f, marker level %.1f", b, w)
-    # the camera's frame period: each marker is shown at a random phase of it, so that the delays sample the whole
-    # frame interval instead of locking to the frame clock (reading a frame, then showing, would always land at
-    # the same phase and round every delay up to the same frame)
-    gaps = np.diff(np.asarray(arrivals))
-    gaps = gaps[gaps > 0.25 * gaps.max()] if gaps.size else gaps      # not the frames a driver had buffered
-    period = float(np.median(gaps)) if gaps.size else 0.0
     rng = np.random.default_rng(tries)
-
     delays: list[float] = []
     for i in range(tries):
-        projector.show(black, step=step)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            v, t = level()
-            if v < mid:
-                break
-            if t > deadline:
-                raise RigError(f"{camera.label}: the camera never saw the projector go black again within "
-                               f"{timeout_s:g} s (latency measurement, {projector.label}; mean code {v:.1f}, "
-                               f"black is {b:.1f})")
-        level()                                    # one more dark frame: the next one starts from black
-        if period > 0:
-            time.sleep(rng.uniform(0.0, min(period, timeout_s / 4)))
-        t0 = projector.show(marker, step=step)
-        if t0 is None:
-            t0 = time.monotonic()
-        deadline = t0 + timeout_s
-        while True:
-            v, t = level()
-            if v > mid:
-                break
-            if t > deadline:
-                raise _marker_never_seen(camera, projector, timeout_s, f"mean code {v:.1f}, marker is "
-                                         f"{w:.1f}, black {b:.1f}")
-        delays.append(max(0.0, t - t0))
+        delays.append(_one_delay(projector, camera, black, marker, (b, mid, w), period, rng, timeout_s, step))
         if progress is not None:
             progress(i, tries, delays[-1])
     projector.show(black, step=step)

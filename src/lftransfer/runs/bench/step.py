@@ -287,6 +287,72 @@ def _settings_json(scene, options: BenchOptions, settings: TransferSettings, ren
     }
 
 
+def _beside(scene, options: BenchOptions, opened, model, live: LiveTransfer, settings, times: list[float], last,
+            say: Progress):
+    """What the bench measures beside the timed steps, each where asked for: the decoupled loop's run, the fast
+    path's accuracy on the last frame, Mitsuba's own path tracer on the light field job. Returns (decoupled,
+    accuracy, peer), None where not asked for."""
+    decoupled = accuracy = peer = None
+    if options.decoupled:
+        decoupled = run_decoupled(opened.rig, model, scene.synthetic_part(), settings, np.asarray(times),
+                                  frames=max(options.iterations, 10), progress=say)
+    if options.accuracy:
+        say("accuracy: the exact path on the last frame (dense aperture sampling)")
+        accuracy = fast_vs_exact(last, live.side, settings, max_depth=scene.render.max_depth,
+                                 aperture_samples=options.exact_aperture_samples)
+    if options.peer:
+        peer = peer_comparison(live.side.renderer, model.array, last.captured_lf, spp=settings.lf_spp,
+                               seed=settings.seed, repeats=max(3, options.iterations // 2),
+                               max_spp=options.peer_max_spp, progress=say)
+    return decoupled, accuracy, peer
+
+
+def _notes(options: BenchOptions, renderer: str, rig_model: str, sync_moved: bool, decoupled: bool,
+           extra: list[str]) -> list[str]:
+    """What the bench's result says of how it measured: where the fast path approximates, the rig model, the peer,
+    what the latencies include, the stages counted beside the usual ones (``extra``)."""
+    notes = []
+    if renderer == "fast":
+        notes.append("the fast path approximates: irradiance cached at the vertices of a fine tessellation "
+                     "(the synthetic objects' diffuse light, glossy lobes per ray); "
+                     + ("fast_vs_exact measures what that costs in accuracy" if options.accuracy else
+                        "its accuracy was not measured (--no-accuracy)"))
+    if options.calibration is None and options.rig_model != "calibrated":
+        notes.append(f"rig model {rig_model}")
+    if options.peer:
+        notes.append("peer: the light field render alone in the point model (Mitsuba has no area emitter), "
+                     "not the live step")
+    if sync_moved:
+        notes.append("latency_ms.sync: each capture runs inside its frame, so on the simulated rig the simulator's "
+                     "capture is in the latency (a physical rig's exposure would be instead)")
+    if decoupled:
+        notes.append("decoupled: the simulator's captures share the cores with the render loop, so its frame rate "
+                     "is lower than the pipeline's alone (what lft live on the simulated rig shows)")
+    if extra:
+        notes.append(f"stages counted in the pipeline besides the usual ones: {', '.join(extra)}")
+    return notes
+
+
+def _timings(frames) -> dict:
+    """:class:`BenchResult`'s timings of the timed frames: the pipeline's stages (every stage but the rig's) and
+    their sum per frame, the captures, what no stage timed, the whole step; medians in ms and spreads, and the
+    rates they give."""
+    stages = [k for k in frames[0].timings_s if k != "total"]
+    pipeline = [k for k in stages if k not in RIG_STAGES]
+    per_frame = [sum(f.timings_s.get(k, 0.0) for k in pipeline) for f in frames]
+    capture = [sum(f.timings_s.get(k, 0.0) for k in RIG_STAGES) for f in frames]
+    unstaged = [f.timings_s["total"] - sum(f.timings_s.get(k, 0.0) for k in stages) for f in frames]
+    pipeline_ms = round(1000 * statistics.median(per_frame), 3)
+    step_ms = round(1000 * statistics.median(f.timings_s["total"] for f in frames), 3)
+    return {"pipeline_iteration_ms": pipeline_ms, "pipeline_iteration": Spread.of(per_frame),
+            "stages_ms": {k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in pipeline},
+            "capture_ms": round(1000 * statistics.median(capture), 3),
+            "rig_stages_ms": {k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in RIG_STAGES},
+            "unstaged_ms": round(1000 * statistics.median(unstaged), 3), "step_total_ms": step_ms,
+            "pipeline_fps": round(1000.0 / pipeline_ms, 2) if pipeline_ms > 0 else float("inf"),
+            "step_fps": round(1000.0 / step_ms, 3)}
+
+
 def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progress | None = None) -> BenchResult:
     """Time the live step on the simulated rig, and measure the floor, the accuracy and the peer beside it.
 
@@ -335,63 +401,19 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
                           renderer_scene=live.side.renderer.scene)
         last = frames[-1]
         sync_latency = motion_latency(list(live.changes), frames, "sync")
-        decoupled = None
-        if options.decoupled:
-            decoupled = run_decoupled(opened.rig, model, scene.synthetic_part(), settings, np.asarray(times),
-                                      frames=max(options.iterations, 10), progress=say)
-        accuracy = None
-        if options.accuracy:
-            say("accuracy: the exact path on the last frame (dense aperture sampling)")
-            accuracy = fast_vs_exact(last, live.side, settings, max_depth=scene.render.max_depth,
-                                     aperture_samples=options.exact_aperture_samples)
-        peer = None
-        if options.peer:
-            peer = peer_comparison(live.side.renderer, model.array, last.captured_lf, spp=settings.lf_spp,
-                                   seed=settings.seed, repeats=max(3, options.iterations // 2),
-                                   max_spp=options.peer_max_spp, progress=say)
+        decoupled, accuracy, peer = _beside(scene, options, opened, model, live, settings, times, last, say)
     finally:
         opened.rig.close()
 
-    stages = [k for k in frames[0].timings_s if k != "total"]
-    pipeline = [k for k in stages if k not in RIG_STAGES]
-    per_frame = [sum(f.timings_s.get(k, 0.0) for k in pipeline) for f in frames]
-    capture = [sum(f.timings_s.get(k, 0.0) for k in RIG_STAGES) for f in frames]
-    unstaged = [f.timings_s["total"] - sum(f.timings_s.get(k, 0.0) for k in stages) for f in frames]
-    pipeline_ms = round(1000 * statistics.median(per_frame), 3)
-    step_ms = round(1000 * statistics.median(f.timings_s["total"] for f in frames), 3)
-    notes = []
-    if renderer == "fast":
-        notes.append("the fast path approximates: irradiance cached at the vertices of a fine tessellation "
-                     "(the synthetic objects' diffuse light, glossy lobes per ray); "
-                     + ("fast_vs_exact measures what that costs in accuracy" if options.accuracy else
-                        "its accuracy was not measured (--no-accuracy)"))
-    if options.calibration is None and options.rig_model != "calibrated":
-        notes.append(f"rig model {rig_model}")
-    if options.peer:
-        notes.append("peer: the light field render alone in the point model (Mitsuba has no area emitter), "
-                     "not the live step")
-    if sync_latency.view is not None:
-        notes.append("latency_ms.sync: each capture runs inside its frame, so on the simulated rig the simulator's "
-                     "capture is in the latency (a physical rig's exposure would be instead)")
-    if decoupled is not None:
-        notes.append("decoupled: the simulator's captures share the cores with the render loop, so its frame rate "
-                     "is lower than the pipeline's alone (what lft live on the simulated rig shows)")
-    extra = [k for k in pipeline if k not in PIPELINE_STAGES]
-    if extra:
-        notes.append(f"stages counted in the pipeline besides the usual ones: {', '.join(extra)}")
+    timed = _timings(frames)
+    pipeline = list(timed["stages_ms"])
+    notes = _notes(options, renderer, rig_model, sync_latency.view is not None, decoupled is not None,
+                   [k for k in pipeline if k not in PIPELINE_STAGES])
     return BenchResult(
-        pipeline_iteration_ms=pipeline_ms,
-        pipeline_iteration=Spread.of(per_frame),
-        stages_ms={k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in pipeline},
-        capture_ms=round(1000 * statistics.median(capture), 3),
-        rig_stages_ms={k: Spread.of([f.timings_s.get(k, 0.0) for f in frames]) for k in RIG_STAGES},
-        unstaged_ms=round(1000 * statistics.median(unstaged), 3),
-        step_total_ms=step_ms,
+        **timed,
         floor_ms=floor.ms,
         floor=floor,
-        iteration_over_floor=round(pipeline_ms / floor.ms, 2),
-        pipeline_fps=round(1000.0 / pipeline_ms, 2) if pipeline_ms > 0 else float("inf"),
-        step_fps=round(1000.0 / step_ms, 3),
+        iteration_over_floor=round(timed["pipeline_iteration_ms"] / floor.ms, 2),
         fast_vs_exact=accuracy,
         peer=peer,
         settings=_settings_json(scene, options, settings, renderer, rig_model),
