@@ -1,5 +1,5 @@
-"""The light field on the interface: radiance per lenslet on a regular (u, v) grid (docs/architecture.md sections
-2-3)."""
+"""The light field on the interface: radiance per lenslet on a regular (u, v) grid (docs/architecture.md, "The
+interface" and "Radiometry of a lenslet")."""
 
 from __future__ import annotations
 

@@ -308,7 +308,8 @@ class RenderConfig(_Model):
         spp: samples per pixel of view renders and per light field sample.
         lf_spp: rays per entry of the outgoing light field render (points over the entry's lenslet aperture), which
             the depth prefilter also uses to model where each entry's light lands; None: ``spp``. More rays let the
-            prefilter sharpen edges finer than a lenslet (Fig. 5's penumbra, docs/architecture.md).
+            prefilter sharpen edges finer than a lenslet (Fig. 5's penumbra:
+            benchmarks/reconstruction/projector_prefilter.py).
         max_depth: path depth (surface interactions) inside each half-space.
         gt_spp: samples per pixel of the path-traced ground truth.
     """

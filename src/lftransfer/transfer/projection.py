@@ -13,7 +13,8 @@ light where it belongs. Knowing where each projected ray lands:
 2. every ray of the light field render (``spp`` stratified aperture points per entry: the scene's
    ``[render] lf_spp``) lands on the plane of its entry's depth; the landing points are binned (:data:`BIN_M`).
    The rays are the fit's model of where each entry's light lands: four sample an entry's footprint (a lenslet
-   wide) too coarsely for an edge sharper than a lenslet, 16 do better (Fig. 5's penumbra, docs/architecture.md);
+   wide) too coarsely for an edge sharper than a lenslet, 16 do better (Fig. 5's penumbra:
+   benchmarks/reconstruction/projector_prefilter.py --fig5);
 3. the projected entries P are chosen so that every bin receives the light the synthetic scene sends along the
    rays that land in it (:class:`DepthPrefilter`)::
 
@@ -28,7 +29,8 @@ light where it belongs. Knowing where each projected ray lands:
    fit that may add light sends too much to the real objects: 13 to 21 % on the study scenes).
 
 Entries whose rays land nowhere (no depth: dark, or past the sweep's range) keep their box value. The measured
-effect, per scene, is in docs/architecture.md ("The projector's side").
+effect, per scene: benchmarks/reconstruction/projector_prefilter.py (why: docs/architecture.md, "The projector's
+side").
 """
 
 from __future__ import annotations

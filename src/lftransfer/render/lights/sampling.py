@@ -17,7 +17,8 @@ from lftransfer.lightfield.window import SteepRays
 from lftransfer.render.lights.jit import jit_array
 
 #: How far ``window="edge"`` reads beyond the window: |(u, v)| <= EDGE_REACH a (36.9 degrees off the normal for
-#: a = 0.5). Measured on Fig. 4 and five other scenes (docs/architecture.md, "Light from beyond the window"):
+#: a = 0.5). Measured on Fig. 4 and five other scenes (benchmarks/reconstruction/window.py; docs/architecture.md, "Light
+#: from beyond the window", says why):
 #: 1.5 brings the synthetic side's energy to within 1 % of the ground truth's on the four whose real objects
 #: stand near the synthetic ones; unbounded it overshoots by 3 to 5 % and the error grows again.
 EDGE_REACH = 1.5
