@@ -29,7 +29,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lftransfer.reports.results_demo import demo_tables
-from lftransfer.reports.results_format import db, fixed, median_p95, num, resolution_text, table
+from lftransfer.reports.results_format import (db, fixed, median_p95, num, resolution_text, surface_solve_text,
+                                                table)
 from lftransfer.reports.results_live import live_fps_tables, paired_tables, profile_tables, soak_tables
 from lftransfer.reports.results_occlusion import occlusion_tables
 from lftransfer.reports.results_probe import probe_tables
@@ -344,6 +345,9 @@ def bench_tables(s: StoredRun) -> list[str]:
     rows.append(["`floor_ms` (the step's rays cast once)",
                  fixed(d["floor_ms"], 1) + (f" ({' + '.join(f'{r:,}' for r in rays)} rays)" if rays else "")])
     rows.append(["`iteration_over_floor`", num(d["iteration_over_floor"])])
+    if isinstance(d.get("surface_solve"), dict):
+        rows.append(["the projection's solve against the measured surface (`surface_solve`, in `encode`)",
+                     surface_solve_text(d["surface_solve"])])
     for loop, lat in (d.get("latency_ms") or {}).items():
         if isinstance(lat, dict):
             rows.append([f"motion to composite / to its light, ms, median (95 %) ({loop} loop)",

@@ -63,3 +63,20 @@ def resolution_text(res: dict) -> str:
     if "angular_samples" in res:
         parts.append(f"{res['angular_samples']} x {res['angular_samples']} directions per lenslet")
     return ", ".join(parts)
+
+
+def surface_solve_text(solve: dict) -> str:
+    """The bench's surface solve (``BenchResult.surface_solve``) in words: warm frames (ms, steps), the cold start,
+    the last frame's misfit against a converged solve and the box light field's."""
+    warm, steps = solve["warm_ms"], solve["warm_iterations"]
+    out = (f"warm {warm['median']:.1f} ms (max {warm['max']:.1f}; {steps['median']:g} steps, at most "
+           f"{steps['max']})" if warm else "no warm frame")
+    if solve["cold_ms"] is not None:
+        out += f"; cold {solve['cold_ms']:.0f} ms ({solve['cold_iterations']} steps, in the warm-up)"
+    last = solve.get("last_frame")
+    if last is not None:
+        out += (f"; last frame's misfit {last['misfit']:.3f} (converged {last['converged_misfit']:.3f}, box light "
+                f"field {last['box_misfit']:.3f})")
+    if solve["cold_in_timed"]:
+        out += f"; {solve['cold_in_timed']} timed frames started cold"
+    return out

@@ -17,6 +17,7 @@ from lftransfer.app.cli.options import (Calibration, LightingModel, MaxMemory, P
                                             option)
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.settings import Overrides
+from lftransfer.reports.results_format import surface_solve_text
 
 __all__ = ["register"]
 
@@ -106,22 +107,6 @@ def register(app: typer.Typer) -> None:
     command(app)(bench)
 
 
-def _solve_cell(solve: dict) -> str:
-    """The surface solve's row: warm frames (ms, steps) and the cold start."""
-    warm, steps = solve["warm_ms"], solve["warm_iterations"]
-    out = (f"warm {warm['median']:.1f} ms (max {warm['max']:.1f}; {steps['median']:g} steps, at most "
-           f"{steps['max']})" if warm else "no warm frame")
-    if solve["cold_ms"] is not None:
-        out += f"; cold {solve['cold_ms']:.0f} ms ({solve['cold_iterations']} steps, in the warm-up)"
-    last = solve.get("last_frame")
-    if last is not None:
-        out += (f"; last frame's misfit {last['misfit']:.3f} (converged {last['converged_misfit']:.3f}, box light "
-                f"field {last['box_misfit']:.3f})")
-    if solve["cold_in_timed"]:
-        out += f"; {solve['cold_in_timed']} timed frames started cold"
-    return out
-
-
 def _demo_calibration_hint(scene) -> str:
     """`` The demo's FILE fits this scene: ...`` where the demo's calibration file exists and fits, else ``""``."""
     from lftransfer.calibration.rig import CalibrationFileError, load_calibration
@@ -194,7 +179,7 @@ def _bench_table(result) -> None:
     for stage, t in result.stages_ms.items():
         row(table, f"  {labels.get(stage, stage.replace('_', ' '))}", f"{t.median:.1f} ms")
         if stage == "encode" and result.surface_solve is not None:
-            row(table, "    of which the surface solve", _solve_cell(result.surface_solve))
+            row(table, "    of which the surface solve", surface_solve_text(result.surface_solve))
     rig = result.rig_stages_ms
     row(table, "rig capture (simulator; not in the pipeline)",
          f"{result.capture_ms:.0f} ms (LF {rig['capture'].median:.0f}, view {rig['capture_view'].median:.0f})")
