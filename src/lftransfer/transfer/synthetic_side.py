@@ -160,7 +160,7 @@ class SyntheticSide:
         self.prefilter: DepthPrefilter | None = None
         self.depth: np.ndarray | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
-        self._gain: tuple | None = None   # (the probe's map, the depth, (the entries' factor, the points'))
+        self._gain: tuple | None = None   # (the probe's map, the depth, the solve, (the entries' factor, the points'))
 
     @property
     def surface_solve(self) -> SurfaceSolve | None:
@@ -354,11 +354,12 @@ class SyntheticSide:
         from lftransfer.transfer.room import room_gain_at, steep_room_gain
 
         depth, solve = self.depth, self.encoder.solve
-        if self._gain is None or self._gain[0] is not self.probe or self._gain[1] is not depth:
+        if self._gain is None or self._gain[0] is not self.probe or self._gain[1] is not depth \
+                or self._gain[2] is not solve:
             entries = steep_room_gain(self.probe, self.model.array, depth, ls.u, ls.v)
             points = None if solve is None else room_gain_at(self.probe, self.model.array, solve.surface.points)
-            self._gain = (self.probe, depth, (entries, points))
-        return self._gain[2]
+            self._gain = (self.probe, depth, solve, (entries, points))
+        return self._gain[3]
 
 
 PROBE_SAMPLES = 16          # directions of the light probe's map per shading point
