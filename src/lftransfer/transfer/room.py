@@ -22,7 +22,7 @@ import numpy as np
 
 from lftransfer.optics.geometry import crosses_rectangle, env_directions, env_solid_angles, in_window
 
-__all__ = ["MAX_GAIN", "room_gain_at", "steep_room_gain"]
+__all__ = ["MAX_GAIN", "landing_points", "room_gain_at", "steep_room_gain"]
 
 MAX_GAIN = 8.0                     # the room's window light is sent at most this much stronger
 GRID_XY = 9                        # grid points across the array's extent, per axis
@@ -87,9 +87,13 @@ def steep_room_gain(radiance: np.ndarray, array, depth: np.ndarray, u: np.ndarra
     Returns:
         (K, V, U) float32 in [1, :data:`MAX_GAIN`].
     """
+    return room_gain_at(radiance, array, landing_points(array, depth, u, v)).reshape(np.shape(depth))
+
+
+def landing_points(array, depth: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(K, V, U, 3) where each light field entry's centre ray meets the measured ``depth`` (K, V, U) (array frame,
+    metres; NaN where the depth is unknown); ``u``, ``v``: the entries' angular coordinates."""
     c = array.centres                                                     # (K, 2)
     uu, vv = np.meshgrid(u, v)                                            # (V, U)
     z = np.asarray(depth, float)
-    px = c[:, 0, None, None] + z * uu[None]
-    py = c[:, 1, None, None] + z * vv[None]
-    return room_gain_at(radiance, array, np.stack([px, py, z], -1)).reshape(z.shape)
+    return np.stack([c[:, 0, None, None] + z * uu[None], c[:, 1, None, None] + z * vv[None], z], -1)

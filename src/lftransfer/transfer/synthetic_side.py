@@ -351,14 +351,17 @@ class SyntheticSide:
         """The steep room light's factors for the light probe's map and the measured depth
         (:mod:`~lftransfer.transfer.room`), found once per map and depth: (K, V, U) per light field entry, and (N,)
         per point of the solve's measured surface (None without the solve)."""
-        from lftransfer.transfer.room import room_gain_at, steep_room_gain
+        from lftransfer.transfer.room import landing_points, room_gain_at
 
         depth, solve = self.depth, self.encoder.solve
         if self._gain is None or self._gain[0] is not self.probe or self._gain[1] is not depth \
                 or self._gain[2] is not solve:
-            entries = steep_room_gain(self.probe, self.model.array, depth, ls.u, ls.v)
-            points = None if solve is None else room_gain_at(self.probe, self.model.array, solve.surface.points)
-            self._gain = (self.probe, depth, solve, (entries, points))
+            # one lookup table for both: the entries' landing points, then the solve's measured points
+            landed = landing_points(self.model.array, depth, ls.u, ls.v).reshape(-1, 3)
+            where = landed if solve is None else np.concatenate([landed, solve.surface.points])
+            gain = room_gain_at(self.probe, self.model.array, where)
+            entries = gain[:len(landed)].reshape(np.shape(depth))
+            self._gain = (self.probe, depth, solve, (entries, None if solve is None else gain[len(landed):]))
         return self._gain[3]
 
 
