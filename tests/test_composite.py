@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lftransfer.composite import composite
-from lftransfer.render.renderer import sample_mean
+from lftransfer.render.base import sample_mean
 
 
 def _plain(syn, alpha, real):

@@ -99,6 +99,9 @@ MAX_BOUNCES = 20
 roughly as the product of both sides' albedo and form factor, 1e-2 per bounce on Fig. 4. (The live page runs up
 to :data:`lftransfer.app.viewer.session.MAX_EXCHANGES` exchanges per shown frame.)"""
 
+DEFAULT_MAX_DEPTH = 3
+"""Surface interactions per path inside a half-space (``[render] max_depth``): direct light and two
+interreflections."""
 DEFAULT_ANGULAR_SAMPLES = 48
 DEFAULT_APERTURE_SAMPLES = 4
 DEFAULT_SPP = 4

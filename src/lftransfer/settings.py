@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 
 from lftransfer import choices
+from lftransfer.render.selection import resolve_renderer
 from lftransfer.transfer.bounce import TransferSettings
 
 __all__ = ["COMPARABLE", "Overrides", "RunSettings", "resolve_settings"]
@@ -159,6 +160,7 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
                   lighting_model=render.lighting_model, aperture_samples=render.aperture_samples,
                   reconstruction=render.reconstruction, projection=render.projection, window=render.window,
                   lf_spp=render.lf_spp or render.spp, view_spp=render.spp, renderer=choices.DEFAULT_RENDERER,
+                  max_depth=render.max_depth,
                   composite=render.composite, direct_light="probe" if scene.probe is not None else "point")
     for name in ("bounces", "lighting_model", "reconstruction", "projection", "window", "renderer", "composite",
                  "direct_light"):
@@ -170,6 +172,7 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
     if not area:
         values.update(choices.NON_AREA)
     values.update(transfer_changes)
+    values["renderer"] = resolve_renderer(scene, values["renderer"])
     transfer = TransferSettings(**values)
     adjustments = []
     if live and transfer.prefilters and any(o.moves for o in getattr(scene, "real", ())):

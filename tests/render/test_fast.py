@@ -87,13 +87,29 @@ def test_03_light_field_lighting_matches_exact(variant, model):
     assert psnr(fast.rgb, exact.rgb) > 35, model
 
 
+def approximations(scene, kind="auto"):
+    """What the renderer ``kind`` resolves to for ``scene`` approximates there, at the scene's max_depth."""
+    from lftransfer.render.selection import approximations as notes, resolve_renderer
+
+    return notes(scene, resolve_renderer(scene, kind), max_depth=scene.render.max_depth)
+
+
+def synthetic_renderer(scene):
+    """The renderer a run of ``scene`` builds (settings resolved as a run resolves them)."""
+    from lftransfer.render.selection import make_renderer
+    from lftransfer.settings import resolve_settings
+
+    settings = resolve_settings(scene).transfer
+    return make_renderer(scene.synthetic, settings.renderer, settings.max_depth)
+
+
 def test_04_glossy_and_metal_take_the_fast_path_where_verified(variant):
     """Every material renders on the fast path; "auto" takes it for glossy and metal objects of roughness at
     least MIN_ROUGHNESS (measured as accurate as the exact path), the exact path below, and a forced fast path
     says what it approximates."""
     from lftransfer.render.fast import MIN_ROUGHNESS
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-    from lftransfer.transfer.synthetic_side import approximations, resolve_renderer, synthetic_renderer
+    from lftransfer.render.selection import resolve_renderer
 
     glossy = _objects({"type": "glossy", "albedo": [0.5] * 3, "roughness": 0.2})
     assert supports(glossy) and supports(_objects())
@@ -170,7 +186,7 @@ def test_07_auto_renders_light_between_synthetic_objects(variant):
     and the report says what it leaves out; with a glossy or metal one among them too (fig6, fig1b), the report
     then naming the glossy light they exchange; an emitter beside one reflecting object exchanges nothing."""
     from lftransfer.scenes import builtin_scene, load_scene, with_overrides
-    from lftransfer.transfer.synthetic_side import approximations, resolve_renderer, synthetic_renderer
+    from lftransfer.render.selection import resolve_renderer
 
     scene = load_scene(builtin_scene("fig4"))
     cube = scene.synthetic[0].model_dump(mode="json")
@@ -178,7 +194,7 @@ def test_07_auto_renders_light_between_synthetic_objects(variant):
     two = with_overrides(scene, synthetic=[cube, ball])
     assert resolve_renderer(scene) == "fast" and resolve_renderer(two) == "fast"
     assert any("exchange: their diffuse light" in note for note in approximations(two))
-    assert synthetic_renderer(two).bounces == scene.render.max_depth - 1
+    assert synthetic_renderer(two).gathers == scene.render.max_depth - 1
     assert not any("exchange" in note for note in approximations(scene))
     shiny = with_overrides(scene, synthetic=[cube, {**ball, "material": {"type": "metal", "roughness": 0.1}}])
     assert resolve_renderer(shiny) == "fast" and resolve_renderer(shiny, "exact") == "exact"
@@ -393,8 +409,8 @@ def test_16_interreflection_between_synthetic_objects(variant, material):
 
     share = 1.0 - direct.rgb[seen].sum() / reference.rgb[seen].sum()
     assert share > 0.1                                                       # the effect is there to miss
-    with_bounces = CachedRenderer(objects, bounces=2).render_view(sensor, w, h, light, spp=4)
-    without = CachedRenderer(objects, bounces=0).render_view(sensor, w, h, light, spp=4)
+    with_bounces = CachedRenderer(objects, max_depth=3).render_view(sensor, w, h, light, spp=4)
+    without = CachedRenderer(objects, max_depth=1).render_view(sensor, w, h, light, spp=4)
     assert error(with_bounces) < 0.04 and error(with_bounces) < error(exact)
     assert error(without) > 0.8 * share                                      # the control misses it
 
@@ -489,7 +505,7 @@ def test_19_objects_that_move_as_one_keep_their_gather(variant):
 
     objects = _facing_panels({"type": "diffuse", "albedo": [0.9, 0.9, 0.9]})
     light = [PointLight(np.array([0.0, 0.03, -0.09]), np.array([1.0, 1.0, 1.0]))]
-    r = CachedRenderer(objects, bounces=2)
+    r = CachedRenderer(objects, max_depth=3)
     r.relight(light)
     gather = r.arrangement.gather()
 

@@ -7,7 +7,8 @@ import numpy as np
 from lftransfer.optics import LensArray
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import PointLight
-from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
+from lftransfer.render.base import aperture_offsets
+from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.scenes.format import ObjectConfig
 
 

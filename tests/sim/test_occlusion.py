@@ -28,7 +28,7 @@ import pytest
 
 from lftransfer.composite import composite
 from lftransfer.real_depth import ViewDepth
-from lftransfer.render.renderer import ViewImage
+from lftransfer.render.base import ViewImage
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.sim.ground_truth import GroundTruth, views_overlap
 from lftransfer.sim.metrics import occlusion_metrics

@@ -8,7 +8,7 @@ import pytest
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
-from lftransfer.render.renderer import lightfield_rays
+from lftransfer.render.base import lightfield_rays
 from lftransfer.transfer.projection import DepthPrefilter
 
 P = 0.0254

@@ -12,7 +12,7 @@ import pytest
 
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth.surface import measured_surface
-from lftransfer.render.renderer import lightfield_rays, sample_mean
+from lftransfer.render.base import lightfield_rays, sample_mean
 from lftransfer.rig.model import nominal_rig
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.transfer.projection import DepthPrefilter

@@ -26,7 +26,7 @@ from lftransfer.calibration.rig import count_calibration_steps, load_calibration
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
-from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
+from lftransfer.render.selection import approximations
 
 if TYPE_CHECKING:
     from lftransfer.sim.metrics import NegativeControl
@@ -631,8 +631,8 @@ class _Run:
                 "metrics": measured.get("metric_resolution"),
             },
             "gt_spp": self.settings.gt_spp if self.verified else None,
-            "renderer": resolve_renderer(known.scene, s.renderer),
-            "approximations": approximations(known.scene, s.renderer),
+            "renderer": s.renderer,
+            "approximations": approximations(known.scene, s.renderer, max_depth=s.max_depth),
             "settings": self.settings.to_json(),
             "rig": str(options.rig),
             "truth_seed": self.opened.truth_seed,

@@ -38,7 +38,7 @@ from lftransfer.lightfield import LightField
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view, run_transfer
 from lftransfer.settings import RunSettings
 from lftransfer.transfer.live import LiveTransfer
-from lftransfer.transfer.synthetic_side import approximations, resolve_renderer
+from lftransfer.render.selection import approximations
 from lftransfer.validation import read_json
 
 __all__ = ["ConvergedFrame", "FrameRecord", "FrameWorker", "SequenceError", "SequenceOptions", "acquire_model",
@@ -408,10 +408,11 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             report = {"key": key, "mode": seq.mode, "loop": seq.loop if seq.mode == "live" else None,
                       "rig_model": rig_model, "variant": _variant(),
                       "warnings": list(known.warnings),
-                      "renderer": resolve_renderer(ps, settings.renderer), "fps": _fps(scene),
+                      "renderer": settings.renderer, "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "projection": settings.projection,
-                      "approximations": approximations(ps, settings.renderer) + projection_note
+                      "approximations": approximations(ps, settings.renderer, max_depth=settings.max_depth)
+                      + projection_note
                       + _composite_note(scene, seq, settings)}
             writer = _FrameWriter(out, report, report_path, ceiling=emitter_ceiling(ps), progress=progress, total=n)
             verify = seq.verify_every > 0 and opened.oracle is not None

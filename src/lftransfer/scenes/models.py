@@ -21,6 +21,7 @@ from lftransfer.choices import (
     DEFAULT_COMPOSITE,
     DEFAULT_GT_SPP,
     DEFAULT_LIGHTING_MODEL,
+    DEFAULT_MAX_DEPTH,
     DEFAULT_PROJECTION,
     DEFAULT_RECONSTRUCTION,
     DEFAULT_SPP,
@@ -322,7 +323,7 @@ class RenderConfig(_Model):
     composite: Composite = DEFAULT_COMPOSITE
     spp: PosInt = DEFAULT_SPP
     lf_spp: PosInt | None = None
-    max_depth: PosInt = 3
+    max_depth: PosInt = DEFAULT_MAX_DEPTH
     gt_spp: PosInt = DEFAULT_GT_SPP
 
 

@@ -275,7 +275,8 @@ def lightfield_depths(world, model, U: int, V: int, *, time_s: float = 0.0) -> n
     normal: what :func:`~lftransfer.transfer.projection.measure_depth` measures, without its error. NaN off the
     data samples and where the ray meets no real object."""
     from lftransfer.lightfield import LightField
-    from lftransfer.render.renderer import HalfSpaceRenderer, lightfield_rays
+    from lftransfer.render.base import lightfield_rays
+    from lftransfer.render.renderer import HalfSpaceRenderer
     from lftransfer.scenes.frame import scene_in_frame
 
     posed = scene_in_frame(world.at(time_s), model.world_to_array())

@@ -30,7 +30,8 @@ from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.optics.geometry import apply_homography, rectangle_to_world
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import EnvironmentLight, LightFieldLight, PointLight
-from lftransfer.render.renderer import HalfSpaceRenderer, aperture_offsets
+from lftransfer.render.base import aperture_offsets
+from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.model import RigModel, nominal_rig
 from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,

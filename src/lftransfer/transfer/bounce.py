@@ -27,7 +27,7 @@ from lftransfer.real_depth.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light, view_depth_from_lightfield
-from lftransfer.render.renderer import ViewImage
+from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene
@@ -67,9 +67,12 @@ class TransferSettings:
         view_spp: rays per view pixel for synthetic renders.
         projector_fill: fraction of the projector's full radiance that the brightest sample of g_n Ls is given.
         bounce_views: also capture the real view for every bounce (for the Fig. 4 panel).
-        renderer: "exact" (path tracing, every lenslet summed at every ray), "fast" (irradiance cached at the
-            vertices of a fine tessellation, diffuse materials only, see :mod:`lftransfer.render.fast`) or
-            "auto" (fast where the synthetic scene allows it).
+        renderer: "exact" (path tracing, every lenslet summed at every ray) or "fast" (irradiance cached at the
+            vertices of a fine tessellation, :mod:`lftransfer.render.fast`), as resolved for the scene
+            (:func:`~lftransfer.render.selection.resolve_renderer`); settings made by hand may say "auto" (the
+            synthetic side resolves it by the same rule).
+        max_depth: surface interactions per path inside the synthetic half-space (the scene's
+            ``render.max_depth``; 1 = direct light only).
         seed: Monte Carlo seed of the synthetic renders.
     """
 
@@ -87,6 +90,7 @@ class TransferSettings:
     projector_fill: float = choices.DEFAULT_PROJECTOR_FILL
     bounce_views: bool = True
     renderer: choices.Renderer = choices.DEFAULT_RENDERER
+    max_depth: int = choices.DEFAULT_MAX_DEPTH
     seed: int = 0
 
     def __post_init__(self) -> None:

@@ -41,7 +41,7 @@ from lftransfer import choices
 from lftransfer.backend import bound_blas
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
-from lftransfer.render.renderer import ViewImage
+from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import RealScene

@@ -43,7 +43,7 @@ from scipy.sparse.linalg import splu
 
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.depth import SWEEP_DEPTHS, plane_sweep
-from lftransfer.render.renderer import data_entry_rays, sample_mean
+from lftransfer.render.base import data_entry_rays, sample_mean
 
 #: Side of the landing bins, metres.
 BIN_M = 0.004

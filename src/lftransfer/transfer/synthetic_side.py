@@ -11,10 +11,10 @@ import numpy as np
 
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.window import SteepRays, steep_rays
-from lftransfer.render import fast
+from lftransfer.render.base import ViewImage
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import EDGE_REACH, EmitterLight, EnvironmentLight, LightFieldLight, PointLight
-from lftransfer.render.renderer import HalfSpaceRenderer, ViewImage
+from lftransfer.render.selection import make_renderer, resolve_renderer
 from lftransfer.rig.model import RigModel
 from lftransfer.scenes import SyntheticScene, check_synthetic
 from lftransfer.scenes.frame import scene_in_frame
@@ -22,90 +22,7 @@ from lftransfer.real_depth.surface import measured_surface
 from lftransfer.transfer.projection import DepthPrefilter
 from lftransfer.transfer.surface_solve import SolvingEncoder, SurfaceSolve, TargetedLightField
 
-__all__ = ["SyntheticSide", "approximations", "resolve_renderer", "synthetic_renderer"]
-
-
-def _reflecting(scene) -> list:
-    return [o for o in scene.synthetic if o.material.type != "emitter"]
-
-
-def resolve_renderer(scene, kind: str = "auto") -> str:
-    """"fast" or "exact": what ``kind`` ("auto", "fast", "exact") means for this scene.
-
-    "auto" is the fast path where it renders the scene as the exact path does, within the exact path's own
-    Monte Carlo error: diffuse, glossy and metal materials (glossy and metal of roughness at least
-    ``fast.MIN_ROUGHNESS`` = 0.02, where the fast path's error against the converged exact path was measured to
-    be no larger than the exact path's at its default samples; below it neither path converges, and the exact
-    path stays the reference) and emitters; otherwise the exact path. Synthetic objects that light each other
-    take the fast path too, whose interreflection gather renders the diffuse light they exchange (measured against
-    the converged exact path, tests/render/test_fast.py::test_16) and whose glossy lobes read it; the glossy light
-    they reflect onto each other is left out, and reports say so (Figs. 6 and 1b, each a glossy photograph on a
-    glossy or metal frame: the same cross error and PSNR over the objects as the exact path against ground truth,
-    benchmarks/glossy/fast_vs_exact.py). A half-space where nothing reflects light (no objects, or emitters only)
-    always takes the exact path: there is no irradiance to cache, and the exact path only shows the emitters. So
-    does a scene lit by a light probe (the fast path has no environment light).
-    """
-    if kind not in ("auto", "fast", "exact"):
-        raise ValueError(f"renderer must be 'auto', 'fast' or 'exact', got {kind!r}")
-    if not _reflecting(scene):
-        return "exact"
-    if getattr(scene, "probe", None) is not None:
-        if kind == "fast":
-            raise ValueError("renderer 'fast': the fast path does not render a light probe's environment (its "
-                             "background and its light); use 'exact' or 'auto'")
-        return "exact"
-    if kind == "auto":
-        ok = fast.supports(scene.synthetic) and all(fast.verified(o.material) for o in scene.synthetic)
-        return "fast" if ok else "exact"
-    return kind
-
-
-def approximations(scene, kind: str = "auto") -> list[str]:
-    """What the chosen renderer leaves out of this scene or approximates, one sentence each (reports say it:
-    an effect is never dropped silently)."""
-    if resolve_renderer(scene, kind) != "fast":
-        return []
-    notes = [f"fast path: diffuse irradiance cached at the vertices of a {fast.DEFAULT_MAX_EDGE * 1000:.0f} mm "
-             f"tessellation, linear across each triangle"]
-    glossy = [o for o in scene.synthetic if o.material.type in ("glossy", "metal")]
-    if glossy:
-        notes.append("fast path: glossy and metal lobes evaluated per ray, the light field's share by "
-                     f"{fast.DEFAULT_LOBE_SAMPLES} or more directions drawn from the lobe "
-                     f"({fast.DEFAULT_VIEW_LOBE_SAMPLES} per view ray), its occlusion read from the cache except "
-                     "on cache triangles a shadow edge crosses")
-    at_points = [o.name for o in glossy if o.material.roughness >= fast.PINHOLE_ROUGHNESS]
-    if at_points:
-        notes.append(f"fast path: in the view, the lobes of roughness >= {fast.PINHOLE_ROUGHNESS} "
-                     f"({', '.join(at_points)}) computed at the cache points towards the camera "
-                     f"({fast.PINHOLE_SAMPLES} x the directions) and interpolated across each triangle")
-    rough = [o.name for o in glossy if 0 < o.material.roughness < fast.MIN_ROUGHNESS]
-    if rough:
-        notes.append(f"fast path: roughness below {fast.MIN_ROUGHNESS} ({', '.join(rough)}) is not verified against "
-                     f"the exact path (whose sampling does not converge there); point-light highlights on "
-                     f"tessellated spheres shift; --renderer exact is the reference")
-    smooth = [o.name for o in glossy if o.material.roughness == 0]
-    if smooth:
-        notes.append(f"fast path: smooth (roughness 0) surfaces ({', '.join(smooth)}) mirror the captured light "
-                     f"field, which the exact path (next-event estimation only) leaves black")
-    if fast.exchanges_light(scene.synthetic):
-        bounces = scene.render.max_depth - 1
-        names = ", ".join(o.name for o in _reflecting(scene))
-        if bounces < 1:
-            notes.append(f"fast path: max_depth 1, so the light the synthetic objects ({names}) exchange is not "
-                         f"rendered, as on the exact path")
-        else:
-            notes.append(f"fast path: the light the synthetic objects ({names}) exchange: their diffuse light "
-                         f"gathered at the cache points ({fast.GATHER_RAYS} directions, {bounces} bounce"
-                         f"{'s' if bounces > 1 else ''}) and reflected in their glossy lobes; the glossy light "
-                         f"they reflect onto each other is left out (--renderer exact renders it)")
-    return notes
-
-
-def synthetic_renderer(scene, kind: str = "auto") -> HalfSpaceRenderer:
-    """The renderer of the synthetic half-space: "exact", "fast" or "auto" (see ``TransferSettings``)."""
-    if resolve_renderer(scene, kind) == "fast":
-        return fast.CachedRenderer(scene.synthetic, bounces=scene.render.max_depth - 1)
-    return HalfSpaceRenderer(scene.synthetic, max_depth=scene.render.max_depth)
+__all__ = ["SyntheticSide"]
 
 
 class SyntheticSide:
@@ -151,7 +68,7 @@ class SyntheticSide:
         self.time_s = float(time_s)
         self.probe: np.ndarray | None = None
         posed = self._posed(self.time_s)
-        self.renderer = synthetic_renderer(posed, settings.renderer)
+        self.renderer = self._renderer(posed, settings)
         self._set_lights(posed)
         view = posed.view
         self.width, self.height = view.resolution
@@ -185,6 +102,12 @@ class SyntheticSide:
         return photograph_probe(rig, self.scene.probe.ball_centre, ball, posed.view, self.model.array.extent(),
                                 width=p.map_width)
 
+    @staticmethod
+    def _renderer(posed: SyntheticScene, settings):
+        """The renderer the settings name (``settings.renderer`` as resolved; "auto" in settings made by hand is
+        resolved here by the same rule, :func:`~lftransfer.render.selection.resolve_renderer`)."""
+        return make_renderer(posed.synthetic, resolve_renderer(posed, settings.renderer), settings.max_depth)
+
     def _posed(self, t: float) -> SyntheticScene:
         return scene_in_frame(self.scene.at(t), self.model.world_to_array())
 
@@ -202,14 +125,14 @@ class SyntheticSide:
         and optionally the settings; the codecs stay, the renderer is updated in place where it can be."""
         scene = check_synthetic(scene)
         settings = settings if settings is not None else self.settings
-        same_kind = resolve_renderer(scene, settings.renderer) == resolve_renderer(self.scene, self.settings.renderer)
         self.scene, self.settings = scene, settings
         posed = self._posed(self.time_s)
-        same_kind &= getattr(self.renderer, "bounces", scene.render.max_depth - 1) == scene.render.max_depth - 1
-        if same_kind and len(posed.synthetic) == len(self.renderer.objects):
+        kind = resolve_renderer(posed, settings.renderer)
+        if (kind, settings.max_depth, len(posed.synthetic)) == (self.renderer.kind, self.renderer.max_depth,
+                                                               len(self.renderer.objects)):
             self.renderer.update(posed.synthetic)
         else:
-            self.renderer = synthetic_renderer(posed, settings.renderer)
+            self.renderer = make_renderer(posed.synthetic, kind, settings.max_depth)
         self._set_lights(posed)
         if self.depth is not None:
             self.set_depth(self.depth)

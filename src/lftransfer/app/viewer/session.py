@@ -190,14 +190,19 @@ class LiveSession:
             light) for the "ground truth" layer, or None.
         lights: the synthetic side's point lights as the rig model knows them (calibrated, or the oracle's), kept
             through every edit; None: the scene file's.
+        overrides: what the command asked for beyond the scene file (:class:`~lftransfer.settings.Overrides`):
+            an edit from the page changes it and the settings are resolved again for the scene as edited
+            (:meth:`resolved`), as ``live`` was built.
 
     Example:
         >>> session = LiveSession(scene, LiveTransfer(rig, model, scene.synthetic_part()), Path("out/live"))
         >>> session.start(on_frame=print); session.submit({"type": "pause"}); session.stop()   # doctest: +SKIP
     """
 
-    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, oracle=None, lights=None) -> None:
+    def __init__(self, scene, live: LiveTransfer, out: Path, *, sim_rig=None, oracle=None, lights=None,
+                 overrides: Overrides = Overrides()) -> None:
         self.scene = scene
+        self.overrides = overrides
         self.oracle = oracle
         self.lights = None if lights is None else list(lights)
         self._gt: tuple[str, np.ndarray] | None = None          # (state key, image) of the latest ground truth
@@ -279,8 +284,12 @@ class LiveSession:
             self._pending.edits.put((kind, n))
         elif kind == "lighting_model":
             model = payload.get("lighting_model")
-            if model not in LIGHTING_MODELS:
-                raise EditError(f"lighting_model: expected one of {', '.join(LIGHTING_MODELS)}, got {model!r}")
+            try:                       # validated as the command line's --lighting-model is (Overrides)
+                if model is None:
+                    raise ValueError(f"lighting_model: expected one of {', '.join(LIGHTING_MODELS)}, got nothing")
+                Overrides(lighting_model=model)
+            except ValueError as exc:
+                raise EditError(str(exc)) from None
             self._pending.edits.put((kind, model))
         elif kind == "layer":
             layer = payload.get("layer")
@@ -383,18 +392,16 @@ class LiveSession:
             elif kind == "record":
                 self._record(value)
             elif kind == "lighting_model":
-                settings: TransferSettings = resolve_settings(
-                    self.scene, Overrides(lighting_model=value, renderer=self.live.settings.renderer,
-                                          bounces=self.live.settings.bounces),
-                    bounce_views=self.live.settings.bounce_views).transfer
-                self.live.set_scene(self.synthetic(), settings)
+                self.overrides = replace(self.overrides, lighting_model=value)
+                self.live.set_scene(self.synthetic(), self.resolved())
             elif kind == "object":
                 side, index, edited, asked_at = value
                 if side == "synthetic":
                     objs = list(self.scene.synthetic)
                     objs[index] = edited
                     self.scene = with_overrides(self.scene, synthetic=objs)
-                    self.live.set_scene(self.synthetic(), changed_at=asked_at)
+                    # a material the fast path does not render takes the exact path: resolved again
+                    self.live.set_scene(self.synthetic(), self.resolved(), changed_at=asked_at)
                     self.edits += 1
                 else:
                     objs = [o.model_dump() for o in self.sim_rig.real_objects]
@@ -442,6 +449,14 @@ class LiveSession:
         times = self.scene.frame_times()
         return float(times[int(self._clock) % len(times)]) if self.scene.moving else 0.0
 
+    def resolved(self, *, bounces: int | None = None, bounce_views: bool | None = None) -> TransferSettings:
+        """The live loop's settings for the scene as it now is: :attr:`overrides` (with ``bounces`` for a run of
+        the bounce loop) resolved as ``lft live`` resolved them (:func:`~lftransfer.settings.resolve_settings`,
+        ``live``), so a page's edit is validated and made final the same way as the command line's."""
+        asked = self.overrides if bounces is None else replace(self.overrides, bounces=bounces)
+        views = self.live.settings.bounce_views if bounce_views is None else bounce_views
+        return resolve_settings(self.scene, asked, live=True, bounce_views=views).transfer
+
     def bounce_layers(self, bounces: int, *, on_step: Callable[[ViewerBounces], None] | None = None) -> ViewerBounces:
         """Run the bounce loop on the scene as it stands and return its per-bounce layers; never raises.
 
@@ -463,7 +478,7 @@ class LiveSession:
         """
         step = on_step or (lambda _b: None)
         t = self.last.time_s if self.last is not None else self._time_next()
-        settings = replace(self.live.settings, bounces=int(bounces), bounce_views=True)
+        settings = self.resolved(bounces=int(bounces), bounce_views=True)
         t0 = time.perf_counter()
 
         def progress(message: str) -> None:

@@ -42,12 +42,12 @@ split into their two lobes:
   the exact path's lenslet sum with the cached visibility.
 
 Synthetic objects that light each other (two or more reflecting objects, or a mesh) exchange light through an
-interreflection gather (:class:`Interreflection`, ``bounces`` = the scene's ``max_depth`` - 1): every distinct
-cache point casts ``GATHER_RAYS`` cosine-weighted directions once per arrangement of the objects, and each that
-meets a cached surface reads the diffuse radiance leaving it from the cache, so a bounce is one sparse
+interreflection gather (:class:`Interreflection`, ``max_depth`` - 1 rounds, as the exact path counts depth): every
+distinct cache point casts ``GATHER_RAYS`` cosine-weighted directions once per arrangement of the objects, and each
+that meets a cached surface reads the diffuse radiance leaving it from the cache, so a round is one sparse
 matrix-vector product per colour channel; a glossy lobe at a point whose gather met a surface also casts its lobe
-directions and reads the diffuse radiance of the surfaces they meet. The glossy light the objects reflect onto
-each other is left out (reports say so).
+directions and reads the diffuse radiance of the surfaces they meet. The glossy light the objects reflect onto each
+other is left out (reports say so).
 
 One object laid on another (fig1b's photograph on its frame) buries the cache points under it
 (:meth:`~lftransfer.render.fast.interreflection.Arrangement.burial`): no camera sees them, but interpolated into the

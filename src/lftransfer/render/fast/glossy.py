@@ -83,7 +83,7 @@ class GlossyLobes:
         mesh: the cache's geometry.
         arrangement: its interreflection gather (the other surfaces a lobe reads) and buried points.
         irradiance: the irradiance cache (the other surfaces' diffuse light).
-        bounces: interreflection bounces (with none, a lobe reads no other surface).
+        gathers: rounds of the interreflection gather (with none, a lobe reads no other surface).
         lobe_samples: directions drawn per ray from a lobe of roughness up to ``LOBE_ROUGHNESS``
             (:func:`lobe_strata`).
 
@@ -92,15 +92,15 @@ class GlossyLobes:
         visibility: the lenslet visibility cache (:class:`~lftransfer.render.fast.visibility.LensletVisibility`).
     """
 
-    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, irradiance: IrradianceCache, bounces: int,
+    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, irradiance: IrradianceCache, gathers: int,
                  lobe_samples: int) -> None:
         self.mesh = mesh
         self.arrangement = arrangement
         self.irradiance = irradiance
-        self.bounces = int(bounces)
+        self.gathers = int(gathers)
         self.lobe_samples = int(lobe_samples)
         self.samples = self.lobe_samples
-        self.visibility = LensletVisibility(mesh, arrangement, bounces)
+        self.visibility = LensletVisibility(mesh, arrangement, gathers)
         self._pinhole_memo = None
 
     def forget(self) -> None:
@@ -160,7 +160,7 @@ class GlossyLobes:
             out += self._lobe(si, glossy if cast is None else glossy & ~cast, by_lenslet, side, light, seen, seed)
             if cast is not None:
                 out = self._cast(at, cast, by_lenslet, side, light, seed, out)
-        if self.bounces and exchanges_light(self.mesh.objects):       # the other objects' diffuse light in the lobe
+        if self.gathers and exchanges_light(self.mesh.objects):       # the other objects' diffuse light in the lobe
             self.arrangement.gather()
             sees = interpolate(self.arrangement.sees, first, bary, glossy)
             out += self._neighbours(si, glossy & (sees > 0.0), seed)

@@ -1,6 +1,6 @@
 """The irradiance cache: the diffuse irradiance at the cache vertices, computed per light with the same lights as the
 exact path (shadow rays) once per distinct (position, normal) pair, kept per light object while nothing moves, with
-the interreflection gather's bounces added and the buried points filled (:class:`IrradianceCache`)."""
+the interreflection gather's rounds added and the buried points filled (:class:`IrradianceCache`)."""
 
 from __future__ import annotations
 
@@ -23,16 +23,16 @@ class IrradianceCache:
     Args:
         mesh: the cache's geometry.
         arrangement: its interreflection gather and buried points.
-        bounces: interreflection bounces added (where the objects light each other).
+        gathers: rounds of the interreflection gather added (where the objects light each other).
 
     Attributes:
         values: (3,) mi.Float (M,), the irradiance of the lights that lit the cache last (None before).
     """
 
-    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, bounces: int) -> None:
+    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, gathers: int) -> None:
         self.mesh = mesh
         self.arrangement = arrangement
-        self.bounces = int(bounces)
+        self.gathers = int(gathers)
         self.values: list | None = None
         self._lit_by: tuple | None = None
         self._per_light: dict[int, tuple[object, list[np.ndarray]]] = {}
@@ -63,10 +63,10 @@ class IrradianceCache:
             for c in range(3):
                 total[c] += e[c]
         self._per_light = kept
-        if self.bounces and exchanges_light(mesh.objects):
+        if self.gathers and exchanges_light(mesh.objects):
             gather = self.arrangement.gather()
             bounce = total
-            for _ in range(self.bounces):
+            for _ in range(self.gathers):
                 bounce = [gather.bounce(bounce[c], c, mesh.shared) for c in range(3)]
                 total = [t + b for t, b in zip(total, bounce)]
         burial = self.arrangement.burial()

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lftransfer.render.culling import TILE, RayTiles, bounding_spheres
-from lftransfer.render.renderer import SampleMeans, mean_depth
+from lftransfer.render.base import SampleMeans, mean_depth
 
 CULL_BELOW = 0.25           # primary rays are culled by tile when fewer than this share of the tiles may hit
 

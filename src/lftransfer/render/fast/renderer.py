@@ -1,6 +1,6 @@
 """The fast path's renderer (:class:`CachedRenderer`): the cache's geometry, its irradiance, the interreflection
-gather and the glossy lobes composed into the renderer interface of
-:class:`~lftransfer.render.renderer.HalfSpaceRenderer` (module docs of :mod:`lftransfer.render.fast`)."""
+gather and the glossy lobes composed into the renderer interface every renderer shares
+(:class:`~lftransfer.render.base.RayRenderer`; module docs of :mod:`lftransfer.render.fast`)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 
 from lftransfer.backend import mitsuba
 from lftransfer.choices import DEFAULT_SPP
+from lftransfer.render.base import RayRenderer, SampleMeans
 from lftransfer.render.fast.burial import shade_under
 from lftransfer.render.fast.glossy import (DEFAULT_LOBE_SAMPLES, DEFAULT_VIEW_LOBE_SAMPLES, GlossyLobes,
                                            pinhole_objects)
@@ -21,10 +22,9 @@ from lftransfer.render.fast.rays import RaySets, group_means, rays_to_cast
 from lftransfer.render.fast.tessellation import DEFAULT_MAX_EDGE
 from lftransfer.render.integrator import Light
 from lftransfer.render.lights import jit_array, to_numpy
-from lftransfer.render.renderer import HalfSpaceRenderer, SampleMeans
 
 
-class CachedRenderer(HalfSpaceRenderer):
+class CachedRenderer(RayRenderer):
     """Renders objects from a diffuse irradiance cache at the vertices of a fine tessellation, with glossy lobes
     evaluated per ray (module docs).
 
@@ -39,29 +39,35 @@ class CachedRenderer(HalfSpaceRenderer):
             :func:`lobe_strata`; a smooth lobe takes its one mirror direction).
         view_lobe_samples: the same for the rays of a view render (:meth:`render_view`).
         glossy: evaluate the glossy lobes (False: the diffuse cache alone, a control for tests).
+        max_depth: surface interactions per path, as the exact path counts them: 1 renders the lights' direct
+            light only; each one more adds a round of the interreflection gather (``gathers`` = max_depth - 1)
+            where the objects light each other.
+        gather_rays: directions of the interreflection gather per cache point.
 
     Example:
         >>> r = CachedRenderer(scene.synthetic)                                   # doctest: +SKIP
         >>> lf = r.render_lightfield(array, lights, U=48, V=48, model="point")     # doctest: +SKIP
     """
 
+    kind = "fast"
+
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE,
                  lobe_samples: int = DEFAULT_LOBE_SAMPLES, view_lobe_samples: int = DEFAULT_VIEW_LOBE_SAMPLES,
-                 glossy: bool = True, bounces: int = 0, gather_rays: int = GATHER_RAYS) -> None:
+                 glossy: bool = True, max_depth: int = 1, gather_rays: int = GATHER_RAYS) -> None:
         if not supports(objects):
-            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path (HalfSpaceRenderer)")
         if lobe_samples < 1 or view_lobe_samples < 1:
             raise ValueError(f"lobe_samples and view_lobe_samples must be >= 1, got {lobe_samples} and "
                              f"{view_lobe_samples}")
-        if bounces < 0 or gather_rays < 1:
-            raise ValueError(f"bounces must be >= 0 and gather_rays >= 1, got {bounces} and {gather_rays}")
+        if max_depth < 1 or gather_rays < 1:
+            raise ValueError(f"max_depth and gather_rays must be >= 1, got {max_depth} and {gather_rays}")
         self.max_edge = float(max_edge)
         self.lobe_samples = int(lobe_samples)
         self.view_lobe_samples = int(view_lobe_samples)
         self.glossy = bool(glossy)
-        self.bounces = int(bounces)
+        self.max_depth = int(max_depth)
+        self.gathers = self.max_depth - 1
         self.gather_rays = int(gather_rays)
-        self.max_depth = 1 + self.bounces
         self._ray_sets = RaySets()
         self._build(list(objects))
 
@@ -69,8 +75,8 @@ class CachedRenderer(HalfSpaceRenderer):
         """Build the cache for ``objects``: its geometry, and an empty irradiance cache, gather and lobes over it."""
         self.mesh = CacheMesh(objects, self.max_edge, pinhole_objects(objects))
         self.arrangement = Arrangement(self.mesh, self.gather_rays)
-        self.irradiance = IrradianceCache(self.mesh, self.arrangement, self.bounces)
-        self.lobes = GlossyLobes(self.mesh, self.arrangement, self.irradiance, self.bounces, self.lobe_samples)
+        self.irradiance = IrradianceCache(self.mesh, self.arrangement, self.gathers)
+        self.lobes = GlossyLobes(self.mesh, self.arrangement, self.irradiance, self.gathers, self.lobe_samples)
         self._any_glossy = self.glossy and bool(self.mesh.glossy_objects.any())
         self._any_pinhole = self.glossy and bool(self.mesh.pinhole_objects.any())
 
@@ -109,7 +115,7 @@ class CachedRenderer(HalfSpaceRenderer):
         """
         objects = list(objects)
         if not supports(objects):
-            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use HalfSpaceRenderer")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path (HalfSpaceRenderer)")
         if len(objects) != len(self.objects) or any(a.shape != b.shape or a.material != b.material
                                                     for a, b in zip(objects, self.objects)):
             self._build(objects)
@@ -132,7 +138,7 @@ class CachedRenderer(HalfSpaceRenderer):
 
     def render_view(self, sensor, width: int, height: int, lights: Sequence[Light], *, spp: int = DEFAULT_SPP,
                     seed: int = 0):
-        """:meth:`HalfSpaceRenderer.render_view`, its glossy lobes sampled with ``view_lobe_samples`` directions
+        """:meth:`RayRenderer.render_view`, its glossy lobes sampled with ``view_lobe_samples`` directions
         per ray."""
         with self.lobes.drawing(self.view_lobe_samples):
             return super().render_view(sensor, width, height, lights, spp=spp, seed=seed)
@@ -192,7 +198,7 @@ class CachedRenderer(HalfSpaceRenderer):
 
     def render_samples(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], spp: int, *,
                        seed: int = 0) -> SampleMeans:
-        """:meth:`HalfSpaceRenderer.render_samples`, summed over the rays that hit only (a view's objects cover a
+        """:meth:`RayRenderer.render_samples`, summed over the rays that hit only (a view's objects cover a
         few per cent of its rays, so full-size passes over every ray's radiance were most of a view render)."""
         if spp == 1:                                 # one ray per group (the projection prefilter's rays)
             radiance, hit, t = self.render_rays(origins, directions, lights, seed=seed)

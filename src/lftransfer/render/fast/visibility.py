@@ -21,16 +21,17 @@ class LensletVisibility:
     Args:
         mesh: the cache's geometry.
         arrangement: its interreflection gather (which points' hemispheres hold another shape) and buried points.
-        bounces: interreflection bounces (with none, the gather is not cast and every point casts shadow rays).
+        gathers: rounds of the interreflection gather (with none, the gather is not cast and every point casts
+            shadow rays).
 
     Attributes:
         tables: {(lens array, side): (table, varying)}, what :meth:`of` found while nothing moved.
     """
 
-    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, bounces: int) -> None:
+    def __init__(self, mesh: CacheMesh, arrangement: Arrangement, gathers: int) -> None:
         self.mesh = mesh
         self.arrangement = arrangement
-        self.bounces = int(bounces)
+        self.gathers = int(gathers)
         self.tables: dict = {}
 
     def forget(self) -> None:
@@ -63,7 +64,7 @@ class LensletVisibility:
             if m else np.zeros(0, bool)
         if len(mesh.objects) == 1 and mesh.objects[0].shape != "mesh":
             free = np.ones(len(one), bool)
-        elif self.bounces and exchanges_light(mesh.objects):
+        elif self.gathers and exchanges_light(mesh.objects):
             free = self.arrangement.gather().meets[one] == 0
         else:
             free = np.zeros(len(one), bool)

@@ -45,7 +45,7 @@ import numpy as np
 from lftransfer.rig.base import RigError
 from lftransfer.rig.hardware._worker import Worker, WorkerStuck, WorkerTimeout
 from lftransfer.rig.hardware.config import ProjectorConfig
-from lftransfer.rig.hardware.x11 import window_image
+from lftransfer.rig.x11 import window_image
 
 __all__ = ["ProjectorWindow"]
 

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 
 from lftransfer.composite import composite
-from lftransfer.render.renderer import HalfSpaceRenderer
+from lftransfer.render.selection import make_renderer
 from lftransfer.sim.metrics import psnr
 
 __all__ = ["FastVsExact", "fast_vs_exact"]
@@ -44,29 +44,26 @@ class FastVsExact:
     note: str
 
 
-def fast_vs_exact(frame, side, settings, *, max_depth: int, aperture_samples: int = 32) -> FastVsExact:
+def fast_vs_exact(frame, side, settings, *, aperture_samples: int = 32) -> FastVsExact:
     """Render the exact reference of a live frame and compare composites.
 
     Args:
         frame: a ``LiveFrame`` (its decoded light field, real view and composite).
         side: the live loop's ``SyntheticSide`` (posed objects, point light, view sensor) at the frame's time.
-        settings: the live loop's ``TransferSettings``.
-        max_depth: surface interactions per path of the exact path (the scene's ``render.max_depth``).
+        settings: the live loop's ``TransferSettings`` (the exact path renders at its ``max_depth``).
         aperture_samples: aperture points per lenslet of the reference (area model; other models use the
             settings' own).
 
     Returns:
         :class:`FastVsExact`.
     """
-    from lftransfer.render import fast
-
     spp = max(4, settings.view_spp)
-    if not isinstance(side.renderer, fast.CachedRenderer):
+    if side.renderer.kind != "fast":
         return FastVsExact(None, None, settings.aperture_samples, settings.view_spp,
                            "the step renders with the exact path: nothing is approximated by the fast path")
     samples = int(aperture_samples) if settings.lighting_model == "area" else settings.aperture_samples
     incident = side.incident_light(frame.captured_lf, settings.seed, aperture_samples=samples)
-    exact = HalfSpaceRenderer(side.renderer.objects, max_depth=max_depth)
+    exact = make_renderer(side.renderer.objects, "exact", settings.max_depth)
     view = exact.render_view(side.sensor, side.width, side.height, [*side.direct_lights, incident], spp=spp,
                              seed=settings.seed)
     reference = composite(view.rgb, view.alpha, frame.real_view)
@@ -76,6 +73,6 @@ def fast_vs_exact(frame, side, settings, *, max_depth: int, aperture_samples: in
     objects = psnr(frame.composite, reference, peak, mask=covered) if covered.any() else float("nan")
     note = (f"the step's composite (fast path, {settings.view_spp} rays per pixel, {settings.aperture_samples} "
             f"aperture points) against the exact path ({spp} rays per pixel, {samples} aperture points, shadow "
-            f"rays at every hit, max_depth {max_depth}), same lights, {settings.lighting_model} model")
+            f"rays at every hit, max_depth {settings.max_depth}), same lights, {settings.lighting_model} model")
     return FastVsExact(round(value, 2) if math.isfinite(value) else None,
                        round(objects, 2) if math.isfinite(objects) else None, samples, spp, note)

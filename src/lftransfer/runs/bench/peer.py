@@ -327,7 +327,7 @@ def peer_comparison(renderer, array, captured: LightField, *, spp: int, seed: in
     import drjit as dr
 
     from lftransfer.render.lights import LightFieldLight
-    from lftransfer.render.renderer import HalfSpaceRenderer
+    from lftransfer.render.selection import make_renderer
 
     say = progress or (lambda _m: None)
     U, V = captured.U, captured.V
@@ -342,7 +342,7 @@ def peer_comparison(renderer, array, captured: LightField, *, spp: int, seed: in
 
     say("peer: converged point-model light field (exact path, averaged over each sample's footprint)")
     light = LightFieldLight(captured, side="synthetic", model="point")
-    reference = footprint_average(HalfSpaceRenderer(objects, max_depth=1), array, [light], U, V)
+    reference = footprint_average(make_renderer(objects, "exact", 1), array, [light], U, V)
     say("peer: our renderer on the same job (point model)")
     lf, _ = ours()                                             # warm-up: kernels compiled
     ours_s = statistics.median(ours()[1] for _ in range(max(1, int(repeats))))

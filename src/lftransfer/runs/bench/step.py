@@ -255,7 +255,7 @@ def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[obj
     return nominal_rig(scene.rig), f"nominal (rig file): {NOT_WHAT_USERS_RUN}", 0.0
 
 
-def _settings_json(scene, options: BenchOptions, settings: TransferSettings, renderer: str, rig_model: str) -> dict:
+def _settings_json(scene, options: BenchOptions, settings: TransferSettings, rig_model: str) -> dict:
     """The settings of a bench run, JSON-ready (machine: CPUs, platform, load averages over 1, 5 and 15 minutes at
     the end of the run: other work on the machine slows every number)."""
     from lftransfer.backend import blas_thread_counts, blas_threads, variant
@@ -272,7 +272,7 @@ def _settings_json(scene, options: BenchOptions, settings: TransferSettings, ren
         "lighting_model": settings.lighting_model,
         "reconstruction": settings.reconstruction,
         "projection": settings.projection,
-        "renderer": {"asked": settings.renderer, "used": renderer},
+        "renderer": {"asked": options.settings.renderer or choices.DEFAULT_RENDERER, "used": settings.renderer},
         "rig": "sim",
         "truth_seed": options.truth_seed,
         "rig_model": rig_model,
@@ -298,8 +298,7 @@ def _beside(scene, options: BenchOptions, opened, model, live: LiveTransfer, set
                                   frames=max(options.iterations, 10), progress=say)
     if options.accuracy:
         say("accuracy: the exact path on the last frame (dense aperture sampling)")
-        accuracy = fast_vs_exact(last, live.side, settings, max_depth=scene.render.max_depth,
-                                 aperture_samples=options.exact_aperture_samples)
+        accuracy = fast_vs_exact(last, live.side, settings, aperture_samples=options.exact_aperture_samples)
     if options.peer:
         peer = peer_comparison(live.side.renderer, model.array, last.captured_lf, spp=settings.lf_spp,
                                seed=settings.seed, repeats=max(3, options.iterations // 2),
@@ -367,7 +366,6 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     """
     from lftransfer.runs.pipeline import RunOptions
     from lftransfer.runs.rigs import open_rig
-    from lftransfer.render import fast
 
     say = progress or (lambda _m: None)
     say("set up the simulated rig")
@@ -377,7 +375,7 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         settings = transfer_settings(scene, options)
         say("set up the live loop (renderer, codecs)")
         live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
-        renderer = "fast" if isinstance(live.side.renderer, fast.CachedRenderer) else "exact"
+        renderer = settings.renderer
         times = [float(t) for t in scene.frame_times()]
         frame_index = iter(range(10 ** 9))
 
@@ -416,7 +414,7 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
         iteration_over_floor=round(timed["pipeline_iteration_ms"] / floor.ms, 2),
         fast_vs_exact=accuracy,
         peer=peer,
-        settings=_settings_json(scene, options, settings, renderer, rig_model),
+        settings=_settings_json(scene, options, settings, rig_model),
         frames_moved=sum(bool(f.moved) for f in frames),
         cache_vertices=live.side.renderer.cache_size if renderer == "fast" else None,
         peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),

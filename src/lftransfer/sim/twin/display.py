@@ -1,6 +1,6 @@
 """The projector as the twin sees it: what the window system shows on the projector's monitor, over time.
 
-:class:`ProjectorScreen` reads the monitor's pixels from the X server (:class:`lftransfer.rig.hardware.x11.XScreen`)
+:class:`ProjectorScreen` reads the monitor's pixels from the X server (:class:`lftransfer.rig.x11.XScreen`)
 at the display's refresh rate and keeps the moments they changed, so a camera frame taken at time t can show the
 image that was on the screen at t minus the display-to-capture latency. It sees whatever the window system drew
 (a window in the wrong place, a half-drawn frame, a desktop where no window is), not what the pipeline meant.
@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from lftransfer.rig.hardware.x11 import XScreen
+from lftransfer.rig.x11 import XScreen
 from lftransfer.sim.twin.world import digest
 
 __all__ = ["ProjectorScreen", "start_xvfb"]
