@@ -167,3 +167,63 @@ def test_run_settings_serialise_every_field():
     assert set(data["transfer"]) == {f.name for f in dataclasses.fields(TransferSettings)}
     assert data["transfer"]["view_spp"] == 8 and isinstance(s, RunSettings)
     assert set(COMPARABLE) <= set(data["transfer"])
+
+
+@pytest.mark.parametrize("name", builtin_scenes())
+def test_resolved_settings_hold_final_values(name):
+    """What resolve_settings returns names the renderer the scene gets ("fast" or "exact", never "auto") and the
+    scene's max_depth; resolving an already resolved renderer gives it again; a light probe scene takes the exact
+    path, and asking it for the fast path is refused with the setting's name."""
+    from lftransfer.render.selection import resolve_renderer
+
+    scene = load_scene(builtin_scene(name))
+    s = resolve_settings(scene).transfer
+    assert s.renderer in ("fast", "exact") and s.max_depth == scene.render.max_depth
+    assert resolve_renderer(scene, s.renderer) == s.renderer
+    assert resolve_settings(scene, Overrides(renderer="exact")).transfer.renderer == "exact"
+    deeper = with_overrides(scene, render={"max_depth": scene.render.max_depth + 1})
+    assert resolve_settings(deeper).transfer.max_depth == scene.render.max_depth + 1
+    if scene.probe is not None:
+        assert s.renderer == "exact"
+        with pytest.raises(ValueError, match="renderer 'fast'"):
+            resolve_settings(scene, Overrides(renderer="fast"))
+
+
+def test_a_material_the_fast_path_has_not_verified_resolves_to_the_exact_path():
+    """"auto" is the fast path on Fig. 4's diffuse cube and the exact path once the cube is a near-mirror metal
+    (roughness below fast.MIN_ROUGHNESS), as the live page's edit re-resolves it (negative control: the same edit
+    with --renderer fast keeps the fast path the user asked for)."""
+    scene = load_scene(builtin_scene("fig4"))
+    cube = scene.synthetic[0].model_dump(mode="json")
+    mirror = with_overrides(scene, synthetic=[{**cube, "material": {"type": "metal", "roughness": 0.005}}])
+    assert resolve_settings(scene).transfer.renderer == "fast"
+    assert resolve_settings(mirror).transfer.renderer == "exact"
+    assert resolve_settings(mirror, Overrides(renderer="fast")).transfer.renderer == "fast"
+
+
+def test_every_setting_is_one_option_made_from_its_field():
+    """Each field of Overrides but ``compare`` is an option of ``lft run`` whose flag, help and values are the
+    field's (the command line, the page's validation and docs/cli.md read the same definition); an unknown
+    setting is refused."""
+    import typer.main
+    from rich.markup import escape
+
+    from lftransfer.app.cli import app
+    from lftransfer.app.cli.options import setting_options
+
+    run = typer.main.get_command(app).commands["run"]
+    params = {p.name: p for p in run.params}
+    for f in dataclasses.fields(Overrides):
+        if f.name == "compare":
+            continue
+        param = params[f.name]
+        assert param.opts == ["--" + f.name.replace("_", "-")], f.name
+        assert " ".join(param.help.split()) == " ".join(escape(f.metadata["help"]).split()), f.name
+        if f.metadata["choice"] is not None:
+            assert param.metavar == "|".join(choices.values(f.metadata["choice"])), f.name
+    group = setting_options("bounces", "renderer", "quiet_reference")
+    asked = group(bounces=1, renderer="exact", quiet_reference=False)
+    assert asked.overrides() == Overrides(bounces=1, renderer="exact")
+    assert asked.arguments() == ["--bounces", "1", "--renderer", "exact"]
+    with pytest.raises(ValueError, match="not a setting"):
+        setting_options("bounce")

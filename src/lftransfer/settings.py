@@ -11,7 +11,8 @@ setting used.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
 
 from lftransfer import choices
 from lftransfer.render.selection import resolve_renderer
@@ -26,9 +27,21 @@ setting changed."""
 _AREA_ONLY = ("reconstruction", "projection", "window")
 
 
+def _setting(help: str, *, choice=None, command_default=None, **bounds) -> Any:  # noqa: A002
+    """A field of :class:`Overrides` (None: the scene's) with what its command-line option shows: ``help``, the
+    choice's ``Literal`` type (its values), the value the commands start from (``command_default``; None: the
+    scene's) and bounds (``min``, ``max``, ``metavar``). :func:`lftransfer.app.cli.options.setting_options` makes
+    the options from these, so the setting, its option and docs/cli.md say the same."""
+    return field(default=None, metadata={"help": help, "choice": choice, "command_default": command_default,
+                                         "bounds": bounds})
+
+
 @dataclass(frozen=True)
 class Overrides:
     """What a caller asks for beyond the scene file; None (or an empty tuple) leaves the scene's choice.
+
+    Each field but ``compare`` is a setting a command may take as an option (``--bounces``, ``--lighting-model``,
+    ...; its help is the field's ``metadata["help"]``).
 
     Attributes:
         bounces: N, light field exchanges after the direct frame (0 .. :data:`lftransfer.choices.MAX_BOUNCES`).
@@ -42,16 +55,42 @@ class Overrides:
             ``{"lighting_model": ("area", "point")}``.
     """
 
-    bounces: int | None = None
-    lighting_model: choices.LightingModel | None = None
-    reconstruction: choices.Reconstruction | None = None
-    projection: choices.Projection | None = None
-    window: choices.Window | None = None
-    renderer: choices.Renderer | None = None
-    composite: choices.Composite | None = None
-    direct_light: choices.DirectLight | None = None
-    gt_spp: int | None = None
-    quiet_reference: bool | None = None
+    bounces: int | None = _setting(
+        f"Number of bounces, light field exchanges after the direct frame (0 to {choices.MAX_BOUNCES}).",
+        command_default=choices.DEFAULT_BOUNCES, min=0, max=choices.MAX_BOUNCES, metavar="N")
+    lighting_model: choices.LightingModel | None = _setting(
+        f"How the captured light field lights the synthetic objects (default: the scene's render.lighting_model, "
+        f"{choices.DEFAULT_LIGHTING_MODEL} unless the scene says).", choice=choices.LightingModel)
+    reconstruction: choices.Reconstruction | None = _setting(
+        f"Area model: how the captured light field is read between lenslets (default: the scene's, "
+        f"{choices.DEFAULT_RECONSTRUCTION} unless the scene says).", choice=choices.Reconstruction)
+    projection: choices.Projection | None = _setting(
+        f"Area model: what the projector is sent: the box light field, the light field prefiltered from the real "
+        f"scene's depth measured through the rig, or the light field solved against the surface that depth "
+        f"measures (default: the scene's, {choices.DEFAULT_PROJECTION} unless the scene says).",
+        choice=choices.Projection)
+    window: choices.Window | None = _setting(
+        f"Area model: what the synthetic objects receive from beyond the lenslets' window: the captured light "
+        f"field read at the window's edge, or nothing (default: the scene's, {choices.DEFAULT_WINDOW} unless the "
+        f"scene says).", choice=choices.Window)
+    renderer: choices.Renderer | None = _setting(
+        "Synthetic renderer: auto (the fast path where the scene allows it) | fast | exact (path tracing); the "
+        "report names the one used.", choice=choices.Renderer, command_default=choices.DEFAULT_RENDERER)
+    composite: choices.Composite | None = _setting(
+        f"How the final frame is put together: the synthetic render over the real view, or the nearer surface per "
+        f"pixel (the real scene's depth measured through the rig, carried into the view camera; default: the "
+        f"scene's, {choices.DEFAULT_COMPOSITE} unless the scene says).", choice=choices.Composite)
+    direct_light: choices.DirectLight | None = _setting(
+        "What lights the synthetic objects directly: the scene's point lights, or the environment its light probe "
+        "shows; on a light probe scene, point is one point light at the probe's brightest direction, for "
+        "comparison (default: probe where the scene's [light] has kind = 'probe', else point).",
+        choice=choices.DirectLight)
+    gt_spp: int | None = _setting(
+        f"Ground-truth samples per pixel (>= 1; default: the scene's render.gt_spp, {choices.DEFAULT_GT_SPP} "
+        f"unless the scene says).", min=1, metavar="N")
+    quiet_reference: bool | None = _setting(
+        "Render the ground truth in rounds (the objects' pixels only after the first) until its noise on the "
+        "cross term is at most a third of the error; --gt-spp is the first round's samples.")
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self) -> None:

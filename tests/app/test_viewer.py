@@ -405,3 +405,23 @@ def test_08_decoupled_session_compare_and_record(variant, tmp_path):
         _wait(lambda: session.live._worker.count > count, 30, "captures after resuming")
     finally:
         session.stop()
+
+
+def test_09_the_page_resolves_its_settings_as_the_command_line_does(session):
+    """The session keeps what the command asked for and resolves it again for the scene as edited: the same
+    settings resolve_settings gives a live loop, the renderer final, and a glossy object edited below the fast
+    path's verified roughness taking the exact path; a bounce-layer request resolves its bounces the same way."""
+    from lftransfer.settings import resolve_settings
+
+    views = session.live.settings.bounce_views
+    assert session.resolved() == resolve_settings(session.scene, session.overrides, live=True,
+                                                  bounce_views=views).transfer
+    assert session.resolved().renderer == "fast"
+    cube = session.scene.synthetic[0].model_dump(mode="json")
+    saved = session.scene
+    try:
+        session.scene = with_overrides(saved, synthetic=[{**cube, "material": {"type": "glossy", "roughness": 0.01}}])
+        assert session.resolved().renderer == "exact"
+    finally:
+        session.scene = saved
+    assert session.resolved(bounces=3, bounce_views=True).bounces == 3

@@ -111,7 +111,7 @@ class TransferSettings:
         """Whether the projection is made from a measured depth (``projection`` ``"depth"``, the prefilter, or
         ``"solve"``, the solve against the measured surface; both need the area model, and something to project: at
         least one bounce)."""
-        return self.projection in ("depth", "solve") and self.lighting_model == "area" and self.bounces > 0
+        return self.projection in ("depth", "solve") and self.bounces > 0       # NON_AREA made it "box" elsewhere
 
 
 @dataclass

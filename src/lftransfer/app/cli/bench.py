@@ -12,14 +12,14 @@ from rich.table import Table
 
 from lftransfer import choices
 from lftransfer.app.cli.common import check_before_work, command, load, rig_options, row, step_bar
-from lftransfer.app.cli.options import (Calibration, LightingModel, MaxMemory, Projection, Quick,
-                                            Reconstruction, Renderer, RigArgs, TruthArgs, choice_check, flag, metavar,
-                                            option)
+from lftransfer.app.cli.options import (Calibration, MaxMemory, Quick, RigArgs, TruthArgs, choice_check, flag,
+                                        metavar, option, setting_options)
 from lftransfer.app.terminal import FAILED, fail
-from lftransfer.settings import Overrides
 from lftransfer.reports.results_format import surface_solve_text
 
 __all__ = ["register"]
+
+BenchSettings = setting_options("lighting_model", "reconstruction", "projection", "renderer")
 
 
 def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE.toml",
@@ -38,8 +38,7 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
               help="The rig model the step uses: calibrated (what a run uses, default: the bench calibrates "
                    "the simulated rig first) | nominal | oracle (neither is what users run; the output says "
                    "so).")] = choices.DEFAULT_RIG_MODEL,
-          truth: TruthArgs = None, lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
-          projection: Projection = None, renderer: Renderer = choices.DEFAULT_RENDERER,
+          truth: TruthArgs = None,
           accuracy: Annotated[bool, option("--accuracy/--no-accuracy", metavar="", help=(
               "Also render the last frame with the exact path and report the fast path's PSNR against it."))
           ] = True,
@@ -54,7 +53,7 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
               "beside them, capture rate and age, motion-to-composite latency."))] = False,
           sync: Annotated[bool, flag("--sync", "With --live: time the synchronous loop only (no decoupled "
                                                "run).")] = False,
-          max_memory: MaxMemory = None) -> None:
+          max_memory: MaxMemory = None, asked: BenchSettings = None) -> None:
     """Time the live loop's step (LiveTransfer.step) on the simulated rig with the calibrated rig model and
     the scene's samples: the pipeline's stages apart from the rig's capture, against the floor of casting the
     step's rays once."""
@@ -74,9 +73,7 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
     calibrates = calibration is None and rig_model == "calibrated"
     check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
                       max_memory=max_memory)
-    settings = Overrides(lighting_model=lighting_model, reconstruction=reconstruction, projection=projection,
-                         renderer=renderer)
-    options = BenchOptions(iterations=iterations, settings=settings, truth_seed=rig_opts["truth_seed"],
+    options = BenchOptions(iterations=iterations, settings=asked.overrides(), truth_seed=rig_opts["truth_seed"],
                            rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer,
                            decoupled=live and not sync)
     if calibrates:
@@ -93,9 +90,8 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
     data = result.to_json()
     data["settings"]["quick"] = quick
     data["settings"]["live"] = live
-    data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model,
-                                                 truth, lighting_model, reconstruction, renderer,
-                                                 accuracy, peer, live, projection, sync)
+    data["settings"]["command"] = _bench_command(scene_file, quick, iterations, calibration, rig_model, truth, asked,
+                                                 accuracy, peer, live, sync)
     _bench_table(result)
     if json_out is not None:
         write_json(json_out, data)
@@ -122,8 +118,8 @@ def _demo_calibration_hint(scene) -> str:
             f"demo's --truth-seed).")
 
 
-def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth, lighting_model,
-                   reconstruction, renderer, accuracy, peer, live=False, projection=None, sync=False) -> str:
+def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth, asked, accuracy, peer, live=False,
+                   sync=False) -> str:
     """The ``lft bench`` command line that reproduces a run (without --json and --max-memory)."""
     import shlex
 
@@ -145,12 +141,7 @@ def _bench_command(scene_file, quick, iterations, calibration, rig_model, truth,
         parts.append("--exact-rig")
     elif truth.truth_seed != 0:
         parts += ["--truth-seed", str(truth.truth_seed)]
-    for name, value in (("--lighting-model", lighting_model), ("--reconstruction", reconstruction),
-                        ("--projection", projection)):
-        if value is not None:
-            parts += [name, value]
-    if renderer != choices.DEFAULT_RENDERER:
-        parts += ["--renderer", renderer]
+    parts += asked.arguments()
     if not accuracy:
         parts.append("--no-accuracy")
     if not peer:

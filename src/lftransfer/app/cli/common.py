@@ -16,10 +16,10 @@ from rich.table import Table
 from typer.core import TyperCommand
 
 from lftransfer.app.cli.options import RigArgs, TruthArgs, option_groups
-from lftransfer.app.terminal import LftGroup, console, fail
+from lftransfer.app.terminal import FAILED, INTERRUPTED, LftGroup, console, fail
 
-__all__ = ["Command", "Group", "check_before_work", "cluster_spec", "command", "load", "operator", "progress_bar", "rig_options",
-           "rig_spec", "row", "step_bar", "sub_app"]
+__all__ = ["Command", "Group", "check_before_work", "cluster_spec", "command", "ending_cleanly", "load", "operator",
+           "progress_bar", "rig_options", "rig_spec", "row", "step_bar", "sub_app"]
 
 
 class _PlainHelp:
@@ -166,6 +166,25 @@ def check_before_work(scene, *, out_dir: Optional[Path] = None, out_file: Option
         check_cache_dir(cache_dir())
     check_memory(estimate_memory(scene, calibrate=calibrate, **({} if bounces is None else {"bounces": bounces})),
                  parse_memory(max_memory))
+
+
+@contextmanager
+def ending_cleanly(bar: Progress, *, interrupted: str, refused: tuple = (), failed: tuple = (), where: str = ""):
+    """Work under a progress bar that ends in one line, the bar stopped first: Ctrl-C says ``interrupted`` (exit
+    code ``INTERRUPTED``); an error of a class in ``refused`` (bad input found late) its message (exit 1); one in
+    ``failed`` (a device, a calibration, a cluster) its message and ``where`` what was written stands (exit
+    ``FAILED``)."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        bar.stop()
+        fail(interrupted, INTERRUPTED)
+    except refused as exc:
+        bar.stop()
+        fail(str(exc))
+    except failed as exc:
+        bar.stop()
+        fail(f"{exc} ({where})", FAILED)
 
 
 def progress_bar(width: int, *extra: TextColumn) -> Progress:

@@ -1,10 +1,14 @@
 """Every option of the ``lft`` command, defined once.
 
-An option used by more than one command is an ``Annotated`` type here (its flag, metavar, range and help); the
-options that always travel together are *option groups* (:class:`TruthArgs`, :class:`RigArgs`), frozen
-dataclasses whose fields become the command's options through :func:`option_groups`. A choice's values and its
-default come from :mod:`lftransfer.choices`, so the command line, the scene model and studies agree. Help texts
-go through :func:`rich.markup.escape`: TOML tables such as ``[animation]`` are shown, not read as markup.
+A run's settings are not defined here: each is a field of :class:`lftransfer.settings.Overrides`, whose metadata
+holds its help, its choice and its bounds, and :func:`setting_options` makes a command's options from the fields it
+names (an option group that gives the command its ``Overrides``). A choice's values and its default come from
+:mod:`lftransfer.choices`, so the command line, the page, the scene model and studies agree.
+
+Any other option used by more than one command is an ``Annotated`` type here (its flag, metavar, range and help);
+the options that always travel together are *option groups* (:class:`TruthArgs`, :class:`RigArgs`, the settings'
+groups), frozen dataclasses whose fields become the command's options through :func:`option_groups`. Help texts go
+through :func:`rich.markup.escape`: TOML tables such as ``[animation]`` are shown, not read as markup.
 """
 
 from __future__ import annotations
@@ -20,10 +24,11 @@ from rich.markup import escape
 
 from lftransfer import choices
 from lftransfer.scenes import builtin_scenes
+from lftransfer.settings import Overrides
 
-__all__ = ["Bounces", "Calibration", "Cluster", "GtSpp", "LightingModel", "MaxMemory", "NoCache", "NoFloor",
-           "OutDir", "Projection", "Quick", "QuietReference", "Reconstruction", "Renderer", "RigArgs", "SceneArg",
-           "TruthArgs", "Window", "Workers", "choice_check", "flag", "metavar", "option", "option_groups"]
+__all__ = ["Calibration", "Cluster", "MaxMemory", "NoCache", "NoFloor", "OutDir", "Quick", "RigArgs", "SceneArg",
+           "SettingOptions", "TruthArgs", "Workers", "choice_check", "flag", "metavar", "option", "option_groups",
+           "setting_options"]
 
 
 def metavar(choice) -> str:
@@ -70,57 +75,12 @@ Quick = Annotated[bool, flag("--quick", "Quarter resolution: every device at a q
                                         "angular samples (at least 8), a quarter of the ground-truth samples (at "
                                         "least 16).")]
 NoCache = Annotated[bool, flag("--no-cache", "Render the ground truth again (do not read or write the cache).")]
-QuietReference = Annotated[bool, flag("--quiet-reference", "Render the ground truth in rounds (the objects' pixels "
-                                                             "only after the first) until its noise on the cross "
-                                                             "term is at most a third of the error; --gt-spp is the "
-                                                             "first round's samples.")]
 NoFloor = Annotated[bool, flag("--no-floor", "Skip the fidelity floor (on the simulated rig: the best any algorithm "
                                              "could do through this rig, each side; a few hundred renders).")]
 MaxMemory = Annotated[Optional[str], option(
     "--max-memory", metavar="SIZE", callback=_memory_check,
     help="Largest memory the run may need, e.g. 64G (default: what the machine has available now). The need is "
          "estimated from the scene before any work.")]
-Bounces = Annotated[int, option("--bounces", min=0, max=choices.MAX_BOUNCES, metavar="N",
-                                help=f"Number of bounces (0 to {choices.MAX_BOUNCES}).")]
-GtSpp = Annotated[Optional[int], option("--gt-spp", min=1, metavar="N",
-                                        help="Ground-truth samples per pixel (>= 1; default: the scene's "
-                                             f"render.gt_spp, {choices.DEFAULT_GT_SPP} unless the scene says).")]
-Renderer = Annotated[str, option("--renderer", metavar=metavar(choices.Renderer),
-                                 callback=choice_check("--renderer", choices.Renderer),
-                                 help="Synthetic renderer: auto (the fast path where the scene allows it) | fast | "
-                                      "exact (path tracing).")]
-LightingModel = Annotated[Optional[str], option(
-    "--lighting-model", metavar=metavar(choices.LightingModel),
-    callback=choice_check("--lighting-model", choices.LightingModel),
-    help=f"How the captured light field lights the synthetic objects (default: the scene's render.lighting_model, "
-         f"{choices.DEFAULT_LIGHTING_MODEL} unless the scene says).")]
-Reconstruction = Annotated[Optional[str], option(
-    "--reconstruction", metavar=metavar(choices.Reconstruction),
-    callback=choice_check("--reconstruction", choices.Reconstruction),
-    help=f"Area model: how the captured light field is read between lenslets (default: the scene's, "
-         f"{choices.DEFAULT_RECONSTRUCTION} unless the scene says).")]
-Projection = Annotated[Optional[str], option(
-    "--projection", metavar=metavar(choices.Projection),
-    callback=choice_check("--projection", choices.Projection),
-    help=f"Area model: what the projector is sent: the box light field, the light field prefiltered from the "
-         f"real scene's depth measured through the rig, or the light field solved against the surface that depth "
-         f"measures (default: the scene's, {choices.DEFAULT_PROJECTION} unless the scene says).")]
-Window = Annotated[Optional[str], option(
-    "--window", metavar=metavar(choices.Window), callback=choice_check("--window", choices.Window),
-    help=f"Area model: what the synthetic objects receive from beyond the lenslets' window: the captured light "
-         f"field read at the window's edge, or nothing (default: the scene's, {choices.DEFAULT_WINDOW} unless the "
-         f"scene says).")]
-Composite = Annotated[Optional[str], option(
-    "--composite", metavar=metavar(choices.Composite), callback=choice_check("--composite", choices.Composite),
-    help=f"How the final frame is put together: the synthetic render over the real view, or the nearer surface per "
-         f"pixel (the real scene's depth measured through the rig, carried into the view camera; default: the "
-         f"scene's, {choices.DEFAULT_COMPOSITE} unless the scene says).")]
-DirectLight = Annotated[Optional[str], option(
-    "--direct-light", metavar=metavar(choices.DirectLight),
-    callback=choice_check("--direct-light", choices.DirectLight),
-    help="What lights the synthetic objects directly: the scene's point lights, or the environment its light probe "
-         "shows; on a light probe scene, point is one point light at the probe's brightest direction, for "
-         "comparison (default: probe where the scene's [light] has kind = 'probe', else point).")]
 Cluster = Annotated[Optional[str], option(
     "--cluster", metavar="auto|local|ray://HOST:PORT",
     help="Spread the work over a Ray cluster (pip install 'lftransfer[cluster]'): auto (the cluster `ray start` "
@@ -162,6 +122,63 @@ class RigArgs:
              "file's values) | oracle (the simulated rig's hidden truth: what perfect calibration would reach).")
     ] = choices.DEFAULT_RIG_MODEL
     calibration: Calibration = None
+
+
+class SettingOptions:
+    """Base of the option groups :func:`setting_options` makes: the settings a command was given."""
+
+    def overrides(self, *, compare_all: bool = False) -> Overrides:
+        """The :class:`~lftransfer.settings.Overrides` these options ask for (a flag left off: None, the scene's);
+        ``compare_all``: also measuring every other value of every comparable choice
+        (:meth:`~lftransfer.settings.Overrides.comparing_all`)."""
+        asked = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if asked.get("quiet_reference") is False:
+            asked["quiet_reference"] = None
+        return Overrides.comparing_all(**asked) if compare_all else Overrides(**asked)
+
+    def arguments(self) -> list[str]:
+        """The options that give these settings, those left at their defaults left out (a command line that
+        reproduces a run)."""
+        parts: list[str] = []
+        for f in dataclasses.fields(self):
+            value, flag_name = getattr(self, f.name), "--" + f.name.replace("_", "-")
+            if value != f.default:
+                parts += [flag_name] if isinstance(value, bool) else [flag_name, str(value)]
+        return parts
+
+
+def _setting_field(name: str) -> tuple[str, object, object]:
+    """(name, annotated type, default) of the option of ``Overrides``' field ``name``."""
+    spec = Overrides.__dataclass_fields__[name]
+    meta, flag_name = spec.metadata, "--" + name.replace("_", "-")
+    if meta["choice"] is not None:
+        info = option(flag_name, metavar=metavar(meta["choice"]), callback=choice_check(flag_name, meta["choice"]),
+                      help=meta["help"])
+        kind = str if meta["command_default"] is not None else Optional[str]
+    elif get_type_hints(Overrides)[name] == Optional[bool]:
+        return name, Annotated[bool, flag(flag_name, meta["help"])], False
+    else:
+        info = option(flag_name, help=meta["help"], **meta["bounds"])
+        kind = int if meta["command_default"] is not None else Optional[int]
+    return name, Annotated[kind, info], meta["command_default"]
+
+
+@functools.lru_cache(maxsize=None)
+def setting_options(*names: str) -> type:
+    """An option group (:func:`option_groups`) of the settings ``names``, fields of
+    :class:`~lftransfer.settings.Overrides`: each option's flag is the field's name (``--lighting-model``), its help,
+    values and bounds are the field's, and the command receives a :class:`SettingOptions` whose
+    :meth:`~SettingOptions.overrides` is what it asked for.
+
+    Example:
+        >>> RunSettings = setting_options("bounces", "renderer")
+        >>> def run(scene_file: SceneArg, asked: RunSettings = None) -> None: ...     # doctest: +SKIP
+    """
+    unknown = [n for n in names if n not in Overrides.__dataclass_fields__ or n == "compare"]
+    if unknown:
+        raise ValueError(f"not a setting of Overrides: {', '.join(unknown)}")
+    fields = [(name, kind, dataclasses.field(default=default)) for name, kind, default in map(_setting_field, names)]
+    return dataclasses.make_dataclass("Settings_" + "_".join(names), fields, bases=(SettingOptions,), frozen=True)
 
 
 def option_groups(command):

@@ -12,15 +12,18 @@ from rich.markup import escape
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, operator,
-                                       progress_bar, rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Calibration, Cluster, Composite, DirectLight, GtSpp, LightingModel,
-                                        MaxMemory, NoCache, NoFloor, OutDir, Projection, Quick, QuietReference, Reconstruction,
-                                        Renderer, RigArgs, SceneArg, TruthArgs, Window, Workers, flag, option)
-from lftransfer.app.terminal import FAILED, INTERRUPTED, fail, warn
-from lftransfer.settings import Overrides
+from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, ending_cleanly, load,
+                                       operator, progress_bar, rig_options, row)
+from lftransfer.app.cli.options import (Calibration, Cluster, MaxMemory, NoCache, NoFloor, OutDir, Quick, RigArgs,
+                                        SceneArg, TruthArgs, Workers, flag, option, setting_options)
+from lftransfer.app.terminal import fail, warn
 
 __all__ = ["register"]
+
+DemoSettings = setting_options("bounces", "renderer", "quiet_reference")
+RunSettings = setting_options("bounces", "lighting_model", "reconstruction", "projection", "window", "composite",
+                              "direct_light", "gt_spp", "renderer", "quiet_reference")
+RecordSettings = setting_options("bounces", "renderer")
 
 METRICS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
            "cross_transfer_rel_error", "gt_noise_psnr_db", "cross_gt_noise_rel")
@@ -42,17 +45,11 @@ def _run(scene, out: Path, options) -> dict:
         def progress(msg: str, done: int) -> None:
             bar.update(task, description=escape(msg[:58]), completed=min(done, total))
 
-        try:
+        with ending_cleanly(bar, interrupted=f"interrupted; what was written so far is in {out}, and {status} says "
+                                             f"'interrupted'", refused=(CalibrationFileError,),
+                            failed=(RigError, CalibrationFailedError),
+                            where=f"what was written so far is in {out}; {status} says where it stopped"):
             report = run_scene(scene, out, options, progress=progress, operator=operator(bar), warn=warn)
-        except KeyboardInterrupt:
-            bar.stop()
-            fail(f"interrupted; what was written so far is in {out}, and {status} says 'interrupted'", INTERRUPTED)
-        except CalibrationFileError as exc:
-            bar.stop()
-            fail(str(exc))
-        except (RigError, CalibrationFailedError) as exc:
-            bar.stop()
-            fail(f"{exc} (what was written so far is in {out}; {status} says where it stopped)", FAILED)
         bar.update(task, description="done", completed=total)
     summary(report, out)
     return report
@@ -132,10 +129,9 @@ def summary(report: dict, out: Path) -> None:
         Console().print(escape(f"{key} is undefined: {reason}"), soft_wrap=True, highlight=False)
 
 
-def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces = choices.DEFAULT_BOUNCES,
-         no_cache: NoCache = False, renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
+def demo(out: OutDir = Path("out/demo"), quick: Quick = False, no_cache: NoCache = False, truth: TruthArgs = None,
          rig: RigArgs = None, max_memory: MaxMemory = None, no_floor: NoFloor = False,
-         quiet_reference: QuietReference = False) -> None:
+         asked: DemoSettings = None) -> None:
     """Run the paper's Fig. 4 scene (10 x 12 hexagonal lenslets), by default on the simulated rig: calibrate,
     transfer, check against ground truth (both lighting models, both reconstructions, every projection, both
     windows) and against a negative control (the rig file's nominal values, uncalibrated)."""
@@ -143,44 +139,35 @@ def demo(out: OutDir = Path("out/demo"), quick: Quick = False, bounces: Bounces 
 
     scene = load(None, quick)
     rig_opts = rig_options(scene, truth, rig)
-    options = RunOptions(settings=Overrides.comparing_all(bounces=bounces, renderer=renderer,
-                                                          quiet_reference=quiet_reference or None),
-                         use_cache=not no_cache, negative_control=True, floor=not no_floor, **rig_opts)
+    options = RunOptions(settings=asked.overrides(compare_all=True), use_cache=not no_cache, negative_control=True,
+                         floor=not no_floor, **rig_opts)
     check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                      bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+                      bounces=asked.bounces, calibrate=calibrates(rig), max_memory=max_memory)
     _run(scene, out, options)
 
 
-def run(scene_file: SceneArg, bounces: Bounces = choices.DEFAULT_BOUNCES, out: OutDir = Path("out/run"),
-        lighting_model: LightingModel = None, reconstruction: Reconstruction = None,
-        projection: Projection = None, window: Window = None, composite: Composite = None,
-        direct_light: DirectLight = None,
+def run(scene_file: SceneArg, out: OutDir = Path("out/run"),
         compare: Annotated[bool, flag("--compare-models", "Also measure the other lighting model (area or "
                                                           "point), the other reconstruction, the other "
                                                           "projections and the other window, each a full "
                                                           "re-run.")] = False,
-        gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
-        renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
-        max_memory: MaxMemory = None, no_floor: NoFloor = False,
-        quiet_reference: QuietReference = False, cluster: Cluster = None, workers: Workers = None) -> None:
+        quick: Quick = False, no_cache: NoCache = False, truth: TruthArgs = None, rig: RigArgs = None,
+        max_memory: MaxMemory = None, no_floor: NoFloor = False, cluster: Cluster = None, workers: Workers = None,
+        asked: RunSettings = None) -> None:
     """Run light field transfer on any scene file with a rig (calibrating it first); --cluster spreads a quiet
     reference's rounds over a Ray cluster."""
     from lftransfer.runs.pipeline import RunOptions
 
     spec = cluster_spec(cluster, workers)
-    if spec is not None and not quiet_reference:
+    if spec is not None and not asked.quiet_reference:
         fail("--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference")
 
     scene = load(scene_file, quick)
     rig_opts = rig_options(scene, truth, rig)
-    asked = dict(bounces=bounces, lighting_model=lighting_model, reconstruction=reconstruction,
-                 projection=projection, window=window, composite=composite, direct_light=direct_light,
-                 gt_spp=gt_spp, renderer=renderer, quiet_reference=quiet_reference or None)
-    settings = Overrides.comparing_all(**asked) if compare else Overrides(**asked)
-    options = RunOptions(settings=settings, use_cache=not no_cache, floor=not no_floor, cluster=spec,
-                         **rig_opts)
+    options = RunOptions(settings=asked.overrides(compare_all=compare), use_cache=not no_cache, floor=not no_floor,
+                         cluster=spec, **rig_opts)
     check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                      bounces=bounces, calibrate=calibrates(rig), max_memory=max_memory)
+                      bounces=asked.bounces, calibrate=calibrates(rig), max_memory=max_memory)
     _run(scene, out, options)
 
 
@@ -189,9 +176,8 @@ def record(scene_file: SceneArg,
                                                                    "run's outputs in run/.")],
            rig_spec: Annotated[str, option("--rig", metavar="SPEC", help="Which rig to record: sim | "
                                                                        "hardware:RIG.toml.")] = "sim",
-           bounces: Bounces = choices.DEFAULT_BOUNCES, quick: Quick = False,
-           renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None,
-           calibration: Calibration = None, max_memory: MaxMemory = None) -> None:
+           quick: Quick = False, truth: TruthArgs = None, calibration: Calibration = None,
+           max_memory: MaxMemory = None, asked: RecordSettings = None) -> None:
     """Calibrate and run transfer on a rig (sim or hardware:RIG.toml) while storing every request and image
     it answers (replay it with lft run SCENE.toml --rig replay:SESSION)."""
     from lftransfer.runs.pipeline import RunOptions
@@ -203,12 +189,12 @@ def record(scene_file: SceneArg,
         fail(f"--out {out}: holds a recording already; choose an empty folder")
     scene = load(scene_file, quick)
     rig_opts = rig_options(scene, truth, rig)
-    options = RunOptions(settings=Overrides(bounces=bounces, renderer=renderer), record=out, **rig_opts)
-    check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=bounces,
+    options = RunOptions(settings=asked.overrides(), record=out, **rig_opts)
+    check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=asked.bounces,
                       calibrate=calibrates(rig), max_memory=max_memory)
     _run(scene, out / "run", options)
     Console().print(escape(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
-                           f"{' --quick' if quick else ''} --bounces {bounces})"), soft_wrap=True)
+                           f"{' --quick' if quick else ''} --bounces {asked.bounces})"), soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:

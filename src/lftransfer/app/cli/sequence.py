@@ -12,15 +12,16 @@ from rich.progress import TextColumn
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, load, progress_bar,
-                                       rig_options, row)
-from lftransfer.app.cli.options import (Bounces, Cluster, Composite, DirectLight, GtSpp, MaxMemory, NoCache,
-                                            NoFloor, OutDir, Quick, QuietReference, Renderer, RigArgs, SceneArg, TruthArgs, Workers,
-                                            choice_check, flag, metavar, option)
-from lftransfer.app.terminal import FAILED, INTERRUPTED, console, fail, warn
-from lftransfer.settings import Overrides
+from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_spec, command, ending_cleanly, load,
+                                       progress_bar, rig_options, row)
+from lftransfer.app.cli.options import (Cluster, MaxMemory, NoCache, NoFloor, OutDir, Quick, RigArgs, SceneArg,
+                                        TruthArgs, Workers, choice_check, flag, metavar, option, setting_options)
+from lftransfer.app.terminal import console, fail, warn
 
 __all__ = ["register"]
+
+LiveSettings = setting_options("renderer")
+RenderSettings = setting_options("bounces", "gt_spp", "renderer", "composite", "direct_light", "quiet_reference")
 
 
 def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
@@ -91,11 +92,11 @@ def live(scene_file: SceneArg,
                                      help="Port of the page on localhost.")] = 8080,
          out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
                         ] = Path("out/live"),
-         quick: Quick = False, renderer: Renderer = choices.DEFAULT_RENDERER,
+         quick: Quick = False,
          sync: Annotated[bool, flag("--sync", "One capture inside every frame (for measurement); default: "
                                               "captures on their own thread at the devices' rate, frames at the "
                                               "renderer's rate with the newest capture.")] = False,
-         truth: TruthArgs = None, rig: RigArgs = None) -> None:
+         truth: TruthArgs = None, rig: RigArgs = None, asked: LiveSettings = None) -> None:
     """Run the live loop and show it on a page at http://127.0.0.1:PORT/ until Ctrl-C: the composite and its
     layers, the light field images, the time of every stage, the capture rate, each frame's capture age and
     the motion-to-composite latency, and, on demand, the layers of each bounce with their display gains, an
@@ -114,7 +115,7 @@ def live(scene_file: SceneArg,
     with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
         session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
                                calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
-                               renderer=renderer, loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
+                               settings=asked.overrides(), loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
                                progress=lambda msg: status.update(escape(msg[:70])),
                                warn=warn)
     console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
@@ -152,18 +153,12 @@ def _render_with_progress(scene, out: Path, options, seq) -> tuple[dict, object]
                        description=escape(f"frame {record.index} (t = {record.time_s:.2f} s)"
                                           + (f", {psnr:.1f} dB" if psnr is not None else "")))
 
-        try:
+        with ending_cleanly(bar, interrupted=f"interrupted; the finished frames are in {out}; --resume continues",
+                            refused=(SequenceError, CalibrationFileError),
+                            failed=(RigError, CalibrationFailedError, ClusterError),
+                            where=f"the finished frames are in {out}; {status} says where it stopped"):
             report = render_sequence(scene, out, options, seq, progress=progress, step=step)
             check = verify_exchange(scene, out, options, report, step=step)
-        except KeyboardInterrupt:
-            bar.stop()
-            fail(f"interrupted; the finished frames are in {out}; --resume continues", INTERRUPTED)
-        except (SequenceError, CalibrationFileError) as exc:
-            bar.stop()
-            fail(str(exc))
-        except (RigError, CalibrationFailedError, ClusterError) as exc:
-            bar.stop()
-            fail(f"{exc} (the finished frames are in {out}; {status} says where it stopped)", FAILED)
     return report, check
 
 
@@ -182,18 +177,15 @@ def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
                         "decoupled: captures on their own thread at the rig's rate, every frame rendered with "
                         "the newest (the report says how far behind each frame's capture was).")
                ] = choices.DEFAULT_SEQUENCE_LOOP,
-               bounces: Bounces = choices.DEFAULT_BOUNCES,
                resume: Annotated[bool, flag("--resume", "Continue after the last finished frame in DIR (same "
                                                         "settings).")] = False,
                verify_every: Annotated[int, option(
                    "--verify-every", min=0, metavar="K",
                    help="Path trace the ground truth of every K-th frame and report its PSNR (0: none; "
                         "simulated rig).")] = 0,
-               gt_spp: GtSpp = None, quick: Quick = False, no_cache: NoCache = False,
-               renderer: Renderer = choices.DEFAULT_RENDERER, truth: TruthArgs = None, rig: RigArgs = None,
+               quick: Quick = False, no_cache: NoCache = False, truth: TruthArgs = None, rig: RigArgs = None,
                cluster: Cluster = None, workers: Workers = None, max_memory: MaxMemory = None,
-               no_floor: NoFloor = False, quiet_reference: QuietReference = False,
-               composite: Composite = None, direct_light: DirectLight = None) -> None:
+               no_floor: NoFloor = False, asked: RenderSettings = None) -> None:
     """Render a sequence over the scene's animation: composite.mp4, bounces.mp4, numbered EXR frames and a
     report with per-frame timings (and, with --verify-every, each verified frame's metrics, cross-transfer
     error and fidelity floor)."""
@@ -205,19 +197,16 @@ def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
     scene = load(scene_file, quick)
     rig_opts = rig_options(scene, truth, rig)
     spec = cluster_spec(cluster, workers)     # the converged frames and the quiet reference's rounds
-    options = RunOptions(settings=Overrides(bounces=bounces, gt_spp=gt_spp, renderer=renderer,
-                                            composite=composite, direct_light=direct_light,
-                                            quiet_reference=quiet_reference or None),
-                         use_cache=not no_cache, floor=not no_floor,
-                         cluster=spec if quiet_reference else None, **rig_opts)
+    options = RunOptions(settings=asked.overrides(), use_cache=not no_cache, floor=not no_floor,
+                         cluster=spec if asked.quiet_reference else None, **rig_opts)
     try:
         seq = SequenceOptions(mode=mode, loop=loop, frames=frames, resume=resume, verify_every=verify_every,
-                              cluster=spec if mode == "converged" or not quiet_reference else None)
+                              cluster=spec if mode == "converged" or not asked.quiet_reference else None)
     except SequenceError as exc:
         fail(str(exc))
     if resume and not (out / "report.json").is_file():
         fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
-    check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=bounces,
+    check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=asked.bounces,
                       calibrate=calibrates(rig), max_memory=max_memory)
     report, check = _render_with_progress(scene, out, options, seq)
     _sequence_table(report, out, mode, check)

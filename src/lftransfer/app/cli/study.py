@@ -9,9 +9,9 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from lftransfer.app.cli.common import check_before_work, cluster_spec, command, progress_bar
+from lftransfer.app.cli.common import check_before_work, cluster_spec, command, ending_cleanly, progress_bar
 from lftransfer.app.cli.options import Cluster, MaxMemory, NoCache, OutDir, Workers, flag
-from lftransfer.app.terminal import FAILED, INTERRUPTED, fail
+from lftransfer.app.terminal import fail
 
 __all__ = ["register"]
 
@@ -52,19 +52,12 @@ def register(app: typer.Typer) -> None:
         total = len(c.scenes) * len(c.truth_seeds) * len(c.setting)
         with progress_bar(50) as bar:
             task = bar.add_task("set-up", total=total)
-            try:
+            with ending_cleanly(bar, interrupted=f"interrupted; the finished cells are in {out / 'cells'}; --resume "
+                                                 "continues", refused=(StudyError,), failed=(ClusterError,),
+                                where=f"the finished cells are in {out / 'cells'}; --resume continues"):
                 result = run_study(study, out, cluster=spec, resume=resume, use_cache=not no_cache,
                                    progress=lambda msg, done, n: bar.update(task, completed=done,
                                                                             description=escape(msg[:50])))
-            except KeyboardInterrupt:
-                bar.stop()
-                fail(f"interrupted; the finished cells are in {out / 'cells'}; --resume continues", INTERRUPTED)
-            except StudyError as exc:
-                bar.stop()
-                fail(str(exc))
-            except ClusterError as exc:
-                bar.stop()
-                fail(f"{exc} (the finished cells are in {out / 'cells'}; --resume continues)", FAILED)
         Console().print(escape(f"# {result.title}"))
         Console().print(escape(result.markdown()), soft_wrap=True)
         pitch = ", pitch.png" if (out / "pitch.png").is_file() else ""

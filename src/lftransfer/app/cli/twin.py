@@ -16,13 +16,15 @@ from rich.markup import escape
 from rich.table import Table
 
 from lftransfer.app.cli.common import command, load, row, sub_app
-from lftransfer.app.cli.options import GtSpp, Quick, TruthArgs, flag
+from lftransfer.app.cli.options import Quick, TruthArgs, flag, setting_options
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.sim.twin.serve import VIEW_SPP
 
 twin_app = sub_app(help="The device twin: the simulated world in its own process behind real device interfaces "
                             "(camera streams, a projector window on an X display, an operator endpoint), for "
                  "--rig hardware:twin.toml; and the scoring of a run made through it.")
+
+ScoreSettings = setting_options("gt_spp")
 
 
 def _serve_table(twin, scene_file: Path, rig_file: Path, quick: bool, options) -> Table:
@@ -126,14 +128,14 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
                                                                            "with --rig hardware:TWIN.toml."),
               twin: Optional[Path] = typer.Option(None, "--twin", metavar="TWIN.json", help=(
                   "The twin's manifest (default: the one beside the rig file the run names).")),
-              gt_spp: GtSpp = None) -> None:
+              asked: ScoreSettings = None) -> None:
     """Render the ground truth of the twin's hidden world and write the run's metrics into its report.json, the
     same metrics lft run writes on the in-process rig (and the calibration's errors against the true rig)."""
     from lftransfer.runs.pipeline import VIEWS_FILE
     from lftransfer.reports.report import display_scale
     from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
     from lftransfer.sim.twin import manifest_path
-    from lftransfer.settings import Overrides, resolve_settings
+    from lftransfer.settings import resolve_settings
     from lftransfer.sim.twin.score import SavedViews, score_views
 
     report_path = run_dir / "report.json"
@@ -154,7 +156,7 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
     if manifest.get("format") != "lftransfer-twin":
         fail(f"{twin}: format: expected 'lftransfer-twin', found {manifest.get('format')!r}")
     scene = load(Path(manifest["scene"]), bool(manifest.get("quick")))
-    spp = resolve_settings(scene, Overrides(gt_spp=gt_spp)).gt_spp
+    spp = resolve_settings(scene, asked.overrides()).gt_spp
     try:
         views = SavedViews.read(run_dir / VIEWS_FILE)
         t = time.perf_counter()

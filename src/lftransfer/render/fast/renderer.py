@@ -55,7 +55,7 @@ class CachedRenderer(RayRenderer):
                  lobe_samples: int = DEFAULT_LOBE_SAMPLES, view_lobe_samples: int = DEFAULT_VIEW_LOBE_SAMPLES,
                  glossy: bool = True, max_depth: int = 1, gather_rays: int = GATHER_RAYS) -> None:
         if not supports(objects):
-            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path (HalfSpaceRenderer)")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path")
         if lobe_samples < 1 or view_lobe_samples < 1:
             raise ValueError(f"lobe_samples and view_lobe_samples must be >= 1, got {lobe_samples} and "
                              f"{view_lobe_samples}")
@@ -115,7 +115,7 @@ class CachedRenderer(RayRenderer):
         """
         objects = list(objects)
         if not supports(objects):
-            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path (HalfSpaceRenderer)")
+            raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path")
         if len(objects) != len(self.objects) or any(a.shape != b.shape or a.material != b.material
                                                     for a, b in zip(objects, self.objects)):
             self._build(objects)
