@@ -79,3 +79,22 @@ def test_06_cluster_option_errors(tmp_path):
         result = runner.invoke(app, ["render", "fig4", "--quick", "--out", str(tmp_path / "o"), *args])
         assert result.exit_code == 2 and words in _text(result), _text(result)
         assert not (tmp_path / "o").exists()
+
+
+def test_07_docs_cli_md_is_what_the_commands_say(tmp_path):
+    """docs/cli.md is generated from the commands (``make cli-docs``): regenerated here it is the same file, with
+    no HTML entities left in its Markdown, so the docs cannot drift from the options (run ``make cli-docs``
+    after changing an option or a setting's help)."""
+    import html
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "cli.md"
+    typer_exe = Path(sys.executable).parent / "typer"
+    subprocess.run([str(typer_exe), "lftransfer.app.cli", "utils", "docs", "--name", "lft", "--output", str(out)],
+                   check=True, capture_output=True)
+    generated = html.unescape(out.read_text(encoding="utf-8"))
+    stored = (Path(__file__).resolve().parents[2] / "docs" / "cli.md").read_text(encoding="utf-8")
+    assert "&#x27;" not in stored and "&lt;" not in stored
+    assert generated == stored, "docs/cli.md is out of date: run make cli-docs"

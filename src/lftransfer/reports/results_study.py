@@ -69,4 +69,6 @@ def study_tables(data: dict, scene_rigs: dict | None = None) -> list[str]:
                 "points above: the transfer scored as the floors are, and the floor; both with the ground truth's "
                 "noise taken off):", ""]
         out += table(["scene", "error of", f"pitch for {TARGET_ERROR} (mm)", "exponent k", ""], answers)
+        out += ["![The cross-transfer error, the transfer scored as the floors are, the fidelity floor and each "
+                "side's floor against the lens pitch](images/pitch_study.png)", ""]
     return out
