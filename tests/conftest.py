@@ -34,6 +34,9 @@ def variant(request):
 
 
 @pytest.fixture(autouse=True)
-def _cache_dir(tmp_path_factory, monkeypatch):
-    """Keep ground-truth caches of tests out of the user's cache."""
+def _cache_dir(tmp_path_factory, tmp_path, monkeypatch):
+    """Keep ground-truth caches of tests out of the user's cache (shared by the session's tests), and give each test
+    a calibration cache of its own: a test that stands a fake calibration in for the real one must not leave it
+    for the next."""
     monkeypatch.setenv("LFT_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "cache"))
+    monkeypatch.setenv("LFT_CALIBRATION_CACHE_DIR", str(tmp_path / "calibration_cache"))

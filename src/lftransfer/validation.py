@@ -6,16 +6,20 @@ expected (``scene.toml: <encoding>: not UTF-8 text: byte 0xe9 on line 3 ...``)."
 
 from __future__ import annotations
 
+import difflib
 import json
 import numbers
 import re
 import tomllib
+import types
+import typing
 from pathlib import Path
 from typing import Any, Callable
 
 from pydantic import BaseModel, BeforeValidator, ValidationError
 
-__all__ = ["STRICT_NUMBER", "field_path", "read_json", "read_text", "read_toml", "strict_number", "validation_message"]
+__all__ = ["STRICT_NUMBER", "field_path", "keys_at", "read_json", "read_text", "read_toml", "strict_number",
+           "validation_message"]
 
 # pydantic loc entries that name a validator or a union member, not a field of the file
 _NOT_FIELDS = ("function-", "list[", "union[")
@@ -45,15 +49,78 @@ def field_path(loc: tuple, root: str, is_tag: Callable[[tuple, int], bool] | Non
     return "".join(parts) or root
 
 
-def _describe(err: dict, root: str, is_tag, extra) -> str:
+def _members(kind) -> list:
+    """The types a field's annotation may hold: unions and ``Annotated`` opened, ``list[X]`` kept whole."""
+    origin = typing.get_origin(kind)
+    if origin is typing.Annotated:
+        return _members(typing.get_args(kind)[0])
+    if origin in (typing.Union, types.UnionType):
+        return [m for arg in typing.get_args(kind) for m in _members(arg)]
+    return [kind]
+
+
+def _models(kinds: list) -> list[type[BaseModel]]:
+    return [k for k in kinds if isinstance(k, type) and issubclass(k, BaseModel)]
+
+
+def keys_at(model: type[BaseModel], loc: tuple) -> list[str]:
+    """The keys a table at ``loc`` may have (``loc`` ends with the key looked up, as pydantic's does): the fields,
+    and their aliases, of every model the annotations along ``loc`` allow; a union's tag, which names no field,
+    keeps every member. Empty where ``loc`` leaves the models."""
+    kinds: list = [model]
+    for item in loc[:-1]:
+        following: list = []
+        for kind in kinds:
+            if isinstance(item, int):
+                if typing.get_origin(kind) in (list, tuple):
+                    following += [m for arg in typing.get_args(kind) if arg is not Ellipsis for m in _members(arg)]
+                continue
+            for m in _models([kind]):
+                spec = m.model_fields.get(item) or next(
+                    (f for f in m.model_fields.values() if item in _aliases(f)), None)
+                if spec is not None:
+                    following += _members(spec.annotation)
+        kinds = following or kinds if not isinstance(item, int) else following
+    return sorted({key for m in _models(kinds) for name, f in m.model_fields.items() for key in (name, *_aliases(f))})
+
+
+def _aliases(spec) -> list[str]:
+    alias = spec.validation_alias
+    if isinstance(alias, str):
+        return [alias]
+    return [c for c in getattr(alias, "choices", ()) if isinstance(c, str)]
+
+
+def _object_name(loc: tuple, data) -> str | None:
+    """The ``name`` of the innermost list entry along ``loc`` in the file's data (an object's name), or None."""
+    name, node = None, data
+    for item in loc[:-1]:
+        try:
+            node = node[item]
+        except (KeyError, IndexError, TypeError):
+            break
+        if isinstance(item, int) and isinstance(node, dict) and isinstance(node.get("name"), str):
+            name = node["name"]
+    return name
+
+
+def _describe(err: dict, root: str, is_tag, extra, model=None, data=None) -> str:
     msg = err.get("msg", "invalid")
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
+    loc = tuple(err.get("loc", ()))
     if err.get("type") == "extra_forbidden":
-        msg = "unknown key (not a field of this table)"
+        msg = "unknown key (not a field of this table"
+        close = difflib.get_close_matches(str(loc[-1]), keys_at(model, loc), n=1, cutoff=0.6) \
+            if model is not None and loc else []
+        msg += f"; did you mean {close[0]!r}?)" if close else ")"
     elif err.get("type") == "missing":
         msg = "required field is missing"
-    text = f"{field_path(tuple(err.get('loc', ())), root, is_tag)}: {msg}" + (extra(err) if extra else "")
+    where = field_path(loc, root, is_tag)
+    name = _object_name(loc, data) if data is not None else None
+    if name is not None:
+        where += f" (of {name!r})"
+    text = f"{where}: {msg}" + (extra(err) if extra else "")
     if err.get("type") not in ("value_error", "missing", "assertion_error") and "input" in err:
         found = err["input"]
         if not isinstance(found, (dict, BaseModel)):
@@ -63,7 +130,8 @@ def _describe(err: dict, root: str, is_tag, extra) -> str:
 
 def validation_message(name: str, exc: ValidationError, *, root: str,
                        is_tag: Callable[[tuple, int], bool] | None = None,
-                       extra: Callable[[dict], str] | None = None, first_per_field: bool = False) -> str:
+                       extra: Callable[[dict], str] | None = None, first_per_field: bool = False,
+                       model: type[BaseModel] | None = None, data: Any = None) -> str:
     """The first error, and up to three more, as one line.
 
     Args:
@@ -73,6 +141,10 @@ def validation_message(name: str, exc: ValidationError, *, root: str,
         is_tag: see :func:`field_path`.
         extra: more words for an error (e.g. the unknown tag of a discriminated union).
         first_per_field: keep one error per field (a plain union reports one error per member).
+        model: the model the file was validated against: an unknown key then gets the closest key of its table
+            (:func:`keys_at`, ``did you mean 'albedo'?``).
+        data: the file's data: a field inside a list entry with a ``name`` then says whose it is
+            (``real[0].colour (of 'post')``).
     """
     errors = exc.errors(include_url=False)
     if first_per_field:
@@ -80,9 +152,10 @@ def validation_message(name: str, exc: ValidationError, *, root: str,
         for e in errors:
             seen.setdefault(field_path(tuple(e.get("loc", ())), root, is_tag), e)
         errors = list(seen.values())
-    text = f"{name}: {_describe(errors[0], root, is_tag, extra)}"
+    text = f"{name}: {_describe(errors[0], root, is_tag, extra, model, data)}"
     if len(errors) > 1:
-        text += f" (and {len(errors) - 1} more: " + "; ".join(_describe(e, root, is_tag, extra) for e in errors[1:4])
+        text += f" (and {len(errors) - 1} more: " + "; ".join(_describe(e, root, is_tag, extra, model, data)
+                                                             for e in errors[1:4])
         text += "; ..." if len(errors) > 4 else ""
         text += ")"
     return text

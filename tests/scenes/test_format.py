@@ -231,9 +231,28 @@ def test_with_overrides_revalidates():
     (PROBE + BOX + "[environment]\nwidth = 33\n", "environment.width", "multiple of 2"),
 ])
 def test_bad_input_names_file_and_field(tmp_path, text, path, what):
+    """The file, the field path (with the object's name where the field is inside a named object) and what was
+    expected."""
+    import re
+
     message = _error(tmp_path, text)
-    assert message.startswith(f"{tmp_path / 'bad_scene.toml'}: {path}: "), message
+    assert re.match(rf"{re.escape(str(tmp_path / 'bad_scene.toml'))}: {re.escape(path)}( \(of '[a-z0-9_]+'\))?: ",
+                    message), message
     assert what in message, message
+
+
+def test_an_unknown_key_names_its_object_and_the_closest_key(tmp_path):
+    """A misspelt key gets the closest key of its table (nothing where none is close) and the object it sits in;
+    ``[lights]``, the model's own name for the lights, is refused in a file (the table is [light])."""
+    message = _error(tmp_path, LIGHT + BOX + "[real.material]\nalbdo = [0.5, 0.5, 0.5]\n")
+    assert "real[0].material.albdo (of 'a'): unknown key" in message and "did you mean 'albedo'?" in message
+    message = _error(tmp_path, LIGHT + BOX.replace("translate", "transalte"))
+    assert "did you mean 'translate'?" in message
+    assert "did you mean" not in _error(tmp_path, LIGHT + BOX + "colour = 1\n")
+    message = _error(tmp_path, LIGHT.replace("[light]", "[lights]") + BOX)
+    assert message.startswith(f"{tmp_path / 'bad_scene.toml'}: lights: unknown key") and "'light'" in message
+    message = _error(tmp_path, LIGHT + "[render]\ngt_sp = 4\n" + BOX)
+    assert "render.gt_sp: unknown key" in message and "did you mean 'gt_spp'?" in message
 
 
 def test_one_error_summarises_the_others(tmp_path):

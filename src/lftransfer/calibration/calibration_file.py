@@ -242,5 +242,5 @@ def parse_calibration_file(data: object, name: str) -> CalibrationFile:
     try:
         return CalibrationFile.model_validate(data)
     except ValidationError as exc:
-        raise CalibrationFileError(validation_message(name, exc, root="<calibration>", first_per_field=True)) \
-            from None
+        raise CalibrationFileError(validation_message(name, exc, root="<calibration>", first_per_field=True,
+                                                      model=CalibrationFile, data=data)) from None

@@ -20,9 +20,9 @@ from lftransfer import choices
 from lftransfer.runs.cluster import ClusterSpec
 from lftransfer.reports.report import emitter_ceiling, write_outputs
 from lftransfer.runs.rigs import (NOMINAL, CalibrationFailedError, Knowledge, OpenedRig, RigSpec, calibrate,
-                                 knowledge, open_rig, write_calibration)
+                                 know_rig, knowledge, open_rig, will_calibrate, write_calibration)
 from lftransfer.runs.run_folder import clear_run_folder, tracked_run, write_status
-from lftransfer.calibration.rig import count_calibration_steps, load_calibration
+from lftransfer.calibration.rig import count_calibration_steps
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
@@ -59,6 +59,8 @@ class RunOptions:
             synthetic side's point light where it measured the real one (the scene file's position where it has
             none).
         calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
+        recalibrate: calibrate through the simulated rig even where the calibration cache holds this rig's
+            calibration (:mod:`lftransfer.runs.calibration_cache`), and store the new one.
         rig: which rig (:class:`~lftransfer.runs.rigs.RigSpec`); ``truth_seed``, ``capture_spp`` and the
             ``oracle`` model are for the simulated rig only. A replay of a recording made on the simulated rig is
             verified against the same hidden truth (the recording's manifest names its truth seed).
@@ -79,6 +81,7 @@ class RunOptions:
     truth_seed: int | None = 0
     rig_model: choices.RigModel = choices.DEFAULT_RIG_MODEL
     calibration: Path | None = None
+    recalibrate: bool = False
     rig: RigSpec = RigSpec()
     record: Path | None = None
     verify: bool = True
@@ -174,7 +177,7 @@ def count_run_steps(scene, options: RunOptions) -> int:
     6 ground-truth renders (where verified), each comparison re-run and the negative control with its own
     settings, writing. Counted from the same resolved settings the run uses."""
     settings = options.resolve(scene)
-    calibration = (count_calibration_steps(scene) if _calibrates(options) else 0) \
+    calibration = (count_calibration_steps(scene) if will_calibrate(scene, options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
@@ -334,25 +337,18 @@ class _Run:
                       ceiling=emitter_ceiling(known.scene))
         return report
 
-    def know_rig(self) -> tuple[Knowledge, str, object]:
-        """Stage 1: what the pipeline knows of the rig (calibrated now, a calibration file, nominal or the
-        oracle), the calibration written with its report and (with an oracle) its errors."""
-        options, t = self.options, time.perf_counter()
-        loaded = None if options.calibration is None else \
-            load_calibration(options.calibration, self.scene.synthetic_part())
-        known = knowledge(self.opened, self.scene, options.rig_model, progress=self.step, calibration=loaded,
-                          source=options.calibration)
-        label = known.rig_model if options.calibration is None else f"calibration file {options.calibration}"
+    def know_rig(self) -> tuple[Knowledge, str, dict | None]:
+        """Stage 1: what the pipeline knows of the rig (a calibration file, the calibration cache, calibrated now,
+        nominal or the oracle; :func:`~lftransfer.runs.rigs.know_rig`), the calibration written with its report
+        and (with an oracle) its errors."""
+        t = time.perf_counter()
+        known, errors, calibrated_now = know_rig(self.opened, self.scene, self.options, self.out / "calibration.json",
+                                                 progress=self.step)
         for note in known.warnings:
             self.warning(note)
-        if options.calibration is None and known.calibration is not None:
+        if calibrated_now:
             self.timings["calibration"] = time.perf_counter() - t
-        errors = None
-        if known.calibration is not None:
-            self.step("calibration report")
-            errors = write_calibration(self.out / "calibration.json", known.calibration, self.opened.oracle,
-                                       source=options.calibration)
-        return known, label, errors
+        return known, known.rig_model, errors
 
     def transfer(self, known: Knowledge):
         """Stage 2: the transfer with the run's settings."""
@@ -638,7 +634,7 @@ class _Run:
             "truth_seed": self.opened.truth_seed,
             "rig_model": label,
             "synthetic_lights": known.lights_from,
-            "calibration_errors": errors.to_json() if errors is not None else None,
+            "calibration_errors": errors,
             "variant": variant(),
             "scene": str(scene.source) if scene.source else None,
         }

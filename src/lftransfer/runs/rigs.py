@@ -4,25 +4,29 @@ A *rig spec* picks the rig: ``sim`` (the digital twin), ``hardware:RIG.toml`` (a
 twin behind real device interfaces) or ``replay:DIR`` (a recording). An opened rig may come with an
 :class:`~lftransfer.sim.oracle.Oracle` (the simulated rig, or a recording of one): the only way the faces read
 the hidden truth, to verify a run or to run the ``oracle`` baseline. What the pipeline itself knows
-(:class:`Knowledge`) is calibrated through the rig, read from a calibration file, or the rig file's nominal values.
+(:class:`Knowledge`) is calibrated through the rig, read from a calibration file or the calibration cache
+(:mod:`lftransfer.runs.calibration_cache`), or the rig file's nominal values (:func:`know_rig`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from lftransfer.reports.report import write_json
-from lftransfer.calibration.rig import calibrate_rig
+from lftransfer.calibration.rig import calibrate_rig, load_calibration
+from lftransfer.runs.calibration_cache import CachedCalibration, inputs_sha256, read_entry, write_entry
+from lftransfer.sim.gt_cache import CacheProblem
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
 
 if TYPE_CHECKING:
     from lftransfer.sim.oracle import Oracle
 
-__all__ = ["NOMINAL", "CalibrationFailedError", "Knowledge", "OpenedRig", "RigSpec", "calibrate", "knowledge",
-           "open_rig", "write_calibration"]
+__all__ = ["NOMINAL", "CalibrationFailedError", "Knowledge", "OpenedRig", "RigSpec", "calibrate", "calibration_key",
+           "know_rig", "knowledge", "open_rig", "will_calibrate", "write_calibration"]
 
 Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
 NOMINAL = "nominal (rig file)"          # the report's rig_model for the rig file's values
@@ -247,3 +251,101 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
                                         for lt, at in zip(ps.lights, lights_at)])
     return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label,
                      warnings=(note,) if note else (), lights_from=lights_from)
+
+
+def calibration_key(scene, options) -> str | None:
+    """The calibration cache's key for a run's calibration (:func:`~lftransfer.runs.calibration_cache.inputs_sha256`),
+    or None where none is cached: a calibration file given, a rig model other than "calibrated", a rig other than
+    the simulated one, or a recording being made (it must hold every request the calibration makes).
+
+    Args:
+        scene: the whole scene.
+        options: :class:`lftransfer.runs.pipeline.RunOptions` (its rig, rig model, calibration, truth seed, capture
+            rays and recording).
+    """
+    if options.calibration is not None or options.rig_model != "calibrated" or options.rig.kind != "sim" \
+            or options.record is not None:
+        return None
+    return inputs_sha256(scene, options.truth_seed, options.capture_spp)
+
+
+def will_calibrate(scene, options) -> bool:
+    """Whether a run with these options calibrates through the rig: the rig model "calibrated", no calibration file,
+    and no usable entry in the calibration cache (or ``options.recalibrate``)."""
+    if options.calibration is not None or options.rig_model != "calibrated":
+        return False
+    key = calibration_key(scene, options)
+    return key is None or options.recalibrate or not isinstance(read_entry(key), CachedCalibration)
+
+
+def _reuse(opened: OpenedRig, scene, options, out_file: Path, resume: bool, warn: Callable[[str], None]):
+    """(calibration, label, the file it came from, the cache entry) of a calibration a run reuses, or Nones; a
+    cache entry that cannot be used goes to ``warn``."""
+    ps = scene.synthetic_part()
+    if options.calibration is not None:
+        return load_calibration(options.calibration, ps), f"calibration file {options.calibration}", \
+            options.calibration, None
+    if options.rig_model == "calibrated" and resume and out_file.is_file():
+        return load_calibration(out_file, ps), f"calibrated (resumed from {out_file})", out_file, None
+    key = calibration_key(scene, options)
+    entry = None if key is None or options.recalibrate else read_entry(key)
+    if isinstance(entry, CacheProblem):
+        warn(entry.message())
+    elif entry is not None:
+        calibration = load_calibration(entry.calibration_file, ps)
+        opened.rig.restore_noise_state(entry.rig_state)       # as the calibrating run's rig stood after calibrating
+        return calibration, f"calibrated (reused from the calibration cache, {entry.folder}; --recalibrate makes " \
+                            f"a new one)", entry.calibration_file, entry
+    return None, None, None, None
+
+
+def know_rig(opened: OpenedRig, scene, options, out_file: Path, *, progress: Callable[[str], None] | None = None,
+             resume: bool = False) -> tuple[Knowledge, dict | None, bool]:
+    """What a run knows of its rig, and the calibration written beside its outputs.
+
+    The rig model comes from, in order: a calibration file (``options.calibration``); the one a resumed sequence
+    kept (``out_file``, with ``resume``); the calibration cache, on the simulated rig (:func:`calibration_key`;
+    not with ``options.recalibrate``), whose entry also sets the rig's random streams to where the calibrating
+    run's stood; a calibration now, through the rig (``rig_model`` "calibrated"), then stored in the cache; else
+    the oracle or the nominal model (:func:`knowledge`). A calibration is written to ``out_file`` with its report
+    and, with an oracle, its errors (copied from the entry when cached; a resumed one is left as it is).
+
+    Args:
+        opened: the rig.
+        scene: the whole scene.
+        options: :class:`lftransfer.runs.pipeline.RunOptions`.
+        out_file: where the calibration file goes (``calibration.json`` in the run folder).
+        progress: called with a message per calibration step, and "calibration report" when one is written.
+        resume: a resumed sequence: reuse ``out_file`` where it exists.
+
+    Returns:
+        (the knowledge, its ``rig_model`` the label reports show and its ``warnings`` a cache entry that could not
+        be used; the calibration's errors against the hidden
+        truth as ``calibration_errors.json`` holds them, or None; whether it calibrated through the rig now).
+
+    Raises:
+        ValueError: the oracle on a rig without a known truth.
+        CalibrationFailedError: the calibration could not measure the rig.
+        CalibrationFileError: a calibration file that does not fit the scene.
+    """
+    say = progress or (lambda _m: None)
+    problems: list[str] = []
+    loaded, label, source, cached = _reuse(opened, scene, options, out_file, resume, problems.append)
+    known = knowledge(opened, scene, options.rig_model, calibration=loaded, source=source, progress=progress)
+    now = loaded is None and known.calibration is not None
+    key = calibration_key(scene, options) if now else None
+    state = opened.rig.noise_state() if key is not None else None
+    errors = None
+    resumed = options.calibration is None and source == out_file
+    if known.calibration is not None and not resumed:
+        say("calibration report")
+        if cached is not None:
+            cached.copy_to(out_file.parent)
+            path = out_file.parent / "calibration_errors.json"
+            errors = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
+        else:
+            written = write_calibration(out_file, known.calibration, opened.oracle, source=source)
+            errors = None if written is None else written.to_json()
+        if key is not None:
+            write_entry(key, out_file.parent, state)
+    return replace(known, rig_model=label or known.rig_model, warnings=(*problems, *known.warnings)), errors, now

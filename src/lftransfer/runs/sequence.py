@@ -29,10 +29,9 @@ import numpy as np
 from lftransfer import choices
 from lftransfer.runs.cluster import ClusterSpec, LocalPool, Worker
 from lftransfer.runs.pipeline import RunOptions
-from lftransfer.runs.rigs import Knowledge, OpenedRig, knowledge, open_rig, write_calibration
+from lftransfer.runs.rigs import Knowledge, OpenedRig, know_rig, open_rig
 from lftransfer.reports.report import bounce_panel, display_scale, emitter_ceiling, live_panel, to_display
 from lftransfer.runs.run_folder import tracked_run, write_status
-from lftransfer.calibration.rig import load_calibration
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view, run_transfer
@@ -186,29 +185,20 @@ def _settings_key(scene, options: RunOptions, seq: SequenceOptions, settings: Tr
 
 def acquire_model(opened, scene, options: RunOptions, out: Path, resume: bool,
                   step: Callable[[str], None]) -> Knowledge:
-    """What a sequence or a live session knows of the rig (:func:`~lftransfer.runs.rigs.knowledge`, as
-    ``lft run`` has it): the rig model from a calibration file, a calibration run now (written to
-    ``out/calibration.json``; a resumed sequence reuses it), the oracle or the nominal model; and the synthetic
-    scene with its point lights where the calibration measured them (the oracle: where they really stand).
+    """What a sequence or a live session knows of the rig, as ``lft run`` has it
+    (:func:`~lftransfer.runs.rigs.know_rig`): the rig model from a calibration file, the one a resumed sequence
+    kept in ``out/calibration.json``, the calibration cache, a calibration run now (written there), the oracle or
+    the nominal model; and the synthetic scene with its point lights where the calibration measured them (the
+    oracle: where they really stand).
 
     Raises:
         SequenceError: the oracle on a rig without a known truth.
     """
-    ps = scene.synthetic_part()
-    kept = out / "calibration.json"
-    calibration, label = None, None
-    if options.calibration is not None:
-        calibration, label = load_calibration(options.calibration, ps), f"calibration file {options.calibration}"
-    elif options.rig_model == "calibrated" and resume and kept.is_file():
-        calibration, label = load_calibration(kept, ps), f"calibrated (resumed from {kept})"
     try:
-        known = knowledge(opened, scene, options.rig_model, calibration=calibration, progress=step,
-                          source=options.calibration or (kept if calibration is not None else None))
+        known, _, _ = know_rig(opened, scene, options, out / "calibration.json", progress=step, resume=resume)
     except ValueError as exc:
         raise SequenceError(str(exc)) from None
-    if calibration is None and known.calibration is not None:
-        write_calibration(kept, known.calibration, opened.oracle)
-    return replace(known, rig_model=label or known.rig_model)
+    return known
 
 
 @dataclass

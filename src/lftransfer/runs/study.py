@@ -205,10 +205,11 @@ def load_study(path: str | Path) -> Study:
     if set(data) - {"study", "setting"}:
         raise StudyError(f"{path}: {sorted(set(data) - {'study', 'setting'})[0]}: unknown table (expected [study] "
                          f"and [[setting]])")
+    tables = {**data.get("study", {}), "setting": data.get("setting", [])}
     try:
-        config = StudyConfig.model_validate({**data.get("study", {}), "setting": data.get("setting", [])})
+        config = StudyConfig.model_validate(tables)
     except ValidationError as exc:
-        msg = validation_message(str(path), exc, root="<study>")
+        msg = validation_message(str(path), exc, root="<study>", model=StudyConfig, data=tables)
         raise StudyError(msg.replace(": scenes", ": study.scenes").replace(": truth_seeds", ": study.truth_seeds")
                          ) from None
     scenes, digest = {}, hashlib.sha256(path.read_bytes())

@@ -35,8 +35,9 @@ def _unknown_material(err: dict) -> str:
     return ""
 
 
-def _scene_error(name: str, exc: ValidationError) -> SceneError:
-    return SceneError(validation_message(name, exc, root="<scene>", is_tag=_material_tag, extra=_unknown_material))
+def _scene_error(name: str, exc: ValidationError, model: type[BaseModel], data: dict) -> SceneError:
+    return SceneError(validation_message(name, exc, root="<scene>", is_tag=_material_tag, extra=_unknown_material,
+                                         model=model, data=data))
 
 
 def load_scene(path: str | Path) -> SceneConfig:
@@ -56,11 +57,14 @@ def load_scene(path: str | Path) -> SceneConfig:
     data = read_toml(path, "scene file", SceneError)
     if "source" in data:
         raise SceneError(f"{path}: source: not a scene field (it is set by the loader), found {data['source']!r}")
+    if "lights" in data:          # the model's own name for its lights; the file's table is [light] or [[light]]
+        raise SceneError(f"{path}: lights: unknown key (not a field of this table; did you mean 'light'? one "
+                         f"[light] table, or a [[light]] table per light)")
     data["source"] = path.resolve()
     try:
         return SceneConfig.model_validate(data, context={"base_dir": path.resolve().parent})
     except ValidationError as exc:
-        raise _scene_error(str(path), exc) from None
+        raise _scene_error(str(path), exc, SceneConfig, data) from None
 
 
 def with_overrides(scene: SceneConfig | SyntheticScene, **changes: Any) -> SceneConfig | SyntheticScene:
@@ -94,4 +98,4 @@ def with_overrides(scene: SceneConfig | SyntheticScene, **changes: Any) -> Scene
     try:
         return type(scene).model_validate(data, context={"base_dir": base})
     except ValidationError as exc:
-        raise _scene_error(str(scene.source) if scene.source else "<scene>", exc) from None
+        raise _scene_error(str(scene.source) if scene.source else "<scene>", exc, type(scene), data) from None

@@ -19,7 +19,7 @@ import numpy as np
 
 from lftransfer.imageio_utils import read_exr, write_exr, write_text
 
-__all__ = ["CacheProblem", "cache_dir", "entry_paths", "read_entry", "write_entry"]
+__all__ = ["CacheProblem", "cache_dir", "entry_paths", "file_sha256", "read_entry", "write_entry"]
 
 FORMAT = "lftransfer-gt-cache/1"
 
@@ -41,19 +41,23 @@ class CacheProblem:
     """Why a cache entry cannot be used.
 
     Attributes:
-        path: the entry's image file.
+        path: the entry's image file (or folder).
         reason: what is wrong, e.g. ``"its checksum does not match (corrupt or replaced)"``.
+        what: which cache (the calibration cache, :mod:`lftransfer.runs.calibration_cache`, says its own).
+        action: what is done instead.
     """
 
     path: Path
     reason: str
+    what: str = "ground-truth cache entry"
+    action: str = "rendering it again"
 
     def message(self) -> str:
         """One line for the terminal and the report."""
-        return f"ground-truth cache entry {self.path} {self.reason}; rendering it again"
+        return f"{self.what} {self.path} {self.reason}; {self.action}"
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -85,7 +89,7 @@ def read_entry(inputs_sha256: str, shape: tuple[int, int, int]) -> np.ndarray | 
     if meta.get("inputs_sha256") != inputs_sha256:
         return CacheProblem(image, "belongs to other inputs (swapped or copied from another entry)")
     try:
-        actual = _sha256(image)
+        actual = file_sha256(image)
     except OSError as exc:
         return CacheProblem(image, f"cannot be read ({exc.strerror or exc})")
     if meta.get("sha256") != actual:
@@ -108,6 +112,6 @@ def write_entry(inputs_sha256: str, stack: np.ndarray) -> Path:
     image, meta_path = entry_paths(inputs_sha256)
     meta_path.unlink(missing_ok=True)                  # never a checksum beside an image it does not describe
     write_exr(image, stack)
-    write_text(meta_path, json.dumps({"format": FORMAT, "inputs_sha256": inputs_sha256, "sha256": _sha256(image),
+    write_text(meta_path, json.dumps({"format": FORMAT, "inputs_sha256": inputs_sha256, "sha256": file_sha256(image),
                                       "shape": list(stack.shape)}, indent=1) + "\n")
     return image

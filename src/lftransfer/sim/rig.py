@@ -180,6 +180,22 @@ class SimRig:
             raise ValueError(f"SimRig.start_frame: frame index must be an integer >= 0, got {index!r}")
         self._rng = np.random.default_rng([self._seed, 7, int(index)])
 
+    def noise_state(self) -> dict:
+        """The state of the rig's random streams (sensor noise, the operator's hand), JSON-ready: what a run that
+        reuses a cached calibration restores (:meth:`restore_noise_state`), so that it draws the noise the run that
+        calibrated drew after calibrating."""
+        return {"sensor": self._rng.bit_generator.state, "boards": int(self._boards)}
+
+    def restore_noise_state(self, state: dict) -> None:
+        """Set the random streams to ``state`` (:meth:`noise_state`)."""
+        try:
+            rng = np.random.default_rng()
+            rng.bit_generator.state = state["sensor"]
+            boards = int(state["boards"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"SimRig.restore_noise_state: not a noise state ({exc})") from None
+        self._rng, self._boards = rng, boards
+
     def place_real(self, objects) -> None:
         """Put the real objects somewhere else (the interactive viewer's hand on the simulated world).
 

@@ -11,9 +11,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from lftransfer import choices
-from lftransfer.app.cli.common import check_before_work, command, load, rig_options, row, step_bar
-from lftransfer.app.cli.options import (Calibration, MaxMemory, Quick, RigArgs, TruthArgs, choice_check, flag,
-                                        metavar, option, setting_options)
+from lftransfer.app.cli.common import calibrates, check_before_work, command, load, rig_options, row, step_bar
+from lftransfer.app.cli.options import (Calibration, MaxMemory, Quick, Recalibrate, RigArgs, TruthArgs, choice_check,
+                                        flag, metavar, option, setting_options)
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.reports.results_format import surface_solve_text
 
@@ -31,7 +31,7 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
                                             help="Timed frames of the live step (>= 1), after two warm-up "
                                                  "frames (the first compiles the kernels, the second builds "
                                                  "the culling tiles).")] = 10,
-          calibration: Calibration = None,
+          calibration: Calibration = None, recalibrate: Recalibrate = False,
           rig_model: Annotated[str, option(
               "--rig-model", metavar=metavar(choices.RigModel),
               callback=choice_check("--rig-model", choices.RigModel),
@@ -69,14 +69,15 @@ def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE
             scene = with_moving_object(scene, iterations + 1)
         except ValueError as exc:
             fail(str(exc))
-    rig_opts = rig_options(scene, truth, RigArgs(rig="sim", rig_model=rig_model, calibration=calibration))
-    calibrates = calibration is None and rig_model == "calibrated"
-    check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrates,
+    rig_opts = rig_options(scene, truth, RigArgs(rig="sim", rig_model=rig_model, calibration=calibration,
+                                                 recalibrate=recalibrate))
+    calibrating = calibrates(scene, rig_opts)
+    check_before_work(scene, out_file=json_out, out_option="--json", example="bench.json", calibrate=calibrating,
                       max_memory=max_memory)
     options = BenchOptions(iterations=iterations, settings=asked.overrides(), truth_seed=rig_opts["truth_seed"],
-                           rig_model=rig_model, calibration=calibration, accuracy=accuracy, peer=peer,
-                           decoupled=live and not sync)
-    if calibrates:
+                           rig_model=rig_model, calibration=calibration, recalibrate=recalibrate, accuracy=accuracy,
+                           peer=peer, decoupled=live and not sync)
+    if calibrating:
         say("The bench calibrates the simulated rig first (the model a run uses): this takes minutes at full "
             "resolution (about 10 on 2 cores; about 1.5 with --quick). --calibration FILE skips it."
             + _demo_calibration_hint(scene))

@@ -16,7 +16,7 @@ from rich.table import Table
 from typer.core import TyperCommand
 
 from lftransfer.app.cli.options import RigArgs, TruthArgs, option_groups
-from lftransfer.app.terminal import FAILED, INTERRUPTED, LftGroup, console, fail
+from lftransfer.app.terminal import FAILED, INTERRUPTED, LftGroup, console, fail, say
 
 __all__ = ["Command", "Group", "check_before_work", "cluster_spec", "command", "ending_cleanly", "load", "operator",
            "progress_bar", "rig_options", "rig_spec", "row", "step_bar", "sub_app"]
@@ -103,12 +103,26 @@ def rig_options(scene, truth: TruthArgs, rig: RigArgs) -> dict:
         if not rig.calibration.is_file():
             fail(f"--calibration {rig.calibration}: no such file")
         load_calibration(rig.calibration, scene)              # CalibrationFileError: one line, exit code 2
-    return {"truth_seed": truth.seed, "rig_model": rig.rig_model, "calibration": rig.calibration, "rig": spec}
+    return {"truth_seed": truth.seed, "rig_model": rig.rig_model, "calibration": rig.calibration, "rig": spec,
+            "recalibrate": rig.recalibrate}
 
 
-def calibrates(rig: RigArgs) -> bool:
-    """Whether a command with these rig options calibrates through the rig first."""
-    return rig.calibration is None and rig.rig_model == "calibrated"
+def calibrates(scene, rig_opts: dict) -> bool:
+    """Whether a command with these rig options (:func:`rig_options`) calibrates through the rig first; where it
+    reuses the calibration cache's entry for this simulated rig instead, one line says so."""
+    from lftransfer.runs.calibration_cache import CachedCalibration, read_entry
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.rigs import calibration_key
+
+    options = RunOptions(**rig_opts)
+    if options.calibration is not None or options.rig_model != "calibrated":
+        return False
+    key = calibration_key(scene, options)
+    entry = None if key is None or options.recalibrate else read_entry(key)
+    if not isinstance(entry, CachedCalibration):
+        return True
+    say(f"reusing this simulated rig's calibration from the cache ({entry.folder}); --recalibrate makes a new one")
+    return False
 
 
 def operator(bar: Progress | None = None):

@@ -89,6 +89,9 @@ Cluster = Annotated[Optional[str], option(
          "splits it alike).")]
 Workers = Annotated[Optional[int], option("--workers", min=1, metavar="N",
                                           help="Cluster workers (default: one per GPU, else per CPU core).")]
+Recalibrate = Annotated[bool, flag("--recalibrate", (
+    "Calibrate the simulated rig again although the calibration cache holds its calibration (the same scene "
+    "devices, truth seed and code), and store the new one."))]
 Calibration = Annotated[Optional[Path], option(
     "--calibration", metavar="FILE",
     help="Use this calibration file (from `lft calibrate`, or a run's calibration.json) instead of calibrating.")]
@@ -122,6 +125,7 @@ class RigArgs:
              "file's values) | oracle (the simulated rig's hidden truth: what perfect calibration would reach).")
     ] = choices.DEFAULT_RIG_MODEL
     calibration: Calibration = None
+    recalibrate: Recalibrate = False
 
 
 class SettingOptions:

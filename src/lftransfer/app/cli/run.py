@@ -142,7 +142,7 @@ def demo(out: OutDir = Path("out/demo"), quick: Quick = False, no_cache: NoCache
     options = RunOptions(settings=asked.overrides(compare_all=True), use_cache=not no_cache, negative_control=True,
                          floor=not no_floor, **rig_opts)
     check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                      bounces=asked.bounces, calibrate=calibrates(rig), max_memory=max_memory)
+                      bounces=asked.bounces, calibrate=calibrates(scene, rig_opts), max_memory=max_memory)
     _run(scene, out, options)
 
 
@@ -167,7 +167,7 @@ def run(scene_file: SceneArg, out: OutDir = Path("out/run"),
     options = RunOptions(settings=asked.overrides(compare_all=compare), use_cache=not no_cache, floor=not no_floor,
                          cluster=spec, **rig_opts)
     check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
-                      bounces=asked.bounces, calibrate=calibrates(rig), max_memory=max_memory)
+                      bounces=asked.bounces, calibrate=calibrates(scene, rig_opts), max_memory=max_memory)
     _run(scene, out, options)
 
 
@@ -191,7 +191,7 @@ def record(scene_file: SceneArg,
     rig_opts = rig_options(scene, truth, rig)
     options = RunOptions(settings=asked.overrides(), record=out, **rig_opts)
     check_before_work(scene, out_dir=out, cache=rig_opts["rig"].kind == "sim", bounces=asked.bounces,
-                      calibrate=calibrates(rig), max_memory=max_memory)
+                      calibrate=calibrates(scene, {**rig_opts, "record": out}), max_memory=max_memory)
     _run(scene, out / "run", options)
     Console().print(escape(f"recorded the session into {out} (replay: lft run {scene_file} --rig replay:{out}"
                            f"{' --quick' if quick else ''} --bounces {asked.bounces})"), soft_wrap=True)

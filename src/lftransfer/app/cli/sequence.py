@@ -111,10 +111,11 @@ def live(scene_file: SceneArg,
 
     scene = load(scene_file, quick)
     rig_opts = rig_options(scene, truth, rig)
-    check_before_work(scene, out_dir=out, calibrate=calibrates(rig))
+    check_before_work(scene, out_dir=out, calibrate=calibrates(scene, rig_opts))
     with console.status("setting up the rig (calibrating takes minutes at full resolution)") as status:
         session = open_session(scene, rig=str(rig_opts["rig"]), rig_model=rig.rig_model,
-                               calibration=rig.calibration, truth_seed=rig_opts["truth_seed"], out=out,
+                               calibration=rig.calibration, recalibrate=rig.recalibrate,
+                               truth_seed=rig_opts["truth_seed"], out=out,
                                settings=asked.overrides(), loop="sync" if sync else choices.DEFAULT_LIVE_LOOP,
                                progress=lambda msg: status.update(escape(msg[:70])),
                                warn=warn)
@@ -207,7 +208,7 @@ def render_cmd(scene_file: SceneArg, out: OutDir = Path("out/render"),
     if resume and not (out / "report.json").is_file():
         fail(f"--resume: {out / 'report.json'} does not exist: nothing to resume")
     check_before_work(scene, out_dir=out, cache=verify_every > 0 and not no_cache, bounces=asked.bounces,
-                      calibrate=calibrates(rig), max_memory=max_memory)
+                      calibrate=calibrates(scene, rig_opts), max_memory=max_memory)
     report, check = _render_with_progress(scene, out, options, seq)
     _sequence_table(report, out, mode, check)
 

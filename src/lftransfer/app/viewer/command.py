@@ -12,6 +12,7 @@ __all__ = ["open_session"]
 
 
 def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL, calibration: Optional[Path] = None,
+                 recalibrate: bool = False,
                  truth_seed: Optional[int] = 0, out: Path = Path("out/live"), settings: Overrides = Overrides(),
                  loop: str = DEFAULT_LIVE_LOOP, progress=None, warn=None):
     """A :class:`~lftransfer.app.viewer.session.LiveSession` for a scene on a rig: the rig opened, its model had
@@ -26,7 +27,7 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
 
     out = Path(out)
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
-                         settings=settings)
+                         settings=settings, recalibrate=recalibrate)
     opened = open_rig(scene, options)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:

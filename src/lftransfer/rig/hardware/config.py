@@ -317,9 +317,10 @@ class HardwareRigConfig(_Model):
 
 # -- loading ---------------------------------------------------------------------------------------------------
 
-def _rig_file_error(name: str, exc: ValidationError) -> RigFileError:
+def _rig_file_error(name: str, exc: ValidationError, data: dict) -> RigFileError:
     # a union (response_gamma = number | list) reports one error per member: keep the first of each field
-    return RigFileError(validation_message(name, exc, root="<rig>", first_per_field=True))
+    return RigFileError(validation_message(name, exc, root="<rig>", first_per_field=True, model=HardwareRigConfig,
+                                           data=data))
 
 
 def parse_rig_file(data: dict, name: str = "<rig>", base_dir: str | Path | None = None) -> HardwareRigConfig:
@@ -342,7 +343,7 @@ def parse_rig_file(data: dict, name: str = "<rig>", base_dir: str | Path | None 
     try:
         return HardwareRigConfig.model_validate(data, context={"base_dir": base_dir})
     except ValidationError as exc:
-        raise _rig_file_error(name, exc) from None
+        raise _rig_file_error(name, exc, data) from None
 
 
 def load_rig_file(path: str | Path) -> HardwareRigConfig:

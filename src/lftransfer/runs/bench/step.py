@@ -75,6 +75,7 @@ class BenchOptions:
             "nominal" (the rig file's values) or "oracle" (the hidden truth); the last two are not what a run
             uses and the result says so.
         calibration: a calibration file (from ``lft calibrate`` or the demo's ``calibration.json``), or None.
+        recalibrate: calibrate even where the calibration cache holds this rig's calibration.
         accuracy: also compare the step's composite with the exact path's (:mod:`~lftransfer.runs.bench.accuracy`).
         exact_aperture_samples: aperture points per lenslet of that exact reference (area model).
         peer: also time Mitsuba's path tracer on the light field job (:mod:`~lftransfer.runs.bench.peer`).
@@ -89,6 +90,7 @@ class BenchOptions:
     truth_seed: int | None = 0
     rig_model: choices.RigModel = choices.DEFAULT_RIG_MODEL
     calibration: Path | None = None
+    recalibrate: bool = False
     accuracy: bool = True
     exact_aperture_samples: int = 32
     peer: bool = True
@@ -230,29 +232,42 @@ def transfer_settings(scene, options: BenchOptions = BenchOptions()) -> Transfer
 def count_bench_steps(scene, options: BenchOptions) -> int:
     """Progress messages of :func:`run_bench` (for a progress bar), calibration included."""
     from lftransfer.calibration.rig import count_calibration_steps
+    from lftransfer.runs.rigs import will_calibrate
 
-    calibrates = options.calibration is None and options.rig_model == "calibrated"
-    return (2 + (count_calibration_steps(scene) if calibrates else 0) + options.warmup + options.iterations + 1
-            + int(options.accuracy) + 3 * int(options.peer) + int(options.decoupled))
+    calibrates = will_calibrate(scene, _run_options(options))
+    report = options.rig_model == "calibrated" or options.calibration is not None      # "calibration report"
+    return (2 + (count_calibration_steps(scene) if calibrates else 0) + int(report) + options.warmup
+            + options.iterations + 1 + int(options.accuracy) + 3 * int(options.peer) + int(options.decoupled))
+
+
+def _run_options(options: BenchOptions):
+    """The run options a bench's rig and rig model are had with (the simulated rig, as ``lft run`` opens it)."""
+    from lftransfer.runs.pipeline import RunOptions
+
+    return RunOptions(truth_seed=options.truth_seed, rig_model=options.rig_model, calibration=options.calibration,
+                      recalibrate=options.recalibrate)
 
 
 def _rig_model(scene, opened, options: BenchOptions, say: Progress) -> tuple[object, str, float]:
-    """The rig model the step uses, a label for it, and the seconds spent calibrating."""
-    from lftransfer.runs import rigs
-    from lftransfer.calibration.rig import load_calibration
-    from lftransfer.rig.model import nominal_rig
+    """The rig model the step uses, a label for it, and the seconds spent calibrating: a calibration file, the
+    calibration cache or a calibration now (:func:`~lftransfer.runs.rigs.know_rig`, as a run has it; its files go
+    to a temporary folder), the oracle or the nominal model."""
+    import tempfile
 
+    from lftransfer.runs.rigs import know_rig
+
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="lft-bench-") as folder:
+        known, _, now = know_rig(opened, scene, _run_options(options), Path(folder) / "calibration.json",
+                                 progress=say)
+    took = time.perf_counter() - start if now else 0.0
+    if now:
+        return known.model, f"calibrated (by the bench through the simulated rig, {took:.0f} s)", took
     if options.calibration is not None:
-        return load_calibration(options.calibration, scene.synthetic_part()).model, \
-            f"calibrated (calibration file {options.calibration})", 0.0
+        return known.model, f"calibrated (calibration file {options.calibration})", 0.0
     if options.rig_model == "calibrated":
-        start = time.perf_counter()
-        cal = rigs.calibrate(opened.rig, scene.synthetic_part(), progress=say)
-        took = time.perf_counter() - start
-        return cal.model, f"calibrated (by the bench through the simulated rig, {took:.0f} s)", took
-    if options.rig_model == "oracle":
-        return opened.oracle.model, f"true (oracle): {NOT_WHAT_USERS_RUN}", 0.0
-    return nominal_rig(scene.rig), f"nominal (rig file): {NOT_WHAT_USERS_RUN}", 0.0
+        return known.model, known.rig_model, 0.0
+    return known.model, f"{known.rig_model}: {NOT_WHAT_USERS_RUN}", 0.0
 
 
 def _settings_json(scene, options: BenchOptions, settings: TransferSettings, rig_model: str) -> dict:
