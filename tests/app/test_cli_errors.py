@@ -44,14 +44,21 @@ def _invoke(args, **kw):
     return runner.invoke(app, [str(a) for a in args], **kw)
 
 
+STARTING = re.compile(r"^lft [a-z -]+: starting$")
+STEP = re.compile(r"^\d+/\d+ \S")                # a progress bar's step, as a line off a terminal
+
+
 def _one_line_error(result, code: int = 2, progress: bool = False) -> str:
-    """The command ended with ``code`` and exactly one line on stderr, ``error: ...``, without a traceback (with
-    ``progress``: after the progress bar's line; ``warning: ...`` lines before it, e.g. a calibration file without
-    its light section, are the run's own and not counted)."""
+    """The command ended with ``code`` and exactly one line on stderr, ``error: ...``, without a traceback (after
+    the command's first line, ``lft COMMAND: starting``; with ``progress``: after the progress bar's steps and its
+    last line; ``warning: ...`` lines before it, e.g. a calibration file without its light section, are the run's
+    own and not counted)."""
     assert result.exit_code == code, (result.exit_code, result.output, result.exception)
     assert not isinstance(result.exception, WorkStarted), "the work started before the check"
-    lines = [line for line in result.stderr.splitlines() if line.strip() and not line.startswith("warning: ")]
+    lines = [line for line in result.stderr.splitlines() if line.strip() and not line.startswith("warning: ")
+             and not STARTING.match(line)]
     if progress:
+        lines = [line for line in lines if not STEP.match(line)]
         assert len(lines) == 2 and re.search(r"\d+/\d+ \d+:\d\d:\d\d$", lines[0]), result.stderr
         lines = lines[1:]
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr

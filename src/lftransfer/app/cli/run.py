@@ -87,7 +87,7 @@ def summary(report: dict, out: Path) -> None:
     row(table, "verification", report["verification"])
     settings = report.get("settings", {}).get("transfer", {})
     if settings:
-        row(table, "settings", f"{settings['lighting_model']} model, {settings['reconstruction']} reconstruction, "
+        row(table, "settings.transfer", f"{settings['lighting_model']} model, {settings['reconstruction']} reconstruction, "
                                f"{settings['projection']} projection, {settings['window']} window, "
                                f"{settings['bounces']} bounces, {report['renderer']} renderer")
     undefined = report.get("undefined_metrics") or {}
@@ -96,34 +96,34 @@ def summary(report: dict, out: Path) -> None:
             row(table, key, f"{report[key]:.4g}")
         elif key in undefined:
             row(table, key, "undefined (see below)")
-    for key, label in (("by_lighting_model", "model"), ("by_reconstruction", "reconstruction"),
-                       ("by_projection", "projection"), ("by_window", "window")):
+    for key in ("by_lighting_model", "by_reconstruction", "by_projection", "by_window"):
         by_choice = report.get(key) or {}
         for name, m in by_choice.items():
             if len(by_choice) > 1 and m.get("cross_transfer_rel_error") is not None:
-                row(table, f"cross error, {name} {label}", f"{m['cross_transfer_rel_error']:.4g}")
+                row(table, f"{key}.{name}.cross_transfer_rel_error", f"{m['cross_transfer_rel_error']:.4g}")
     ref = report.get("reference")
     if ref is not None:
-        row(table, "quiet reference", f"{ref['spp']} samples per pixel in {ref['rounds']} rounds; noise "
+        row(table, "reference", f"{ref['spp']} samples per pixel in {ref['rounds']} rounds; noise "
                                       f"{ref['noise']:.3g} = {ref['ratio']:.2g} of the error (target "
                                       f"{ref['target']:.2g}{', met' if ref['met'] else ', NOT met'})"
             if ref.get("ratio") is not None else "no error to judge")
     floor = report.get("fidelity_floor")
     if floor is not None:
-        row(table, "fidelity floor (real / synthetic side)", floor_line(floor))
+        row(table, "fidelity_floor (real / synthetic)", floor_line(floor))
     control = report.get("negative_control")
     if control is not None:
-        row(table, f"negative control: {control['rig_model']}", control_line(control))
+        row(table, f"negative_control ({control['rig_model']})", control_line(control))
     for b in report["bounces"]:
-        row(table, f"bounce {b['index']} energy real / synthetic", f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
-    row(table, "rig model", report["rig_model"])
+        row(table, f"bounces[{b['index']}] real_energy / synthetic_energy",
+            f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
+    row(table, "rig_model", report["rig_model"])
     errors = report.get("calibration_errors") or {}
     if "lenslet_centre_rms_px" in errors:
-        row(table, "calibration: lenslet centres RMS", f"{errors['lenslet_centre_rms_px']:.3f} px")
+        row(table, "calibration_errors.lenslet_centre_rms_px", f"{errors['lenslet_centre_rms_px']:.3f} px")
     if "pose_position_rms_mm" in errors and "pose_rotation_deg" in errors:
-        row(table, "calibration: pose error", f"{errors['pose_position_rms_mm']:.2f} mm, "
-                                              f"{errors['pose_rotation_deg']:.3f} deg")
-    row(table, "total time", f"{report['timings_s']['total']:.1f} s")
+        row(table, "calibration_errors.pose_position_rms_mm / pose_rotation_deg",
+            f"{errors['pose_position_rms_mm']:.2f} mm / {errors['pose_rotation_deg']:.3f} deg")
+    row(table, "timings_s.total", f"{report['timings_s']['total']:.1f} s")
     Console().print(table)
     for key, reason in undefined.items():
         Console().print(escape(f"{key} is undefined: {reason}"), soft_wrap=True, highlight=False)

@@ -30,32 +30,32 @@ def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
     table = Table(title=escape(f"{mode} sequence -> {out}"))
     table.add_column("")
     table.add_column("value", justify="right")
-    row(table, "frames", str(summary["frames"]))
+    row(table, "summary.frames", str(summary["frames"]))
     if report.get("cluster"):
         c = report["cluster"]
         row(table, "cluster", f"{c['workers']} workers on {c['address']} ({c['cpus']:g} CPUs, {c['gpus']:g} GPUs)")
-    row(table, "median frame time", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
+    row(table, "summary.median_frame_s (transfer_fps)", f"{summary['median_frame_s']:.3g} s ({summary['transfer_fps']:.3g} frames/s)")
     if report.get("loop"):
         row(table, "loop", report["loop"])
     if "capture_behind_s_median" in summary:
-        row(table, "captures behind the frames (scene time)",
+        row(table, "summary.capture_behind_s_median / _max (captures_used)",
             f"median {summary['capture_behind_s_median']:.3g} s, at most {summary['capture_behind_s_max']:.3g} s "
             f"({summary['captures_used']} captures for {summary['frames']} frames)")
     if "psnr_objects_db_min" in summary:
-        row(table, "psnr over the objects (verified frames)",
+        row(table, "summary.psnr_objects_db_min .. _max",
             f"{summary['psnr_objects_db_min']:.2f} .. {summary['psnr_objects_db_max']:.2f} dB")
     if "cross_transfer_rel_error_min" in summary:
-        row(table, "cross-transfer error (verified frames)",
+        row(table, "summary.cross_transfer_rel_error_min .. _max",
             f"{summary['cross_transfer_rel_error_min']:.3f} .. {summary['cross_transfer_rel_error_max']:.3f}"
             + (f" (ground truth's own noise on it: up to {summary['cross_gt_noise_rel_max']:.3f})"
                if summary.get("cross_gt_noise_rel_max") is not None else ""))
     if "transfer_over_floor_min" in summary:
-        row(table, "fidelity floor (verified frames)",
+        row(table, "summary.fidelity_floor_min .. _max",
             _range(summary, "fidelity_floor") + f" (real {_range(summary, 'real_floor')}, synthetic "
             f"{_range(summary, 'synthetic_floor')}); the frames {_range(summary, 'transfer_over_floor', '.2f')} "
             "x the floor")
     if "references" in summary:
-        row(table, "quiet reference (verified frames)",
+        row(table, "summary.reference_spp_min .. _max",
             f"{_range(summary, 'reference_spp', '.0f')} samples per pixel, noise "
             f"{_range(summary, 'reference_noise_over_error', '.2f')} of the error; target met in "
             f"{summary['references_met']} of {summary['references']} frames")
@@ -63,15 +63,15 @@ def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
     if effect is not None:
         for name, worst in effect.worst_relative_error().items():
             trend = effect.trend()[name]
-            row(table, f"effect: {name.replace('_', ' ')} against ground truth",
+            row(table, f"effect.{name} against ground truth",
                 "undefined" if worst is None else f"worst {100 * worst:.0f} % off"
                 + ("" if trend is None else f", same trend in {100 * trend:.0f} % of steps"))
         row(table, "effect curve", f"{out / 'effect.png'}")
-    row(table, "rig model", report["rig_model"])
+    row(table, "rig_model", report["rig_model"])
     if "stale_captures" in summary:
-        row(table, "stale captures (hardware rig)", str(summary["stale_captures"]))
+        row(table, "summary.stale_captures", str(summary["stale_captures"]))
     for note in report["approximations"]:
-        row(table, "approximation", note)
+        row(table, "approximations", note)
     row(table, "videos", f"{out / 'composite.mp4'}, {out / 'bounces.mp4'}")
     for line in report.get("warnings", []):
         warn(line)
@@ -90,8 +90,9 @@ def _range(summary: dict, key: str, spec: str = ".3f") -> str:
 def live(scene_file: SceneArg,
          port: Annotated[int, option("--port", min=1, max=65535, metavar="PORT",
                                      help="Port of the page on localhost.")] = 8080,
-         out: Annotated[Path, option("--out", metavar="DIR", help="Where 'save' writes frames and scenes.")
-                        ] = Path("out/live"),
+         out: Annotated[Path, option("--out", metavar="DIR", help=(
+             "Session folder: the calibration the session uses (calibration.json, its report and errors), written "
+             "at start-up, and what 'save' writes (frames and scenes)."))] = Path("out/live"),
          quick: Quick = False,
          sync: Annotated[bool, flag("--sync", "One capture inside every frame (for measurement); default: "
                                               "captures on their own thread at the devices' rate, frames at the "

@@ -20,9 +20,10 @@ from lftransfer.app.cli.options import Quick, TruthArgs, flag, setting_options
 from lftransfer.app.terminal import FAILED, fail
 from lftransfer.sim.twin.serve import VIEW_SPP
 
-twin_app = sub_app(help="The device twin: the simulated world in its own process behind real device interfaces "
-                            "(camera streams, a projector window on an X display, an operator endpoint), for "
-                 "--rig hardware:twin.toml; and the scoring of a run made through it.")
+twin_app = sub_app(name="twin", help="The device twin: the simulated world in its own process behind real device "
+                                     "interfaces (camera streams, a projector window on an X display, an operator "
+                                     "endpoint), for --rig hardware:twin.toml; and the scoring of a run made through "
+                                     "it.")
 
 ScoreSettings = setting_options("gt_spp")
 
