@@ -148,7 +148,7 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
 
 def test_the_command_line_reports_the_settings_it_resolved(variant, tiny, tmp_path):
     """``lft run --lighting-model point --bounces 1``: report.json's settings are resolve_settings' of the same
-    overrides (the command line adds its defaults: the renderer)."""
+    overrides (the command line adds its defaults: the renderer, and a quiet reference)."""
     from lftransfer.app.cli import app
 
     out = tmp_path / "cli"
@@ -156,7 +156,8 @@ def test_the_command_line_reports_the_settings_it_resolved(variant, tiny, tmp_pa
                                       "--rig-model", "nominal", "--exact-rig", "--out", str(out), "--no-cache"])
     assert result.exit_code == 0, (result.output, result.exception)
     report = json.loads((out / "report.json").read_text())
-    expected = resolve_settings(tiny, Overrides(lighting_model="point", bounces=1, renderer=choices.DEFAULT_RENDERER))
+    expected = resolve_settings(tiny, Overrides(lighting_model="point", bounces=1, renderer=choices.DEFAULT_RENDERER,
+                                                quiet_reference=True))          # lft run judges its run
     assert report["settings"] == json.loads(json.dumps(expected.to_json()))
     assert report["settings"]["transfer"]["window"] == "cut"
 
@@ -217,7 +218,7 @@ def test_every_setting_is_one_option_made_from_its_field():
         if f.name == "compare":
             continue
         param = params[f.name]
-        assert param.opts == ["--" + f.name.replace("_", "-")], f.name
+        assert param.opts == [f.metadata["flag"] or "--" + f.name.replace("_", "-")], f.name
         assert " ".join(param.help.split()) == " ".join(escape(f.metadata["help"]).split()), f.name
         if f.metadata["choice"] is not None:
             assert param.metavar == "|".join(choices.values(f.metadata["choice"])), f.name
@@ -225,5 +226,9 @@ def test_every_setting_is_one_option_made_from_its_field():
     asked = group(bounces=1, renderer="exact", quiet_reference=False)
     assert asked.overrides() == Overrides(bounces=1, renderer="exact")
     assert asked.arguments() == ["--bounces", "1", "--renderer", "exact"]
+    judged = setting_options("quiet_reference", "reference_budget_s", defaults=(("quiet_reference", True),))
+    assert judged().overrides() == Overrides(quiet_reference=True)
+    assert judged(quiet_reference=False, reference_budget_s=90.0).arguments() == [
+        "--no-quiet-reference", "--reference-budget", "90"]
     with pytest.raises(ValueError, match="not a setting"):
         setting_options("bounce")

@@ -27,13 +27,14 @@ setting changed."""
 _AREA_ONLY = ("reconstruction", "projection", "window")
 
 
-def _setting(help: str, *, choice=None, command_default=None, **bounds) -> Any:  # noqa: A002
+def _setting(help: str, *, choice=None, command_default=None, flag: str | None = None, **bounds) -> Any:  # noqa: A002
     """A field of :class:`Overrides` (None: the scene's) with what its command-line option shows: ``help``, the
     choice's ``Literal`` type (its values), the value the commands start from (``command_default``; None: the
-    scene's) and bounds (``min``, ``max``, ``metavar``). :func:`lftransfer.app.cli.options.setting_options` makes
-    the options from these, so the setting, its option and docs/cli.md say the same."""
+    scene's), the option's name where it is not the field's (``flag``) and bounds (``min``, ``max``,
+    ``metavar``). :func:`lftransfer.app.cli.options.setting_options` makes the options from these, so the setting,
+    its option and docs/cli.md say the same."""
     return field(default=None, metadata={"help": help, "choice": choice, "command_default": command_default,
-                                         "bounds": bounds})
+                                         "flag": flag, "bounds": bounds})
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,8 @@ class Overrides:
         gt_spp: samples per pixel of each ground-truth render (>= 1).
         quiet_reference: render the ground truth in rounds until its noise on the cross term is at most a third
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
+        reference_budget_s: seconds the quiet reference's later rounds may take (None: the default,
+            :data:`lftransfer.choices.DEFAULT_REFERENCE_BUDGET_S`).
         compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
             reconstruction, projection and window only under the area model), e.g.
             ``{"lighting_model": ("area", "point")}``.
@@ -90,7 +93,12 @@ class Overrides:
         f"unless the scene says).", min=1, metavar="N")
     quiet_reference: bool | None = _setting(
         "Render the ground truth in rounds (the objects' pixels only after the first) until its noise on the "
-        "cross term is at most a third of the error; --gt-spp is the first round's samples.")
+        "cross term is at most a third of the error, within --reference-budget; --gt-spp is the first round's "
+        "samples.")
+    reference_budget_s: float | None = _setting(
+        f"Seconds the quiet reference's later rounds may take, all together (default "
+        f"{choices.DEFAULT_REFERENCE_BUDGET_S:g}; raise it where the run says the target was not met).",
+        flag="--reference-budget", min=1.0, metavar="SECONDS")
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self) -> None:
@@ -98,6 +106,9 @@ class Overrides:
         if self.bounces is not None and not (isinstance(self.bounces, int) and
                                              0 <= self.bounces <= choices.MAX_BOUNCES):
             problems.append(f"bounces: expected an integer from 0 to {choices.MAX_BOUNCES}, got {self.bounces!r}")
+        if self.reference_budget_s is not None and not (isinstance(self.reference_budget_s, (int, float))
+                                                        and self.reference_budget_s >= 1):
+            problems.append(f"reference_budget_s: expected a number of seconds >= 1, got {self.reference_budget_s!r}")
         if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
@@ -139,6 +150,7 @@ class RunSettings:
             angular samples, aperture samples, rays per light field entry and per view pixel).
         gt_spp: samples per pixel of each ground-truth render (with ``quiet_reference``, of its first round).
         quiet_reference: render the ground truth until it is quiet enough (:mod:`lftransfer.sim.reference`).
+        reference_budget_s: the seconds its later rounds may take.
         comparisons: the re-runs measured beside the run: (choice, value) pairs, each the run with that one choice
             changed, in the order of :data:`COMPARABLE`; none that equals the run's own value, and no
             reconstruction, projection or window unless the area model.
@@ -154,6 +166,7 @@ class RunSettings:
     reruns: tuple[TransferSettings, ...] = ()
     quiet_reference: bool = False
     adjustments: tuple[str, ...] = ()
+    reference_budget_s: float = choices.DEFAULT_REFERENCE_BUDGET_S
 
     @property
     def bounces(self) -> int:
@@ -169,7 +182,8 @@ class RunSettings:
         """The settings as JSON (the run's report and a sequence's key write them)."""
         # quiet_reference only where asked for: a sequence's key of the same settings stays as it was
         return {"transfer": asdict(self.transfer), "gt_spp": self.gt_spp,
-                **({"quiet_reference": True} if self.quiet_reference else {}),
+                **({"quiet_reference": True, "reference_budget_s": self.reference_budget_s}
+                   if self.quiet_reference else {}),
                 "comparisons": [list(c) for c in self.comparisons]}
 
 
@@ -231,4 +245,5 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
                    for name, value in comparisons)
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
-                       quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments))
+                       quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments),
+                       reference_budget_s=float(overrides.reference_budget_s or choices.DEFAULT_REFERENCE_BUDGET_S))

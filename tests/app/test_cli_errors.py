@@ -144,7 +144,8 @@ def test_07_bom_accepted_non_utf8_named(tmp_path, no_work):
     (["--renderer", "magic"], "--renderer"),
     (["--rig-model", "psychic"], "--rig-model"),
     (["--colour", "red"], "--colour"),
-    (["--cluster", "local"], "--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference"),
+    (["--cluster", "local", "--no-quiet-reference"],
+     "--cluster: lft run spreads a quiet reference's rounds over it; add --quiet-reference"),
     (["--workers", "2"], "--workers: needs --cluster"),
 ])
 def test_08_options_have_ranges(scene, tmp_path, no_work, args, words):

@@ -27,13 +27,14 @@ def _strict_report(out) -> dict:
 @pytest.fixture(scope="module")
 def calibrated_run(tmp_path_factory):
     """``lft run SCENE --calibration FILE`` on the tiny rig (the rig exactly as its file says, the calibration the
-    file's own values), with 8 ground-truth samples per pixel."""
+    file's own values), with 8 ground-truth samples per pixel and the reference left as noisy as that
+    (``--no-quiet-reference``: the noise's warning is what some of these tests read)."""
     d = tmp_path_factory.mktemp("calibrated_run")
     scene = write_tiny_scene(d / "tiny.toml", gt_spp=8)
     calibration = nominal_calibration(load_scene(scene)).write(d / "calibration.json")
     out = d / "out"
     result = runner.invoke(app, ["run", str(scene), "--calibration", str(calibration), "--exact-rig", "--bounces",
-                                 "1", "--out", str(out)], env={"COLUMNS": "200"})
+                                 "1", "--no-quiet-reference", "--out", str(out)], env={"COLUMNS": "200"})
     return scene, calibration, out, result
 
 

@@ -27,6 +27,7 @@ from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
 from lftransfer.render.selection import approximations
+from lftransfer.reports.verdict import verdict
 
 if TYPE_CHECKING:
     from lftransfer.sim.metrics import NegativeControl
@@ -330,6 +331,7 @@ class _Run:
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor, gt)
         report["occlusion"] = self.occlusion(result, gt)
         report["surface_ablations"] = ablations
+        report = {"verdict": verdict(report), **report}           # first: what a reader looks for first
         self.step("write outputs")
         comp = result.composite()
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
@@ -413,14 +415,16 @@ class _Run:
                 render, parts):
             gt, self.reference = self.opened.oracle.quiet_ground_truth(
                 judge, spp=self.settings.gt_spp, multiple=metric_factor(comp_n.shape[1]),
-                use_cache=self.options.use_cache, parts=parts, render=render, progress=self.step, warn=self.warning)
+                use_cache=self.options.use_cache, parts=parts, render=render, progress=self.step, warn=self.warning,
+                budget_s=self.settings.reference_budget_s)
         for _ in range(1 + MAX_ROUNDS - self.reference.rounds):
             self.step("ground truth: quiet enough")
-        if not self.reference.met:
-            self.warning(f"the quiet reference stopped at {self.reference.spp} samples per pixel with its noise on "
-                         f"the cross term at {self.reference.ratio:.2g} of the error (target "
-                         f"{self.reference.target:.2g})" if self.reference.ratio is not None else
-                         "the quiet reference has no error to judge (no cross term)")
+        ref = self.reference
+        if not ref.met and ref.ratio is not None:
+            why = {"budget": f"its budget of {ref.budget_s:g} s (--reference-budget raises it)",
+                   "samples": "its most samples", "rounds": "its most rounds"}.get(ref.stopped, ref.stopped)
+            self.warning(f"the quiet reference stopped at {ref.spp} samples per pixel, {why}, with its noise on the "
+                         f"cross term at {ref.ratio:.2g} of the error (target {ref.target:.2g})")
         return gt
 
     def floor(self, result, gt):

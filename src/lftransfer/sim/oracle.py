@@ -47,15 +47,16 @@ class Oracle:
 
     def quiet_ground_truth(self, judge, *, spp: int, world=None, multiple: int = 1, use_cache: bool = True,
                            parts: int = 1, render=None, progress: Callable[[str], None] | None = None,
-                           warn: Callable[[str], None] | None = None):
+                           warn: Callable[[str], None] | None = None, budget_s: float | None = None):
         """The ground truth of the world (or of ``world``, one frame of a sequence) rendered in rounds until its
         noise on the cross term is at most a third of the error ``judge`` measures, each later round in ``parts``
-        renders through ``render`` (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth,
-        ``Reference``)."""
+        renders through ``render``, the later rounds within ``budget_s`` seconds
+        (:func:`lftransfer.sim.reference.quiet_ground_truth`): (ground truth, ``Reference``)."""
         from lftransfer.sim.reference import quiet_ground_truth
 
         return quiet_ground_truth(self.world if world is None else world, judge, spp=spp, multiple=multiple,
-                                  use_cache=use_cache, parts=parts, render=render, progress=progress, warn=warn)
+                                  use_cache=use_cache, parts=parts, render=render, progress=progress, warn=warn,
+                                  budget_s=budget_s)
 
     def fidelity_floor(self, rig, result, gt, settings, *, time_s: float = 0.0, cross=None,
                        progress: Callable[[str], None] | None = None):

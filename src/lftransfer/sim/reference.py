@@ -57,6 +57,9 @@ class Reference:
         samples: camera samples spent, all renders (6 per round: union, real, synthetic, two seeds each).
         seconds: wall time.
         parts: renders each later round was split into (the workers it was spread over).
+        budget_s: the seconds the later rounds were given (None: no limit).
+        stopped: why the rounds stopped: "met" (the target), "budget" (the next round would not fit the time
+            left), "samples" (``MAX_SPP``), "rounds" (``MAX_ROUNDS``) or "undefined" (no error to judge).
     """
 
     spp: int
@@ -71,6 +74,8 @@ class Reference:
     samples: int
     seconds: float
     parts: int = 1
+    budget_s: float | None = None
+    stopped: str = "met"
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -143,7 +148,8 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
                        multiple: int = 1, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
                        parts: int = 1, render: Callable[[object, list[Job]], list[GroundTruth]] | None = None,
                        progress: Callable[[str], None] | None = None,
-                       warn: Callable[[str], None] | None = None) -> tuple[GroundTruth, Reference]:
+                       warn: Callable[[str], None] | None = None,
+                       budget_s: float | None = None) -> tuple[GroundTruth, Reference]:
     """The ground truth, rendered in rounds until its noise on the cross term is at most ``target`` times the error
     it judges (module docstring).
 
@@ -164,6 +170,10 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
             :func:`render_jobs` in this process).
         progress: called once per round.
         warn: called with one line when a cache entry is bad.
+        budget_s: seconds the later rounds may take, all together (None: no limit). A round's samples are cut to
+            what the rate of the renders so far says fits the time left, and none starts that would not fit one
+            sample per pixel more (a first round read from the cache gives no rate: the first later round is
+            timed, then the rest are fitted).
 
     Returns:
         (the ground truth, :class:`Reference`). Where the target is not met within the budget, ``met`` says so.
@@ -176,25 +186,46 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
             return render_jobs(sc, jobs, use_cache=use_cache, warn=warn)
     parts = max(1, int(parts))
     say(f"ground truth: {spp} samples per pixel, the whole frame")
+    started = time.perf_counter()
     gt = render(scene, [(spp, seeds, None)])[0]
     box = object_box(gt, multiple)
-    total, rounds, samples = spp, 1, 6 * spp * w * h
+    first_s = time.perf_counter() - started
+    # seconds per sample and pixel (None until a render took long enough to time: a cached one takes none)
+    rate = first_s / (spp * w * h) if first_s > 0.5 else None
+    later_s, total, rounds, samples = 0.0, spp, 1, 6 * spp * w * h
     error, noise = judge(gt)
-    while rounds <= max_rounds and error and noise is not None and noise > target * error and total < max_spp:
+    stopped = "met"
+    while error and noise is not None and noise > target * error:
+        if rounds > max_rounds or total >= max_spp:
+            stopped = "rounds" if rounds > max_rounds else "samples"
+            break
         need = total * (noise / (target * error)) ** 2 * HEADROOM
-        k = _share(max(spp, need - total), parts, max_spp - total)
+        room = max_spp - total
+        if budget_s is not None and rate is not None:
+            room = min(room, int((budget_s - later_s) / (rate * box[2] * box[3])))
+        if room < parts or (budget_s is not None and later_s >= budget_s):
+            stopped = "budget"
+            break
+        k = _share(max(spp, need - total), parts, room)
         more = k * parts
         say(f"ground truth: noise {noise:.3g} of the error {error:.3g}; {more} more samples per pixel in the "
             f"objects' box" + (f", {parts} parts" if parts > 1 else ""))
         jobs = [(k, (seeds[0] + 7919 * rounds + PART_SEED_STEP * j, seeds[1] + 7919 * rounds + PART_SEED_STEP * j),
                  box) for j in range(parts)]
+        started = time.perf_counter()
         for extra in render(scene, jobs):
             gt = _blend(gt, total, extra, k, box)
             total += k
+        took = time.perf_counter() - started
+        later_s += took
+        if took > 0.5:
+            rate = took / (more * box[2] * box[3])
         rounds += 1
         samples += 6 * more * box[2] * box[3]
         error, noise = judge(gt)
+    if not (error and noise is not None):
+        stopped = "undefined"
     ratio = noise / error if error and noise is not None else None
     return gt, Reference(spp=total, first_spp=spp, rounds=rounds, noise=noise, error=error, ratio=ratio,
                          target=target, met=ratio is not None and ratio <= target, box=box, samples=samples,
-                         seconds=time.perf_counter() - t0, parts=parts)
+                         seconds=time.perf_counter() - t0, parts=parts, budget_s=budget_s, stopped=stopped)

@@ -17,7 +17,7 @@ import dataclasses
 import functools
 import inspect
 from pathlib import Path
-from typing import Annotated, Optional, get_type_hints
+from typing import Annotated, Optional, get_args, get_type_hints
 
 import typer
 from rich.markup import escape
@@ -145,43 +145,59 @@ class SettingOptions:
         reproduces a run)."""
         parts: list[str] = []
         for f in dataclasses.fields(self):
-            value, flag_name = getattr(self, f.name), "--" + f.name.replace("_", "-")
+            value, flag_name = getattr(self, f.name), _flag(f.name)
             if value != f.default:
-                parts += [flag_name] if isinstance(value, bool) else [flag_name, str(value)]
+                parts += ([flag_name] if value else [f"--no-{flag_name[2:]}"]) if isinstance(value, bool) \
+                    else [flag_name, f"{value:g}" if isinstance(value, float) else str(value)]
         return parts
 
 
-def _setting_field(name: str) -> tuple[str, object, object]:
-    """(name, annotated type, default) of the option of ``Overrides``' field ``name``."""
+def _flag(name: str) -> str:
+    """The option of ``Overrides``' field ``name``: its metadata's ``flag``, else the field's name
+    (``--lighting-model``)."""
+    return Overrides.__dataclass_fields__[name].metadata.get("flag") or "--" + name.replace("_", "-")
+
+
+def _setting_field(name: str, default=None) -> tuple[str, object, object]:
+    """(name, annotated type, default) of the option of ``Overrides``' field ``name``; ``default``: the command's
+    own starting value where it is not the field's ``command_default`` (a flag that starts on is
+    ``--x/--no-x``)."""
     spec = Overrides.__dataclass_fields__[name]
-    meta, flag_name = spec.metadata, "--" + name.replace("_", "-")
+    meta, flag_name = spec.metadata, _flag(name)
+    start = meta["command_default"] if default is None else default
+    kind = next(a for a in get_args(get_type_hints(Overrides)[name]) if a is not type(None))
     if meta["choice"] is not None:
         info = option(flag_name, metavar=metavar(meta["choice"]), callback=choice_check(flag_name, meta["choice"]),
                       help=meta["help"])
-        kind = str if meta["command_default"] is not None else Optional[str]
-    elif get_type_hints(Overrides)[name] == Optional[bool]:
+        kind = str
+    elif kind is bool:
+        if start:
+            return name, Annotated[bool, option(f"{flag_name}/--no-{flag_name[2:]}", metavar="",
+                                                help=meta["help"])], True
         return name, Annotated[bool, flag(flag_name, meta["help"])], False
     else:
         info = option(flag_name, help=meta["help"], **meta["bounds"])
-        kind = int if meta["command_default"] is not None else Optional[int]
-    return name, Annotated[kind, info], meta["command_default"]
+    return name, Annotated[kind if start is not None else Optional[kind], info], start
 
 
 @functools.lru_cache(maxsize=None)
-def setting_options(*names: str) -> type:
+def setting_options(*names: str, defaults: tuple[tuple[str, object], ...] = ()) -> type:
     """An option group (:func:`option_groups`) of the settings ``names``, fields of
-    :class:`~lftransfer.settings.Overrides`: each option's flag is the field's name (``--lighting-model``), its help,
-    values and bounds are the field's, and the command receives a :class:`SettingOptions` whose
-    :meth:`~SettingOptions.overrides` is what it asked for.
+    :class:`~lftransfer.settings.Overrides`: each option's flag is the field's name (``--lighting-model``) or its
+    metadata's ``flag``, its help, values and bounds are the field's, and the command receives a
+    :class:`SettingOptions` whose :meth:`~SettingOptions.overrides` is what it asked for. ``defaults``: (name,
+    value) where this command starts from another value than the field's ``command_default``.
 
     Example:
-        >>> RunSettings = setting_options("bounces", "renderer")
+        >>> RunSettings = setting_options("bounces", "renderer", defaults=(("quiet_reference", True),))
         >>> def run(scene_file: SceneArg, asked: RunSettings = None) -> None: ...     # doctest: +SKIP
     """
-    unknown = [n for n in names if n not in Overrides.__dataclass_fields__ or n == "compare"]
+    unknown = [n for n in (*names, *dict(defaults)) if n not in Overrides.__dataclass_fields__ or n == "compare"]
     if unknown:
         raise ValueError(f"not a setting of Overrides: {', '.join(unknown)}")
-    fields = [(name, kind, dataclasses.field(default=default)) for name, kind, default in map(_setting_field, names)]
+    starts = dict(defaults)
+    fields = [(name, kind, dataclasses.field(default=default))
+              for name, kind, default in (_setting_field(n, starts.get(n)) for n in names)]
     return dataclasses.make_dataclass("Settings_" + "_".join(names), fields, bases=(SettingOptions,), frozen=True)
 
 

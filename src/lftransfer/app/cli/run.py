@@ -20,9 +20,12 @@ from lftransfer.app.terminal import fail, warn
 
 __all__ = ["register"]
 
-DemoSettings = setting_options("bounces", "renderer", "quiet_reference")
+DemoSettings = setting_options("bounces", "renderer", "quiet_reference", "reference_budget_s")
 RunSettings = setting_options("bounces", "lighting_model", "reconstruction", "projection", "window", "composite",
-                              "direct_light", "gt_spp", "renderer", "quiet_reference")
+                              "direct_light", "gt_spp", "renderer", "quiet_reference", "reference_budget_s",
+                              defaults=(("quiet_reference", True),))
+"""``lft run`` judges the run it makes: its reference is made quiet enough by default, within a time budget
+(``lft demo`` keeps the fixed reference its stored results were measured against; ``--quiet-reference`` there)."""
 RecordSettings = setting_options("bounces", "renderer")
 
 METRICS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
@@ -79,7 +82,10 @@ def floor_line(floor: dict) -> str:
 
 
 def summary(report: dict, out: Path) -> None:
-    """A run's report as a table on stdout, and why each undefined metric is undefined."""
+    """A run's verdict in one line, then its report as a table on stdout, and why each undefined metric is
+    undefined."""
+    if report.get("verdict"):
+        Console().print(escape(f"verdict: {report['verdict']['reading']}"), soft_wrap=True, highlight=False)
     table = Table(title=escape(f"light field transfer -> {out}"))
     table.add_column("metric")
     table.add_column("value", justify="right")
