@@ -116,7 +116,8 @@ def test_the_progress_total_is_the_steps_a_run_takes_and_the_report_says_what_it
         options = RunOptions(settings=Overrides(bounces=2, lighting_model="point"), rig_model="nominal",
                              verify=False, capture_spp=1)
     else:               # a quiet reference (rounds of unknown number), no fidelity floor
-        options = RunOptions(settings=Overrides(bounces=1, gt_spp=16, quiet_reference=True), rig_model="oracle",
+        options = RunOptions(settings=Overrides(bounces=1, gt_spp=16, quiet_reference=True, reference_budget_s=600),
+                             rig_model="oracle",
                              truth_seed=3, use_cache=False, capture_spp=1, floor=False)
     report, seen, given = _run_counting(tiny, tmp_path / "out", options, monkeypatch)
     assert seen == list(range(1, len(seen) + 1))

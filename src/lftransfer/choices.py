@@ -106,8 +106,6 @@ DEFAULT_ANGULAR_SAMPLES = 48
 DEFAULT_APERTURE_SAMPLES = 4
 DEFAULT_SPP = 4
 DEFAULT_GT_SPP = 2048
-DEFAULT_REFERENCE_BUDGET_S = 60.0
-"""Seconds a quiet reference's later rounds may take by default (``--reference-budget``)."""
 DEFAULT_CAPTURE_SPP = 4
 """Rays per LF camera pixel in the simulated rig."""
 DEFAULT_PROJECTOR_FILL = 0.95

@@ -51,8 +51,8 @@ class Overrides:
         gt_spp: samples per pixel of each ground-truth render (>= 1).
         quiet_reference: render the ground truth in rounds until its noise on the cross term is at most a third
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
-        reference_budget_s: seconds the quiet reference's later rounds may take (None: the default,
-            :data:`lftransfer.choices.DEFAULT_REFERENCE_BUDGET_S`).
+        reference_budget_s: seconds the quiet reference's later rounds may take (None: as long as the run took
+            before them).
         compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
             reconstruction, projection and window only under the area model), e.g.
             ``{"lighting_model": ("area", "point")}``.
@@ -96,9 +96,9 @@ class Overrides:
         "cross term is at most a third of the error, within --reference-budget; --gt-spp is the first round's "
         "samples.")
     reference_budget_s: float | None = _setting(
-        f"Seconds the quiet reference's later rounds may take, all together (default "
-        f"{choices.DEFAULT_REFERENCE_BUDGET_S:g}; raise it where the run says the target was not met).",
-        flag="--reference-budget", min=1.0, metavar="SECONDS")
+        "Seconds the quiet reference's later rounds may take, all together (default: as long as the run took "
+        "before them, so a judged run takes at most twice as long; raise it where the run says the target was not "
+        "met).", flag="--reference-budget", min=1.0, metavar="SECONDS")
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self) -> None:
@@ -150,7 +150,7 @@ class RunSettings:
             angular samples, aperture samples, rays per light field entry and per view pixel).
         gt_spp: samples per pixel of each ground-truth render (with ``quiet_reference``, of its first round).
         quiet_reference: render the ground truth until it is quiet enough (:mod:`lftransfer.sim.reference`).
-        reference_budget_s: the seconds its later rounds may take.
+        reference_budget_s: the seconds its later rounds may take (None: as long as the run took before them).
         comparisons: the re-runs measured beside the run: (choice, value) pairs, each the run with that one choice
             changed, in the order of :data:`COMPARABLE`; none that equals the run's own value, and no
             reconstruction, projection or window unless the area model.
@@ -166,7 +166,7 @@ class RunSettings:
     reruns: tuple[TransferSettings, ...] = ()
     quiet_reference: bool = False
     adjustments: tuple[str, ...] = ()
-    reference_budget_s: float = choices.DEFAULT_REFERENCE_BUDGET_S
+    reference_budget_s: float | None = None
 
     @property
     def bounces(self) -> int:
@@ -182,8 +182,9 @@ class RunSettings:
         """The settings as JSON (the run's report and a sequence's key write them)."""
         # quiet_reference only where asked for: a sequence's key of the same settings stays as it was
         return {"transfer": asdict(self.transfer), "gt_spp": self.gt_spp,
-                **({"quiet_reference": True, "reference_budget_s": self.reference_budget_s}
-                   if self.quiet_reference else {}),
+                **({"quiet_reference": True} if self.quiet_reference else {}),
+                **({"reference_budget_s": self.reference_budget_s}
+                   if self.quiet_reference and self.reference_budget_s is not None else {}),
                 "comparisons": [list(c) for c in self.comparisons]}
 
 
@@ -246,4 +247,4 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
                        quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments),
-                       reference_budget_s=float(overrides.reference_budget_s or choices.DEFAULT_REFERENCE_BUDGET_S))
+                       reference_budget_s=overrides.reference_budget_s)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -48,8 +49,33 @@ def test_01_run_with_a_calibration_file(calibrated_run):
     assert "lenslet_centre_rms_px" not in report["calibration_errors"]          # a file has no spot fit
     assert "light field transfer ->" in result.stdout and "calibration_errors.pose_position_rms_mm" in result.stdout
     assert json.loads((out / "status.json").read_text())["state"] == "complete"
-    for name in ("composite.png", "ground_truth.png", "calibration.json", "calibration_report.html"):
+    for name in ("composite.png", "ground_truth.png", "calibration.json", "calibration_report.html", "error.png",
+                 "cross_term.png"):
         assert (out / name).stat().st_size > 0, name
+    assert next(iter(report)) == "verdict" and report["verdict"]["reading"]
+    assert result.stdout.lstrip().startswith("verdict: ")
+
+
+def test_06_pictures_of_the_error_show_the_error():
+    """error.png is |composite - truth| and cross_term.png the two cross terms and their difference, on scales that
+    show them: a composite off by a known patch shows that patch (and nothing where the images agree); the cross
+    term's panels keep their signs (a shadow, light taken away, is below zero)."""
+    from lftransfer.reports.report import cross_term_figure, error_figure
+
+    truth = np.full((24, 32, 3), 0.2, np.float32)
+    composite = truth.copy()
+    composite[5:9, 10:14] += 0.05
+    fig = error_figure(composite, truth)
+    image = fig.axes[0].images[0].get_array()
+    assert np.allclose(image[5:9, 10:14], 0.05, atol=1e-6) and np.all(image[:5] == 0)
+    assert fig.axes[0].images[0].get_clim() == (0.0, pytest.approx(0.05, rel=1e-6))
+    shadow = np.zeros_like(truth)
+    shadow[10:14, 2:6] = -0.1
+    fig = cross_term_figure(shadow * 0.8, shadow)
+    panels = [ax.images[0].get_array() for ax in fig.axes if ax.images]
+    assert len(panels) == 3 and panels[1].min() == pytest.approx(-0.1) and panels[2].max() == pytest.approx(0.02)
+    lo, hi = fig.axes[0].images[0].get_clim()
+    assert lo == -hi == pytest.approx(-0.1)
 
 
 def test_02_noisy_ground_truth_is_named_in_terminal_and_report(calibrated_run):

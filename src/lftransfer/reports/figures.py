@@ -23,7 +23,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-__all__ = ["CHANNEL_COLOURS", "cell_map", "data_uri", "embed", "histogram", "image_panels", "line_plot",
+__all__ = ["CHANNEL_COLOURS", "cell_map", "data_uri", "embed", "histogram", "image_panels", "image_row", "line_plot",
            "new_figure", "nice_floor", "points_per_pixel", "quiver"]
 
 CHANNEL_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")          # R, G, B
@@ -206,3 +206,28 @@ def image_panels(image, boxes=(None,), *, titles=(), cmap: str | None = None, lo
     if label:
         fig.colorbar(shown, ax=axes, label=label, shrink=0.9)
     return fig, axes
+
+
+@_styled
+def image_row(images, *, titles=(), cmap: str, lo: float, hi: float, label: str, width: float = 9.6) -> Figure:
+    """Images of one quantity side by side on one colour scale, with one colour bar.
+
+    Args:
+        images: (H, W) arrays of the same shape (NaN grey).
+        titles: the panels' titles.
+        cmap: matplotlib colour map; ``lo``, ``hi``: its range.
+        label: the colour bar's label (the quantity and its unit).
+        width: the figure's width, inches.
+    """
+    images = [np.asarray(x, np.float64) for x in images]
+    h, w = images[0].shape
+    n = len(images)
+    fig = new_figure(width, (width - 1.2 - 0.3 * (n - 1)) / n * h / w + 0.8)
+    axes = list(fig.subplots(1, n, squeeze=False)[0])
+    colours = matplotlib.colormaps[cmap].with_extremes(bad="#bbbbbb")
+    for ax, img, title in zip(axes, images, [*titles, *[""] * n]):
+        shown = ax.imshow(img, cmap=colours, vmin=lo, vmax=hi, interpolation="antialiased")
+        _pixel_axes(ax, (h, w), None)
+        ax.set_title(title)
+    fig.colorbar(shown, ax=axes, label=label, shrink=0.9)
+    return fig

@@ -122,6 +122,10 @@ def bounce_panel(result, ground_truth: np.ndarray | None, composite_rgb: np.ndar
     last = [_label(_resize(to_display(composite_rgb, base), tile_width), "composite  x1")]
     if ground_truth is not None:
         last.append(_label(_resize(to_display(ground_truth, base), tile_width), "ground truth (path traced)  x1"))
+        diff = np.abs(composite_rgb - ground_truth)
+        gain = display_scale(diff, ceiling=ceiling) / base if np.any(diff > 0) else 1.0
+        last.append(_label(_resize(to_display(diff, base * gain), tile_width),
+                           f"|composite - ground truth|  x{gain:.3g}"))
     width = rows[0].shape[1]
     last_row = np.concatenate(last, axis=1)
     if last_row.shape[1] < width:
@@ -180,11 +184,45 @@ def _base_scale(result, composite_rgb: np.ndarray, ceiling: float | None) -> flo
     return min(display_scale(img, ceiling=ceiling) for img in direct)
 
 
+def _luminance(rgb: np.ndarray) -> np.ndarray:
+    """(H, W) Rec. 709 luminance of a linear (H, W, 3) image."""
+    return np.asarray(rgb, np.float64)[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def error_figure(composite_rgb: np.ndarray, ground_truth: np.ndarray):
+    """``error.png``: |composite - ground truth| (luminance, W m^-2 sr^-1) on a scale to its 99.5th percentile,
+    beside the ground truth's own brightness for where it is."""
+    from lftransfer.reports.figures import image_row
+
+    diff = np.abs(_luminance(composite_rgb) - _luminance(ground_truth))
+    hi = max(float(np.percentile(diff, 99.5)), 1e-12)
+    return image_row([diff], titles=[f"|composite - ground truth|  (mean {diff.mean():.3g}, 99.5 % below "
+                                     f"{hi:.3g})"], cmap="magma", lo=0.0, hi=hi,
+                     label="luminance difference, W m$^{-2}$ sr$^{-1}$", width=6.4)
+
+
+def cross_term_figure(transfer: np.ndarray, truth: np.ndarray):
+    """``cross_term.png``: what the real and synthetic objects add to each other's appearance, the transfer's
+    (composite after the exchange - composite without it) beside the truth's (the union - the objects rendered
+    alone, both seeds' mean) and their difference, one signed scale (W m^-2 sr^-1; light added red, light taken
+    away, a shadow, blue)."""
+    from lftransfer.reports.figures import image_row
+
+    c_lft, c_gt = _luminance(transfer), _luminance(truth)
+    hi = max(float(np.percentile(np.abs(c_gt), 99.5)), float(np.percentile(np.abs(c_lft), 99.5)), 1e-12)
+    return image_row([c_lft, c_gt, c_lft - c_gt], titles=["cross term: the transfer", "cross term: the truth",
+                                                          "transfer - truth"],
+                     cmap="RdBu_r", lo=-hi, hi=hi, label="luminance, W m$^{-2}$ sr$^{-1}$")
+
+
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,
                   captured_raw: np.ndarray | None = None, camera_bits: int = 12,
-                  ceiling: float | None = None) -> list[Path]:
-    """Write every output file of a run into ``out`` (the ground truth's only where there is one); returns their
-    paths. ``ceiling``: see :func:`display_scale`."""
+                  ceiling: float | None = None, cross_truth: np.ndarray | None = None) -> list[Path]:
+    """Write every output file of a run into ``out`` (the ground truth's only where there is one, with the
+    pictures of the error: ``error.png``, and ``cross_term.png`` given the truth's cross term ``cross_truth``,
+    (H, W, 3)); returns their paths. ``ceiling``: see :func:`display_scale`."""
+    from lftransfer.imageio_utils import write_figure
+
     out = Path(out)
     scale = _base_scale(result, composite_rgb, ceiling)
     files = [
@@ -193,7 +231,11 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
     ]
     if ground_truth is not None:
         files += [write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
-                  write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32))]
+                  write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32)),
+                  write_figure(out / "error.png", error_figure(composite_rgb, ground_truth))]
+    if cross_truth is not None:
+        files.append(write_figure(out / "cross_term.png",
+                                  cross_term_figure(composite_rgb - result.composite_direct(), cross_truth)))
     files += [
         write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb, ceiling=ceiling)),
         write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)

@@ -314,7 +314,7 @@ class _Run:
             self.warn(msg)
 
     def run(self) -> dict:
-        t0 = time.perf_counter()
+        t0 = self.started = time.perf_counter()
         self.step(f"set up the rig ({self.options.rig})")
         if self.options.rig_model == "oracle" and self.opened.oracle is None:
             raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
@@ -334,9 +334,10 @@ class _Run:
         report = {"verdict": verdict(report), **report}           # first: what a reader looks for first
         self.step("write outputs")
         comp = result.composite()
+        cross_truth = None if gt is None else 0.5 * sum(gt.union[i] - gt.composite_alone(i) for i in range(2))
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
                       captured_raw=result.captured_raw, camera_bits=self.scene.rig.lf_camera_bits,
-                      ceiling=emitter_ceiling(known.scene))
+                      ceiling=emitter_ceiling(known.scene), cross_truth=cross_truth)
         return report
 
     def know_rig(self) -> tuple[Knowledge, str, dict | None]:
@@ -416,7 +417,7 @@ class _Run:
             gt, self.reference = self.opened.oracle.quiet_ground_truth(
                 judge, spp=self.settings.gt_spp, multiple=metric_factor(comp_n.shape[1]),
                 use_cache=self.options.use_cache, parts=parts, render=render, progress=self.step, warn=self.warning,
-                budget_s=self.settings.reference_budget_s)
+                budget_s=self.settings.reference_budget_s or time.perf_counter() - self.started)
         for _ in range(1 + MAX_ROUNDS - self.reference.rounds):
             self.step("ground truth: quiet enough")
         ref = self.reference

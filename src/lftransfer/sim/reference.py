@@ -35,6 +35,8 @@ MAX_ROUNDS = 4                 # rounds after the first
 MAX_SPP = 65536                # samples per pixel per render, in all, at most
 HEADROOM = 1.2                 # a round asks for this much more than the 1 / sqrt(spp) law's estimate
 PART_SEED_STEP = 104729        # part j of a round adds j times this to the round's seeds
+UNTIMED_GROWTH = 32            # with a budget but no rate yet (renders too quick to time, or read from the cache), a
+                               # round adds at most this many times the samples so far
 
 Job = tuple[int, tuple[int, int], "tuple[int, int, int, int] | None"]
 """One render of a quiet reference: (samples per pixel, the two seeds, the crop box or None: the whole frame)."""
@@ -171,9 +173,9 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
         progress: called once per round.
         warn: called with one line when a cache entry is bad.
         budget_s: seconds the later rounds may take, all together (None: no limit). A round's samples are cut to
-            what the rate of the renders so far says fits the time left, and none starts that would not fit one
-            sample per pixel more (a first round read from the cache gives no rate: the first later round is
-            timed, then the rest are fitted).
+            what the rate of the renders so far says fits the time left, and none starts that would buy too little
+            to change the noise (a quarter of the samples so far); renders too quick to time (or read from the
+            cache) give no rate, and a round then adds at most :data:`UNTIMED_GROWTH` times the samples so far.
 
     Returns:
         (the ground truth, :class:`Reference`). Where the target is not met within the budget, ``met`` says so.
@@ -201,13 +203,17 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
             break
         need = total * (noise / (target * error)) ** 2 * HEADROOM
         room = max_spp - total
-        if budget_s is not None and rate is not None:
-            room = min(room, int((budget_s - later_s) / (rate * box[2] * box[3])))
+        if budget_s is not None:          # fitted to the time left; untimed, at most UNTIMED_GROWTH times the samples
+            room = min(room, int((budget_s - later_s) / (rate * box[2] * box[3])) if rate is not None
+                       else UNTIMED_GROWTH * total)
         if room < parts or (budget_s is not None and later_s >= budget_s):
             stopped = "budget"
             break
         k = _share(max(spp, need - total), parts, room)
         more = k * parts
+        if room < need - total and more < total / 4:        # the time left buys too little to change the noise
+            stopped = "budget"
+            break
         say(f"ground truth: noise {noise:.3g} of the error {error:.3g}; {more} more samples per pixel in the "
             f"objects' box" + (f", {parts} parts" if parts > 1 else ""))
         jobs = [(k, (seeds[0] + 7919 * rounds + PART_SEED_STEP * j, seeds[1] + 7919 * rounds + PART_SEED_STEP * j),
