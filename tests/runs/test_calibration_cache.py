@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 
-import pytest
-
 from lftransfer.runs import calibration_cache as cc
 from lftransfer.runs.pipeline import RunOptions, count_run_steps, run_scene
 from lftransfer.runs.rigs import calibration_key, will_calibrate

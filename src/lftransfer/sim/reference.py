@@ -145,6 +145,43 @@ def _share(need: float, parts: int, room: int) -> int:
     return k
 
 
+def _add_round(scene, gt: GroundTruth, total: int, k: int, parts: int, seeds: tuple[int, int], index: int,
+               box: tuple[int, int, int, int], render) -> tuple[GroundTruth, int]:
+    """Round ``index``'s ``parts`` renders of ``k`` samples per pixel in ``box`` (seeds of their own) averaged into
+    ``gt``, which had ``total``: (the ground truth, its samples per pixel in the box)."""
+    jobs = [(k, (seeds[0] + 7919 * index + PART_SEED_STEP * j, seeds[1] + 7919 * index + PART_SEED_STEP * j), box)
+            for j in range(parts)]
+    for extra in render(scene, jobs):
+        gt = _blend(gt, total, extra, k, box)
+        total += k
+    return gt, total
+
+
+def _next_round(total: int, spp: int, excess: float, parts: int, room: int, seconds_left: float | None,
+                per_spp: float | None) -> tuple[int, str | None]:
+    """Samples per part of a quiet reference's next round, or (0, why none is rendered).
+
+    Args:
+        total: samples per pixel so far in the box; ``spp`` the first round's.
+        excess: the noise over what the target allows (> 1).
+        parts: renders the round is split into.
+        room: samples per pixel left under ``MAX_SPP``.
+        seconds_left: of the budget (None: no budget).
+        per_spp: seconds one more sample per pixel in the box takes (None: not timed yet).
+    """
+    need = total * excess ** 2 * HEADROOM - total
+    if seconds_left is not None:      # fitted to the time left; untimed, at most UNTIMED_GROWTH times the samples
+        if seconds_left <= 0:
+            return 0, "budget"
+        room = min(room, int(seconds_left / per_spp) if per_spp is not None else UNTIMED_GROWTH * total)
+    if room < parts:
+        return 0, "budget" if seconds_left is not None else "samples"
+    k = _share(max(spp, need), parts, room)
+    if seconds_left is not None and room < need and k * parts < total / 4:   # too little to change the noise
+        return 0, "budget"
+    return k, None
+
+
 def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None, float | None]], *, spp: int,
                        target: float = QUIET_RATIO, max_spp: int = MAX_SPP, max_rounds: int = MAX_ROUNDS,
                        multiple: int = 1, seeds: tuple[int, int] = (1, 2), use_cache: bool = True,
@@ -201,27 +238,17 @@ def quiet_ground_truth(scene, judge: Callable[[GroundTruth], tuple[float | None,
         if rounds > max_rounds or total >= max_spp:
             stopped = "rounds" if rounds > max_rounds else "samples"
             break
-        need = total * (noise / (target * error)) ** 2 * HEADROOM
-        room = max_spp - total
-        if budget_s is not None:          # fitted to the time left; untimed, at most UNTIMED_GROWTH times the samples
-            room = min(room, int((budget_s - later_s) / (rate * box[2] * box[3])) if rate is not None
-                       else UNTIMED_GROWTH * total)
-        if room < parts or (budget_s is not None and later_s >= budget_s):
-            stopped = "budget"
+        k, why = _next_round(total, spp, noise / (target * error), parts, max_spp - total,
+                             None if budget_s is None else budget_s - later_s,
+                             None if rate is None else rate * box[2] * box[3])
+        if why is not None:
+            stopped = why
             break
-        k = _share(max(spp, need - total), parts, room)
         more = k * parts
-        if room < need - total and more < total / 4:        # the time left buys too little to change the noise
-            stopped = "budget"
-            break
         say(f"ground truth: noise {noise:.3g} of the error {error:.3g}; {more} more samples per pixel in the "
             f"objects' box" + (f", {parts} parts" if parts > 1 else ""))
-        jobs = [(k, (seeds[0] + 7919 * rounds + PART_SEED_STEP * j, seeds[1] + 7919 * rounds + PART_SEED_STEP * j),
-                 box) for j in range(parts)]
         started = time.perf_counter()
-        for extra in render(scene, jobs):
-            gt = _blend(gt, total, extra, k, box)
-            total += k
+        gt, total = _add_round(scene, gt, total, k, parts, seeds, rounds, box, render)
         took = time.perf_counter() - started
         later_s += took
         if took > 0.5:
