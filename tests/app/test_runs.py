@@ -175,3 +175,26 @@ def test_06_negative_control_is_skipped_with_a_reason_where_it_cannot_tell_anyth
                                     (RunOptions(verify=False), 2, "not verified"),
                                     (RunOptions(rig=RigSpec("replay", Path("session"))), 2, "simulated rig only")):
         assert words in negative_control_skipped(options, bounces), options
+
+
+def test_07_an_animated_scene_says_which_moment_it_runs(tmp_path):
+    """``lft run`` on an animated scene renders one moment and says which, in the terminal and the report (t = 0
+    unless ``--time``); the cube is posed there (negative control: another moment gives another composite); --time
+    on a still scene is refused in one line."""
+    scene = write_tiny_scene(tmp_path / "moving.toml", gt_spp=4)
+    scene.write_text(scene.read_text() + "[[synthetic.keyframes]]\ntime_s = 0.0\n[[synthetic.keyframes]]\n"
+                     "time_s = 1.0\ntranslate = [0.02, 0.0, -0.08]\n[animation]\nduration_s = 1.0\nfps = 4\n")
+    common = ["--calibration", str(nominal_calibration(load_scene(scene)).write(tmp_path / "cal.json")),
+              "--exact-rig", "--bounces", "1", "--no-quiet-reference", "--no-floor"]
+    start = runner.invoke(app, ["run", str(scene), *common, "--out", str(tmp_path / "t0")])
+    later = runner.invoke(app, ["run", str(scene), *common, "--time", "1", "--out", str(tmp_path / "t1")])
+    for result, t in ((start, "0"), (later, "1")):
+        assert result.exit_code == 0, (result.output, result.exception)
+        assert f"this run renders its moment t = {t} s" in " ".join(result.stderr.split())
+    report = _strict_report(tmp_path / "t1")
+    assert any("t = 1 s" in w for w in report["warnings"])
+    a = (tmp_path / "t0" / "composite.exr").read_bytes()
+    assert a != (tmp_path / "t1" / "composite.exr").read_bytes()
+    still = write_tiny_scene(tmp_path / "still.toml", gt_spp=4)
+    refused = runner.invoke(app, ["run", str(still), "--time", "1", "--out", str(tmp_path / "s")])
+    assert refused.exit_code == 2 and "the scene is still" in " ".join(refused.stderr.split())

@@ -75,6 +75,14 @@ def test_02_live_sequence_files_metrics_and_resume(variant, tmp_path):
     assert all(f["metrics"]["psnr_objects_db"] > 20 for f in verified)
     a, b = (read_exr(out / "frames" / f"{i:04d}.exr") for i in (0, 2))
     assert np.abs(a - b).mean() > 1e-3 * np.abs(a).mean()                       # the cube moved
+    # the exchange check: frame 2 (after the 2 warm-up frames) gets its cross error, frame 0 the reason it has none
+    from lftransfer.runs.effects import verify_exchange
+
+    verify_exchange(scene, out, options, report)
+    checked = json.loads((out / "report.json").read_text())
+    frame0, frame2 = checked["frames"][0]["metrics"], checked["frames"][2]["metrics"]
+    assert frame2["cross_transfer_rel_error"] is not None and "cross_transfer_rel_error" not in frame0
+    assert "a warm-up frame" in frame0["undefined"]["cross_transfer_rel_error"]
 
 
 def test_03_frame_metrics_see_a_dark_real_object(variant):

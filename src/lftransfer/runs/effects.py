@@ -212,6 +212,15 @@ def _summarise(report: dict, check: ExchangeCheck, verified: list[dict]) -> None
     reference changes them)."""
     values = [v for v in check.cross_errors.values() if v is not None]
     noise = [f["metrics"]["cross_gt_noise_rel"] for f in verified if f["metrics"].get("cross_gt_noise_rel") is not None]
+    noisy = [f["index"] for f in verified if f["metrics"].get("cross_gt_noise_rel") is not None
+             and f["metrics"].get("cross_transfer_rel_error") is not None
+             and f["metrics"]["cross_gt_noise_rel"] > 0.5 * f["metrics"]["cross_transfer_rel_error"]]
+    if noisy:                                   # as lft run warns: the error mostly the reference's noise
+        report.setdefault("warnings", []).append(
+            f"the ground truth's own noise on the cross term is more than half the cross-transfer error at "
+            f"{len(noisy)} of {len(verified)} verified frames ({', '.join(map(str, noisy[:8]))}"
+            f"{', ...' if len(noisy) > 8 else ''}), so those errors are mostly noise; --quiet-reference renders "
+            f"each frame's reference until it is a third")
     if values and isinstance(report.get("summary"), dict):
         report["summary"]["cross_transfer_rel_error_min"] = min(values)
         report["summary"]["cross_transfer_rel_error_max"] = max(values)
@@ -255,6 +264,11 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     effect = scene.effect
     warmup = int(report["key"]["settings"]["bounces"]) if report.get("mode") == "live" else 0
     verified = [f for f in report.get("frames", []) if f.get("metrics") and int(f["index"]) >= warmup]
+    for f in report.get("frames", []):          # verified during the warm-up: no cross error, and why
+        if f.get("metrics") and int(f["index"]) < warmup:
+            f["metrics"].setdefault("undefined", {})["cross_transfer_rel_error"] = (
+                f"a warm-up frame: the live loop adds one exchange per frame, so frames 0 to {warmup - 1} do not "
+                f"yet have the {warmup} bounces the sequence asks for (frames from {warmup} on are checked)")
     if not verified:
         return None
     out = Path(out)

@@ -62,6 +62,7 @@ class RunOptions:
         calibration: a calibration file to use instead of calibrating (``rig_model`` is then ignored).
         recalibrate: calibrate through the simulated rig even where the calibration cache holds this rig's
             calibration (:mod:`lftransfer.runs.calibration_cache`), and store the new one.
+        time_s: the moment of an animated scene the run renders (None: t = 0; the run says which, in a warning).
         rig: which rig (:class:`~lftransfer.runs.rigs.RigSpec`); ``truth_seed``, ``capture_spp`` and the
             ``oracle`` model are for the simulated rig only. A replay of a recording made on the simulated rig is
             verified against the same hidden truth (the recording's manifest names its truth seed).
@@ -83,6 +84,7 @@ class RunOptions:
     rig_model: choices.RigModel = choices.DEFAULT_RIG_MODEL
     calibration: Path | None = None
     recalibrate: bool = False
+    time_s: float | None = None
     rig: RigSpec = RigSpec()
     record: Path | None = None
     verify: bool = True
@@ -177,6 +179,7 @@ def count_run_steps(scene, options: RunOptions) -> int:
     """Progress steps of :func:`run_scene`, for a progress bar: set-up, calibration and its report, the transfer,
     6 ground-truth renders (where verified), each comparison re-run and the negative control with its own
     settings, writing. Counted from the same resolved settings the run uses."""
+    scene = scene.at(float(options.time_s or 0.0)) if scene.moving else scene        # the moment run_scene runs
     settings = options.resolve(scene)
     calibration = (count_calibration_steps(scene) if will_calibrate(scene, options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
@@ -233,11 +236,20 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     out = Path(out)
     write_status(out, "running", rig=str(options.rig))
     clear_run_folder(out, keep=[options.calibration] if options.calibration is not None else [])
+    moment = None
+    if scene.moving:                     # one moment of an animated scene, said in the terminal and the report
+        t = float(options.time_s or 0.0)
+        moment = (f"the scene is animated ({scene.frame_times()[-1]:g} s): this run renders its moment t = {t:g} s "
+                  f"(--time for another; lft render renders the animation)")
+        scene = scene.at(t)
     with tracked_run(out, str(options.rig)):
         opened = None
         try:
             opened = open_rig(scene, options, operator=operator)
-            report = _Run(scene, out, options, opened, progress, warn).run()
+            run = _Run(scene, out, options, opened, progress, warn)
+            if moment is not None:
+                run.warning(moment)
+            report = run.run()
         finally:
             if opened is not None:
                 opened.rig.close()

@@ -4,7 +4,7 @@ with a progress bar and a summary table."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
@@ -159,6 +159,9 @@ def run(scene_file: SceneArg, out: OutDir = Path("out/run"),
                                                           "re-run.")] = False,
         quick: Quick = False, no_cache: NoCache = False, truth: TruthArgs = None, rig: RigArgs = None,
         max_memory: MaxMemory = None, no_floor: NoFloor = False, cluster: Cluster = None, workers: Workers = None,
+        time_s: Annotated[Optional[float], option("--time", min=0.0, metavar="SECONDS", help=(
+            "The moment of an animated scene the run renders (default 0; the run says which; lft render renders "
+            "the whole animation)."))] = None,
         asked: RunSettings = None) -> None:
     """Run light field transfer on any scene file with a rig (calibrating it first); --cluster spreads a quiet
     reference's rounds over a Ray cluster."""
@@ -170,8 +173,10 @@ def run(scene_file: SceneArg, out: OutDir = Path("out/run"),
 
     scene = load(scene_file, quick)
     rig_opts = rig_options(scene, truth, rig)
+    if time_s is not None and not scene.moving:
+        fail(f"--time {time_s:g}: the scene is still (no object has keyframes), so every moment is the same")
     options = RunOptions(settings=asked.overrides(compare_all=compare), use_cache=not no_cache, floor=not no_floor,
-                         cluster=spec, **rig_opts)
+                         cluster=spec, time_s=time_s, **rig_opts)
     check_before_work(scene, out_dir=out, cache=not no_cache and rig_opts["rig"].kind != "hardware",
                       bounces=asked.bounces, calibrate=calibrates(scene, rig_opts), max_memory=max_memory)
     _run(scene, out, options)
