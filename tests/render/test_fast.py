@@ -547,3 +547,22 @@ def test_20_group_means_from_the_hits_equal_the_full_size_means(hits):
         expected = np.where(count > 0, dist.reshape(groups, spp).sum(1) / count, np.inf)
     np.testing.assert_allclose(means.depth, expected, rtol=1e-6)
     assert means.radiance.dtype == means.coverage.dtype == means.depth.dtype == np.float32
+
+
+def test_where_the_tessellation_shows_the_run_says_so():
+    """A curved synthetic object on which a cache triangle spans several view pixels (Fig. 5's planet: about 14 at
+    the paper's resolution) gets a warning naming it and --renderer exact; a cube (flat faces), the same planet
+    seen from six times as far, and the exact path get none."""
+    from lftransfer.render.selection import visible_steps
+    from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+
+    fig5 = load_scene(builtin_scene("fig5"))
+    (note,) = visible_steps(fig5, "fast")
+    assert "'planet'" in note and "--renderer exact" in note and "about 14 pixels" in note
+    assert visible_steps(fig5, "exact") == [] and visible_steps(load_scene(builtin_scene("fig4")), "fast") == []
+    origin = np.asarray(fig5.view.origin, float)
+    planet = next(o for o in fig5.synthetic if o.name == "planet")
+    far = origin + 6 * (np.asarray(planet.translate, float) - origin)
+    moved = [{**o.model_dump(mode="json"), "translate": list(far) if o.name == "planet" else o.translate,
+              "keyframes": []} for o in fig5.synthetic]
+    assert not any("'planet'" in n for n in visible_steps(with_overrides(fig5, synthetic=moved), "fast"))

@@ -8,13 +8,20 @@ and :func:`approximations` says, one sentence each, what it leaves out of the sc
 
 from __future__ import annotations
 
+import math
 from typing import Literal, Sequence
+
+import numpy as np
 
 from lftransfer.render import fast
 from lftransfer.render.base import RayRenderer
 from lftransfer.render.renderer import HalfSpaceRenderer
 
-__all__ = ["approximations", "make_renderer", "resolve_renderer"]
+__all__ = ["STEP_PIXELS", "approximations", "make_renderer", "resolve_renderer", "visible_steps"]
+
+STEP_PIXELS = 3.0
+"""A cache triangle wider than this many view pixels shows a sharp shadow across a curved surface as steps (the
+irradiance is linear across each triangle)."""
 
 Resolved = Literal["fast", "exact"]
 
@@ -108,4 +115,31 @@ def approximations(scene, renderer: Resolved, *, max_depth: int) -> list[str]:
                          f"gathered at the cache points ({fast.GATHER_RAYS} directions, {gathers} bounce"
                          f"{'s' if gathers > 1 else ''}) and reflected in their glossy lobes; the glossy light "
                          f"they reflect onto each other is left out (--renderer exact renders it)")
+    return notes
+
+
+def visible_steps(scene, renderer: Resolved) -> list[str]:
+    """Where the fast path's tessellation may show in this scene's view, one warning each: a curved synthetic
+    object (sphere, cylinder, mesh) on which a cache triangle (``fast.DEFAULT_MAX_EDGE``) spans more than
+    :data:`STEP_PIXELS` view pixels, so that a sharp shadow across it is drawn as steps. The exact path has none.
+
+    Args:
+        scene: the scene, or its synthetic part (its objects and ``view``).
+        renderer: "fast" or "exact" (no warning).
+    """
+    if renderer != "fast":
+        return []
+    view = scene.view
+    pixel = math.radians(view.fov_deg) / view.resolution[0]            # radians per pixel, about the axis
+    notes = []
+    for o in scene.synthetic:
+        if o.shape not in ("sphere", "cylinder", "mesh") or o.material.type == "emitter":
+            continue
+        distance = float(np.linalg.norm(np.asarray(o.translate, float) - np.asarray(view.origin, float)))
+        span = fast.DEFAULT_MAX_EDGE / max(distance, 1e-6) / pixel
+        if span > STEP_PIXELS:
+            notes.append(f"fast path: on the curved {o.name!r} a {fast.DEFAULT_MAX_EDGE * 1000:.0f} mm cache "
+                         f"triangle spans about {span:.0f} pixels of the view, so a sharp shadow across it shows as "
+                         f"steps (its irradiance is linear across each triangle); --renderer exact renders it "
+                         f"smoothly")
     return notes

@@ -26,7 +26,7 @@ from lftransfer.calibration.rig import count_calibration_steps
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
-from lftransfer.render.selection import approximations
+from lftransfer.render.selection import approximations, visible_steps
 from lftransfer.reports.verdict import verdict
 
 if TYPE_CHECKING:
@@ -367,6 +367,8 @@ class _Run:
 
     def transfer(self, known: Knowledge):
         """Stage 2: the transfer with the run's settings."""
+        for note in visible_steps(known.scene, self.settings.transfer.renderer):
+            self.warning(note)
         result = run_transfer(self.opened.rig, known.model, known.scene, self.settings.transfer, progress=self.step)
         for k, v in result.timings_s.items():
             self.timings[k] = self.timings.get(k, 0.0) + v

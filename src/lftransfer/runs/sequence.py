@@ -37,7 +37,7 @@ from lftransfer.lightfield import LightField
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view, run_transfer
 from lftransfer.settings import RunSettings
 from lftransfer.transfer.live import LiveTransfer
-from lftransfer.render.selection import approximations
+from lftransfer.render.selection import approximations, visible_steps
 from lftransfer.validation import read_json
 
 __all__ = ["ConvergedFrame", "FrameRecord", "FrameWorker", "SequenceError", "SequenceOptions", "acquire_model",
@@ -397,7 +397,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             model, rig_model, ps = known.model, known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "loop": seq.loop if seq.mode == "live" else None,
                       "rig_model": rig_model, "variant": _variant(),
-                      "warnings": list(known.warnings),
+                      "warnings": [*known.warnings, *visible_steps(ps, settings.renderer)],
                       "renderer": settings.renderer, "fps": _fps(scene),
                       "frames_total": n, "display_scale": scale, "frames": done,
                       "projection": settings.projection,
