@@ -147,3 +147,20 @@ def test_09_the_simulated_rig_photographs_what_the_lenslet_step_reads(variant, t
     assert np.linalg.norm(found - other, axis=1).mean() > 1.0
     bad = runner.invoke(app, ["sim", "capture", "fig4", "--quick", "--kind", "flat", "--out", str(tmp_path / "c")])
     assert bad.exit_code == 2 and "--kind: expected one of spots, white, scene" in " ".join(bad.output.split())
+
+
+def test_10_a_new_scene_to_start_from(tmp_path):
+    """``lft new scene PATH`` writes a commented scene with two real and two synthetic objects that loads as it is;
+    it does not write over a file without --force, and a name that is not .toml is refused."""
+    from lftransfer.scenes import load_scene
+
+    path = tmp_path / "mine.toml"
+    result = runner.invoke(app, ["new", "scene", str(path)])
+    assert result.exit_code == 0, (result.output, result.exception)
+    scene = load_scene(path)
+    assert len(scene.real) == 2 and len(scene.synthetic) == 2 and scene.lights
+    assert path.read_text().count("#") > 20 and "docs/scene-format.md" in path.read_text()
+    again = runner.invoke(app, ["new", "scene", str(path)])
+    assert again.exit_code == 2 and "--force" in " ".join(again.stderr.split())
+    assert runner.invoke(app, ["new", "scene", str(path), "--force"]).exit_code == 0
+    assert runner.invoke(app, ["new", "scene", str(tmp_path / "mine.txt")]).exit_code == 2

@@ -23,6 +23,7 @@ from lftransfer.app.cli import bench, run, sequence, study
 from lftransfer.app.cli.calibrate import calibrate_app
 from lftransfer.app.cli.common import Group
 from lftransfer.app.cli.options import flag, option
+from lftransfer.app.cli.new import new_app
 from lftransfer.app.cli.sim import sim_app
 from lftransfer.app.cli.twin import twin_app
 
@@ -72,6 +73,7 @@ bench.register(app)
 app.add_typer(calibrate_app, name="calibrate")
 app.add_typer(twin_app, name="twin")
 app.add_typer(sim_app, name="sim")
+app.add_typer(new_app, name="new")
 
 
 def main() -> None:  # pragma: no cover
