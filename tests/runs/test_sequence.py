@@ -83,6 +83,8 @@ def test_02_live_sequence_files_metrics_and_resume(variant, tmp_path):
     frame0, frame2 = checked["frames"][0]["metrics"], checked["frames"][2]["metrics"]
     assert frame2["cross_transfer_rel_error"] is not None and "cross_transfer_rel_error" not in frame0
     assert "a warm-up frame" in frame0["undefined"]["cross_transfer_rel_error"]
+    for name in ("error_0002.png", "cross_term_0002.png"):                  # its pictures, as a run's
+        assert (out / "frames" / name).stat().st_size > 0, name
 
 
 def test_03_frame_metrics_see_a_dark_real_object(variant):

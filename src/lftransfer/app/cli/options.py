@@ -70,7 +70,9 @@ def _memory_check(value: Optional[str]) -> Optional[str]:
 
 SceneArg = Annotated[Path, typer.Argument(metavar="SCENE.toml", help=escape(
     f"Scene TOML file, or a built-in scene by name ({', '.join(builtin_scenes())})."))]
-OutDir = Annotated[Path, option("--out", metavar="DIR", help="Output folder (made if missing).")]
+OutDir = Annotated[Path, option("--out", metavar="DIR", help=(
+    "Output folder (made if missing): the images, report.json and status.json the command writes (README, 'Your "
+    "first hour', lists them)."))]
 Quick = Annotated[bool, flag("--quick", "Quarter resolution: every device at a quarter of its size, a third of the "
                                         "angular samples (at least 8), a quarter of the ground-truth samples (at "
                                         "least 16).")]
