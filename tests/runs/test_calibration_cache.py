@@ -38,7 +38,8 @@ def test_01_an_entry_reads_back_and_every_bad_entry_is_named():
     problem = cc.read_entry(inputs)
     assert isinstance(problem, CacheProblem)
     assert "calibration_errors.json" in problem.reason and "checksum" in problem.reason
-    assert problem.message().startswith(f"calibration cache entry {folder}") and "calibrating again" in problem.message()
+    assert problem.message().startswith(f"calibration cache entry {folder}")
+    assert "calibrating again" in problem.message()
 
     _entry(cc.cache_dir().parent, inputs)
     meta = json.loads((folder / "entry.json").read_text())

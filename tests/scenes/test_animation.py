@@ -72,7 +72,8 @@ def test_04_frame_change_commutes_with_posing_at_keys():
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"keyframes": [{"time_s": 0.5}, {"time_s": 0.5}]}, r"synthetic\[0\]\.keyframes: .*increase strictly"),
+    ({"keyframes": [{"time_s": 0.5}, {"time_s": 0.5}]},
+     r"synthetic\[0\]\.keyframes \(of 'green cube'\): .*increase strictly"),
     ({"keyframes": [{"time_s": 0.0}, {"time_s": 2.0}]}, r"time_s 2\.0 is after the end of the animation"),
     ({"keyframes": [{"time_s": 0.0}, {"time_s": 1.0, "translate": [0.0, 0.0, 0.05]}]},
      r"synthetic\[0\] \('green cube'\) leaves its half-space \(z < 0\) at t = 0\.\d+ s"),

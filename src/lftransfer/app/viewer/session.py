@@ -629,6 +629,8 @@ def scene_toml(scene) -> str:
     import tomli_w
 
     data = scene.model_dump(mode="json", exclude={"source"}, exclude_none=True)
+    if "lights" in data:                            # the file's table is [[light]] (the model calls them lights)
+        data["light"] = data.pop("lights")
     for side in ("real", "synthetic"):
         for o in data.get(side, []):
             if not o.get("keyframes"):
