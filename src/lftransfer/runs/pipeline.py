@@ -436,7 +436,7 @@ class _Run:
             self.step("ground truth: quiet enough")
         ref = self.reference
         if not ref.met and ref.ratio is not None:
-            why = {"budget": f"its budget of {ref.budget_s:g} s (--reference-budget raises it)",
+            why = {"budget": f"its budget of {ref.budget_s:.0f} s (--reference-budget raises it)",
                    "samples": "its most samples", "rounds": "its most rounds"}.get(ref.stopped, ref.stopped)
             self.warning(f"the quiet reference stopped at {ref.spp} samples per pixel, {why}, with its noise on the "
                          f"cross term at {ref.ratio:.2g} of the error (target {ref.target:.2g})")
