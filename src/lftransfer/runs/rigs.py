@@ -320,8 +320,8 @@ def know_rig(opened: OpenedRig, scene, options, out_file: Path, *, progress: Cal
 
     Returns:
         (the knowledge, its ``rig_model`` the label reports show and its ``warnings`` a cache entry that could not
-        be used; the calibration's errors against the hidden
-        truth as ``calibration_errors.json`` holds them, or None; whether it calibrated through the rig now).
+        be used; the calibration's errors against the hidden truth as ``calibration_errors.json`` holds them, or
+        None; whether it calibrated through the rig now).
 
     Raises:
         ValueError: the oracle on a rig without a known truth.

@@ -26,9 +26,9 @@ from lftransfer import choices
 from lftransfer.scenes import builtin_scenes
 from lftransfer.settings import Overrides
 
-__all__ = ["Calibration", "Cluster", "MaxMemory", "NoCache", "NoFloor", "OutDir", "Quick", "RigArgs", "SceneArg",
-           "SettingOptions", "TruthArgs", "Workers", "choice_check", "flag", "metavar", "option", "option_groups",
-           "setting_options"]
+__all__ = ["Calibration", "Cluster", "MaxMemory", "NoCache", "NoFloor", "OutDir", "Quick", "Recalibrate", "RigArgs",
+           "SceneArg", "SettingOptions", "TruthArgs", "Workers", "choice_check", "flag", "metavar", "option",
+           "option_groups", "setting_options"]
 
 
 def metavar(choice) -> str:
