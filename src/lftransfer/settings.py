@@ -2,10 +2,11 @@
 
 A choice's values and its default live in :mod:`lftransfer.choices`; the scene file may set them (``[render]``,
 ``[rig] angular_samples``); a caller (the command line, a study's setting, the live page, the bench) may
-override them (:class:`Overrides`; None: the scene's). :func:`resolve_settings` applies the two in that order,
-and the rule that only the area model has a reconstruction, projection and window
-(:data:`lftransfer.choices.NON_AREA`), once. A run, its progress total, its comparison re-runs, a sequence, the
-live loop, the bench, studies and the cluster's workers all take its result, so a setting reported is the
+override them (:class:`Overrides`; None: the scene's; each field also declares its command-line option).
+:func:`resolve_settings` applies the two in that order, once, into final values: the rule that only the area model
+has a reconstruction, projection and window (:data:`lftransfer.choices.NON_AREA`), the renderer the scene gets
+("fast" or "exact") and its ``max_depth``. A run, its progress total, its comparison re-runs, a sequence, the live
+loop and its page, the bench, studies and the cluster's workers all take its result, so a setting reported is the
 setting used.
 """
 
