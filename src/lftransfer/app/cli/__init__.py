@@ -19,7 +19,7 @@ from typing import Annotated, Optional
 import typer
 
 from lftransfer import backend, choices
-from lftransfer.app.cli import bench, run, sequence, study
+from lftransfer.app.cli import bench, depth, run, sequence, study
 from lftransfer.app.cli.calibrate import calibrate_app
 from lftransfer.app.cli.common import Group
 from lftransfer.app.cli.options import flag, option
@@ -70,6 +70,7 @@ run.register(app)
 sequence.register(app)
 study.register(app)
 bench.register(app)
+depth.register(app)
 app.add_typer(calibrate_app, name="calibrate")
 app.add_typer(twin_app, name="twin")
 app.add_typer(sim_app, name="sim")
