@@ -1,4 +1,7 @@
-"""Image files: linear float images as EXR (through Mitsuba's Bitmap), display images as sRGB PNG.
+"""Image files: linear float images as EXR (through Mitsuba's Bitmap), display images as sRGB PNG, device codes as
+16-bit PNG, and photographs read back as normalised grey images (:func:`read_image`, :func:`to_grey`: an 8/16-bit
+PNG or TIFF file and an array already held give the same ``(H, W) float64`` in [0, 1], colour averaged, alpha
+dropped).
 
 Every write goes to a temporary file in the destination folder and is renamed into place, so an interrupted
 run never leaves a half-written file and never destroys an earlier complete one. Image decoders that print on
@@ -119,6 +122,20 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
+def write_png16(path: str | Path, image: np.ndarray) -> Path:
+    """Write a uint16 image, (H, W) grey or (H, W, 3) RGB, as a 16-bit PNG (device codes, a light field's views),
+    atomically."""
+    import cv2
+
+    image = np.asarray(image)
+    if image.dtype != np.uint16 or image.ndim not in (2, 3):
+        raise ValueError(f"a 16-bit PNG holds an (H, W) or (H, W, 3) uint16 image, got {image.dtype} {image.shape}")
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1] if image.ndim == 3 else image))
+    if not ok:                                          # OpenCV writes BGR
+        raise OSError(f"{path}: the PNG encoder refused a {image.shape} image")
+    return write_bytes(path, data.tobytes())
+
+
 def write_exr(path: str | Path, image: np.ndarray) -> Path:
     """Write a float32 (H, W, C) linear image as OpenEXR, atomically."""
     from lftransfer.backend import mitsuba
@@ -224,3 +241,95 @@ def native_messages() -> Iterator[list[str]]:
                 text = (m.group(1) if m else raw).strip()
                 if text:
                     lines.append(text)
+
+
+_EXPECTED = "an 8- or 16-bit PNG or TIFF image (grey, RGB or RGBA)"
+_FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+
+
+class ImageReadError(ValueError):
+    """An image file (a calibration photograph, a light field's view) could not be read or has an unsupported
+    format; the message names the file if any."""
+
+
+def to_grey(image: np.ndarray, levels: float | None = None) -> np.ndarray:
+    """Grey image normalised by the full scale of the data.
+
+    Args:
+        image: ``(H, W)``, ``(H, W, 1)``, ``(H, W, 2)`` (grey + alpha), ``(H, W, 3)`` (colour) or ``(H, W, 4)``
+            (colour + alpha) array of ``uint8``, ``uint16`` or floating-point values. The channel order does
+            not matter (colour is averaged); alpha is dropped.
+        levels: the value that stands for full scale (e.g. ``4095`` for 12-bit codes stored in ``uint16``).
+            Default: 255 for ``uint8``, 65535 for ``uint16``, 1 for floating point; other dtypes need it.
+
+    Returns:
+        ``(H, W) float64`` grey image, ``image / levels`` (in [0, 1] for data within full scale).
+
+    Raises:
+        ImageReadError: unsupported dtype or shape, empty image, or a non-positive ``levels``.
+    """
+    arr = np.asarray(image)
+    if arr.dtype.kind not in "uif":
+        raise ImageReadError(f"unsupported pixel type {arr.dtype}: expected uint8, uint16 or float values")
+    if levels is None:
+        if arr.dtype.kind == "f":
+            levels = 1.0
+        elif arr.dtype in _FULL_SCALE:
+            levels = _FULL_SCALE[arr.dtype]
+        else:
+            raise ImageReadError(f"unsupported pixel type {arr.dtype}: expected uint8 or uint16 "
+                                        "(or give the full-scale value as levels=)")
+    levels = float(levels)
+    if not (np.isfinite(levels) and levels > 0):
+        raise ImageReadError(f"levels must be a positive full-scale value, got {levels!r}")
+    if arr.ndim == 3 and arr.shape[2] in (1, 2, 3, 4):
+        channels = {1: 1, 2: 1, 3: 3, 4: 3}[arr.shape[2]]       # drop alpha (grey+alpha, colour+alpha)
+        arr = arr[..., :channels]
+        grey = arr[..., 0].astype(np.float64) if channels == 1 else arr.astype(np.float64).mean(axis=2)
+    elif arr.ndim == 2:
+        grey = arr.astype(np.float64)
+    else:
+        raise ImageReadError(f"unsupported image shape {arr.shape}: expected (H, W) grey, "
+                                    "(H, W, 3) colour or (H, W, 4) colour with alpha")
+    if grey.size == 0:
+        raise ImageReadError(f"empty image of shape {arr.shape}")
+    grey /= levels
+    return grey
+
+
+def read_image(path) -> np.ndarray:
+    """Read a photograph (a calibration step's, a light field's view) as a normalised grey image.
+
+    Args:
+        path: an 8- or 16-bit PNG or TIFF file, grey, RGB or RGBA.
+
+    Returns:
+        ``(H, W) float64`` grey image in [0, 1] (codes divided by 255 or 65535; colour -> mean of the channels,
+        alpha dropped).
+
+    Raises:
+        ImageReadError: missing file, not a file, undecodable data, or an unsupported pixel type or
+            shape; the message names ``path`` and says what was expected.
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.exists():
+        raise ImageReadError(f"{path}: no such file (expected {_EXPECTED})")
+    if not path.is_file():
+        raise ImageReadError(f"{path}: not a file (expected {_EXPECTED})")
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)        # = cv2.imread(IMREAD_UNCHANGED), for any path name
+    except OSError as exc:
+        raise ImageReadError(f"{path}: cannot be read ({exc.strerror or exc}); expected {_EXPECTED}") from exc
+    with native_messages() as said:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if image is None:
+        why = f" ({'; '.join(said)})" if said else ""
+        raise ImageReadError(f"{path}: not a readable image{why} (expected {_EXPECTED})")
+    if image.dtype not in _FULL_SCALE:
+        raise ImageReadError(f"{path}: unsupported pixel type {image.dtype} (expected {_EXPECTED})")
+    try:
+        return to_grey(image)
+    except ImageReadError as exc:
+        raise ImageReadError(f"{path}: {exc}") from exc

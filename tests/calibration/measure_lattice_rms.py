@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from lftransfer.calibration.images import to_grey  # noqa: E402
+from lftransfer.imageio_utils import to_grey  # noqa: E402
 from lftransfer.calibration.lenslets import NoSpotsError  # noqa: E402
 from lftransfer.calibration.lenslets.procedure import _find_lenslet_centres_unchecked  # noqa: E402
 from tests.calibration.lenslet_images import make_lenslet_image  # noqa: E402

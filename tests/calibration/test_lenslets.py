@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.special import ndtr
 
-from lftransfer.calibration.images import CalibrationImageError, read_image, to_grey
+from lftransfer.imageio_utils import ImageReadError, read_image, to_grey
 from lftransfer.calibration.lenslets import (LatticeFit, NoSpotsError, find_lenslet_centres, lattice_coordinates,
                                              write_centres_csv)
 
@@ -257,20 +257,20 @@ def test_09_to_grey_and_read_errors(tmp_path):
     np.testing.assert_allclose(to_grey(codes), 4095 / 65535)
     np.testing.assert_allclose(to_grey(np.full((3, 3), 0.25, np.float32)), 0.25)
     for bad in (np.zeros((3, 3, 5), np.uint8), np.zeros((3,), np.uint8), np.zeros((3, 3), np.int32)):
-        with pytest.raises(CalibrationImageError, match="expected"):
+        with pytest.raises(ImageReadError, match="expected"):
             to_grey(bad)
     missing = tmp_path / "missing.png"
-    with pytest.raises(CalibrationImageError, match="missing.png.*no such file.*PNG or TIFF"):
+    with pytest.raises(ImageReadError, match="missing.png.*no such file.*PNG or TIFF"):
         read_image(missing)
-    with pytest.raises(CalibrationImageError, match="not a file"):
+    with pytest.raises(ImageReadError, match="not a file"):
         read_image(tmp_path)
     notes = tmp_path / "notes.tiff"
     notes.write_text("not an image")
-    with pytest.raises(CalibrationImageError, match="notes.tiff.*not a readable image.*8- or 16-bit"):
+    with pytest.raises(ImageReadError, match="notes.tiff.*not a readable image.*8- or 16-bit"):
         read_image(notes)
     floats = tmp_path / "float.tiff"
     assert cv2.imwrite(str(floats), np.zeros((5, 5), np.float32))
-    with pytest.raises(CalibrationImageError, match="float.tiff.*float32"):
+    with pytest.raises(ImageReadError, match="float.tiff.*float32"):
         read_image(floats)
 
 

@@ -69,13 +69,13 @@ def input_error_types() -> tuple[type, ...]:
     """Exceptions that mean bad input: the project's file and option errors (exit code 2)."""
     from lftransfer.runs.memory import MemoryLimitError
     from lftransfer.runs.paths import OutputPathError
-    from lftransfer.calibration.images import CalibrationImageError
+    from lftransfer.imageio_utils import ImageReadError
     from lftransfer.calibration.intrinsics import IntrinsicsError
     from lftransfer.calibration.rig import CalibrationFileError
     from lftransfer.rig.hardware.config import RigFileError
     from lftransfer.scenes import SceneError
 
-    return (SceneError, CalibrationFileError, RigFileError, CalibrationImageError, IntrinsicsError,
+    return (SceneError, CalibrationFileError, RigFileError, ImageReadError, IntrinsicsError,
             OutputPathError, MemoryLimitError)
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from lftransfer.calibration.images import to_grey
+from lftransfer.imageio_utils import to_grey
 from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres
 from lftransfer.optics import LensArray, LensletDevice
 from lftransfer.optics.geometry import apply_homography, rotation_2d

@@ -28,7 +28,7 @@ import numpy as np
 
 from lftransfer.calibration.calibration_file import FORMAT, CalibrationFileError, parse_calibration_file
 from lftransfer.calibration.distortion import DistortionFit, calibrate_distortion
-from lftransfer.calibration.images import to_grey
+from lftransfer.imageio_utils import to_grey
 from lftransfer.calibration.lenslets import LatticeFit, find_lenslet_centres
 from lftransfer.calibration.light import LightFit, calibrate_light, count_light_messages
 from lftransfer.calibration.pose import FRINGE_SHIFTS, POSE_DEPTHS, POSE_ROUNDS, ArrayPose, apply_pose, calibrate_pose

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 __all__ = ["BADPIX_THRESHOLD", "BORDER_PX", "Disparity", "disparity_to_depth", "estimate_disparity", "guided_filter",
-           "score_disparity", "view_groups"]
+           "score_disparity", "shift_view", "view_groups"]
 
 BADPIX_THRESHOLD = 0.07
 """The benchmark's BadPix threshold: a pixel whose disparity is off by more than this many pixels per view step."""
@@ -66,7 +66,7 @@ def guided_filter(guide: np.ndarray, src: np.ndarray, radius: int, eps: float) -
     return mean(a) * g + mean(b)
 
 
-def _shift(view: np.ndarray, dx: float, dy: float) -> np.ndarray:
+def shift_view(view: np.ndarray, dx: float, dy: float) -> np.ndarray:
     """``view`` translated by (dx, dy) pixels, bicubic (bilinear blurs a fractional shift enough to bias the cost
     towards whole-pixel shifts), the border repeated."""
     m = np.float32([[1.0, 0.0, dx], [0.0, 1.0, dy]])
@@ -81,7 +81,7 @@ def _cost_slice(views: np.ndarray, centre: np.ndarray, offsets: np.ndarray, d: f
     groups' means, guided-filtered by the centre view."""
     diffs = np.empty((len(views), *centre.shape), np.float32)
     for k, (view, (ds, dt)) in enumerate(zip(views, offsets)):
-        diffs[k] = np.abs(_shift(view, d * ds, d * dt) - centre)
+        diffs[k] = np.abs(shift_view(view, d * ds, d * dt) - centre)
     means = np.stack([diffs[g].mean(axis=0) for g in groups]).min(axis=0)
     if eps is None:                         # the control: a plain window, blind to the image's edges
         return cv2.boxFilter(means, cv2.CV_32F, (2 * radius + 1, 2 * radius + 1), borderType=cv2.BORDER_REFLECT)

@@ -11,20 +11,17 @@ channel (``Pf``), rows stored bottom to top, the scale's sign giving the byte or
 from __future__ import annotations
 
 import configparser
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import write_bytes, write_text
+from lftransfer.imageio_utils import ImageReadError, read_image, write_bytes, write_png16, write_text
+from lftransfer.lightfield.disparity import shift_view
 
 __all__ = ["ViewGrid", "ViewGridError", "read_pfm", "read_view_grid", "two_layer_grid", "write_pfm",
            "write_view_grid"]
-
-_VIEW = re.compile(r"input_Cam(\d{3})\.png")
-
 
 class ViewGridError(ValueError):
     """A light field folder or PFM file that cannot be read; the message names the file and what was expected."""
@@ -57,16 +54,6 @@ def _number(cfg: configparser.ConfigParser, path: Path, section: str, key: str, 
         raise ViewGridError(f"{path}: [{section}] {key}: expected a number ({exc})") from None
 
 
-def _grey(path: Path) -> np.ndarray:
-    data = np.fromfile(str(path), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
-    if image is None:
-        raise ViewGridError(f"{path}: not a readable PNG image")
-    scale = 65535.0 if image.dtype == np.uint16 else 255.0
-    image = image.astype(np.float32) / np.float32(scale)
-    return image[..., :3].mean(axis=-1) if image.ndim == 3 else image
-
-
 def read_view_grid(folder: str | Path) -> ViewGrid:
     """Read a light field folder (module docstring).
 
@@ -93,7 +80,10 @@ def read_view_grid(folder: str | Path) -> ViewGrid:
         path = folder / f"input_Cam{i:03d}.png"
         if not path.is_file():
             raise ViewGridError(f"{path}: no such file ({nx} x {ny} views expected by {cfg_path.name})")
-        view = _grey(path)
+        try:
+            view = read_image(path).astype(np.float32)
+        except ImageReadError as exc:
+            raise ViewGridError(str(exc)) from None
         if view.shape != (h, w):
             raise ViewGridError(f"{path}: {view.shape[1]} x {view.shape[0]} pixels, expected {w} x {h}")
         views[i // nx, i % nx] = view
@@ -110,8 +100,7 @@ def write_view_grid(folder: str | Path, grid: ViewGrid, *, focal_length_mm: floa
     t_n, s_n, h, w = grid.views.shape
     for i in range(t_n * s_n):
         view = np.round(np.clip(grid.views[i // s_n, i % s_n], 0.0, 1.0) * 65535).astype(np.uint16)
-        ok, data = cv2.imencode(".png", view)
-        write_bytes(folder / f"input_Cam{i:03d}.png", data.tobytes())
+        write_png16(folder / f"input_Cam{i:03d}.png", view)
     sensor_mm = focal_length_mm * max(w, h) / grid.focal_px
     write_text(folder / "parameters.cfg", (
         f"[intrinsics]\nimage_resolution_x_px = {w}\nimage_resolution_y_px = {h}\n"
@@ -176,8 +165,7 @@ def two_layer_grid(n: int = 9, size: int = 512, *, front: float = 1.2, back: flo
         return 0.5 + contrast * cv2.GaussianBlur(rng.random((size, size)).astype(np.float32) - 0.5, (0, 0), 1.5)
 
     def shift(image: np.ndarray, d: float, ds: int, dt: int) -> np.ndarray:
-        m = np.float32([[1.0, 0.0, -d * ds], [0.0, 1.0, -d * dt]])
-        return cv2.warpAffine(image, m, (size, size), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+        return shift_view(image, -d * ds, -d * dt)
 
     plane, square_tex = texture(back_contrast), texture(1.0)
     square = np.zeros((size, size), np.float32)

@@ -16,10 +16,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from lftransfer.imageio_utils import write_bytes, write_exr, write_png, write_text
+from lftransfer.imageio_utils import write_exr, write_png, write_png16, write_text
 from lftransfer.rig.requests import Collimator, RealScene, WhiteField
 
 __all__ = ["KINDS", "capture_images", "write_codes_png"]
@@ -30,13 +29,7 @@ KINDS = ("spots", "white", "scene")
 def write_codes_png(path: Path, codes: np.ndarray, bits: int) -> Path:
     """Camera codes (H, W, 3) or (H, W) of ``bits`` bits as a 16-bit PNG (scaled to the full 16 bits), atomically."""
     scaled = np.asarray(codes, np.uint32) << (16 - int(bits))
-    image = np.clip(scaled, 0, 65535).astype(np.uint16)
-    if image.ndim == 3:
-        image = image[..., ::-1]                           # OpenCV writes BGR
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(image))
-    if not ok:
-        raise OSError(f"{path}: the PNG encoder refused a {image.shape} image")
-    return write_bytes(path, data.tobytes())
+    return write_png16(path, np.clip(scaled, 0, 65535).astype(np.uint16))
 
 
 def _true_centres(model) -> str:

@@ -159,7 +159,7 @@ def calibrate_lenslets(image: Path = typer.Argument(..., metavar="IMAGE",
                                                 help="CSV of lenslet centres (header x,y).")) -> None:
     """Find every lenslet's centre (sub-pixel spot or sub-image detection) and fit the lattice."""
     from lftransfer.runs.paths import check_output_file
-    from lftransfer.calibration.images import CalibrationImageError, read_image
+    from lftransfer.imageio_utils import ImageReadError, read_image
     from lftransfer.calibration.lenslets import NoSpotsError, find_lenslet_centres, write_centres_csv
 
     if lattice not in ("hex", "rect"):
@@ -169,7 +169,7 @@ def calibrate_lenslets(image: Path = typer.Argument(..., metavar="IMAGE",
     check_output_file(out, "--out", "centres.csv")
     try:
         fit = find_lenslet_centres(read_image(image), lattice, kind=kind)
-    except (CalibrationImageError, NoSpotsError) as exc:
+    except (ImageReadError, NoSpotsError) as exc:
         fail(f"{image}: {exc}" if str(image) not in str(exc) else str(exc))
     write_centres_csv(out, fit)
     Console().print(escape(fit.summary()))

@@ -58,7 +58,7 @@ def _as_grey(image: np.ndarray) -> np.ndarray:
     if arr.ndim == 2 and arr.dtype.kind == "f":
         img = arr.astype(np.float64)
     else:
-        from lftransfer.calibration.images import to_grey
+        from lftransfer.imageio_utils import to_grey
 
         img = to_grey(arr)
     if min(img.shape) < 3:

@@ -26,7 +26,7 @@ def find_lenslet_centres(image: np.ndarray, lattice: str, *, expected_shape: tup
     """Find every lenslet's centre to sub-pixel accuracy and fit the lattice (see the module's docstring).
 
     Args:
-        image: ``(H, W)`` grey image (float, any scale), or any array :func:`lftransfer.calibration.images.to_grey`
+        image: ``(H, W)`` grey image (float, any scale), or any array :func:`lftransfer.imageio_utils.to_grey`
             takes (``uint8``/``uint16``, colour): bright spots on a dark background (``kind="spots"``) or a
             white image (``kind="white"``).
         lattice: ``"hex"`` or ``"rect"``.
