@@ -80,7 +80,11 @@ def keys_at(model: type[BaseModel], loc: tuple) -> list[str]:
                     (f for f in m.model_fields.values() if item in _aliases(f)), None)
                 if spec is not None:
                     following += _members(spec.annotation)
-        kinds = following or kinds if not isinstance(item, int) else following
+        if isinstance(item, int):
+            kinds = following
+        elif following:
+            kinds = following
+        # else: a union's tag, which names no field: every member stays
     return sorted({key for m in _models(kinds) for name, f in m.model_fields.items() for key in (name, *_aliases(f))})
 
 

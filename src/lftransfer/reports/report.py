@@ -215,14 +215,24 @@ def cross_term_figure(transfer: np.ndarray, truth: np.ndarray):
                      cmap="RdBu_r", lo=-hi, hi=hi, label="luminance, W m$^{-2}$ sr$^{-1}$")
 
 
+def write_error_pictures(folder: Path, suffix: str, composite_rgb: np.ndarray, ground_truth: np.ndarray,
+                         transfer_cross: np.ndarray | None, truth_cross: np.ndarray | None) -> list[Path]:
+    """``error{suffix}.png`` (:func:`error_figure`) and, given both cross terms (H, W, 3), ``cross_term{suffix}.png``
+    (:func:`cross_term_figure`) in ``folder``: a run's, or a sequence's verified frame's (``suffix`` "_0004")."""
+    from lftransfer.imageio_utils import write_figure
+
+    files = [write_figure(folder / f"error{suffix}.png", error_figure(composite_rgb, ground_truth))]
+    if transfer_cross is not None and truth_cross is not None:
+        files.append(write_figure(folder / f"cross_term{suffix}.png", cross_term_figure(transfer_cross, truth_cross)))
+    return files
+
+
 def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, composite_rgb: np.ndarray, report: dict,
                   captured_raw: np.ndarray | None = None, camera_bits: int = 12,
                   ceiling: float | None = None, cross_truth: np.ndarray | None = None) -> list[Path]:
     """Write every output file of a run into ``out`` (the ground truth's only where there is one, with the
     pictures of the error: ``error.png``, and ``cross_term.png`` given the truth's cross term ``cross_truth``,
     (H, W, 3)); returns their paths. ``ceiling``: see :func:`display_scale`."""
-    from lftransfer.imageio_utils import write_figure
-
     out = Path(out)
     scale = _base_scale(result, composite_rgb, ceiling)
     files = [
@@ -231,11 +241,10 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
     ]
     if ground_truth is not None:
         files += [write_png(out / "ground_truth.png", to_display(ground_truth, scale)),
-                  write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32)),
-                  write_figure(out / "error.png", error_figure(composite_rgb, ground_truth))]
-    if cross_truth is not None:
-        files.append(write_figure(out / "cross_term.png",
-                                  cross_term_figure(composite_rgb - result.composite_direct(), cross_truth)))
+                  write_exr(out / "ground_truth.exr", ground_truth.astype(np.float32))]
+        files += write_error_pictures(out, "", composite_rgb, ground_truth,
+                                      None if cross_truth is None else composite_rgb - result.composite_direct(),
+                                      cross_truth)
     files += [
         write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb, ceiling=ceiling)),
         write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)

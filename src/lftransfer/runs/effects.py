@@ -33,6 +33,7 @@ import numpy as np
 from lftransfer.runs.pipeline import RunOptions, floor_skipped, open_rig
 from lftransfer.runs.reference_pool import reference_renderer
 from lftransfer.runs.sequence import frame_metrics, sequence_summary
+from lftransfer.reports.report import write_error_pictures
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 
@@ -162,7 +163,7 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     and the effect's point where the scene has one (:func:`verify_exchange`)."""
     from lftransfer.runs.sequence import read_frame_depth
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
-    from lftransfer.sim.metrics import cross_transfer_error
+    from lftransfer.sim.metrics import cross_term_image, cross_transfer_error
 
     opened, oracle, model, ps, out, options = ctx.opened, ctx.opened.oracle, ctx.model, ctx.scene, ctx.out, ctx.options
     spp, settings, direct, effect, depth, step = ctx.spp, ctx.settings, ctx.direct, ctx.effect, ctx.depth, ctx.step
@@ -182,7 +183,7 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     else:
         gt = oracle.ground_truth(spp=spp, world=world, use_cache=options.use_cache)
     cross = cross_transfer_error(frame, no_exchange, gt)
-    _error_pictures(out, i, frame, no_exchange, gt)
+    write_error_pictures(out / "frames", f"_{i:04d}", frame, gt.image, frame - no_exchange, cross_term_image(gt))
     check.cross_errors[i] = f["metrics"]["cross_transfer_rel_error"] = cross.error
     f["metrics"]["cross_gt_noise_rel"] = cross.gt_noise
     for side, part in (cross.by_side or {}).items():          # where the error is: see cross_by_side
@@ -206,16 +207,6 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
         index=i, time_s=t, distance_m=object_distance(world, effect.on, effect.by),
         transfer=measure_effect(effect.kind, frame, transfer_without, pixels),
         truth=measure_effect(effect.kind, gt.image, truth_without, pixels)))
-
-
-def _error_pictures(out: Path, i: int, frame: np.ndarray, no_exchange: np.ndarray, gt) -> None:
-    """A verified frame's pictures of its error, as a run's (``frames/error_NNNN.png``, ``cross_term_NNNN.png``)."""
-    from lftransfer.imageio_utils import write_figure
-    from lftransfer.reports.report import cross_term_figure, error_figure
-
-    truth = 0.5 * sum(gt.union[k] - gt.composite_alone(k) for k in range(2))
-    write_figure(out / "frames" / f"error_{i:04d}.png", error_figure(frame, gt.image))
-    write_figure(out / "frames" / f"cross_term_{i:04d}.png", cross_term_figure(frame - no_exchange, truth))
 
 
 def _summarise(report: dict, check: ExchangeCheck, verified: list[dict]) -> None:

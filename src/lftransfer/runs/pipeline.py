@@ -175,11 +175,16 @@ def _runs_control(options: RunOptions, settings: RunSettings) -> bool:
     return options.negative_control and negative_control_skipped(options, settings.bounces) is None
 
 
+def _at_moment(scene, options: RunOptions):
+    """The scene a run runs: an animated one posed at ``options.time_s`` (0 unless given), a still one as it is."""
+    return scene.at(float(options.time_s or 0.0)) if scene.moving else scene
+
+
 def count_run_steps(scene, options: RunOptions) -> int:
     """Progress steps of :func:`run_scene`, for a progress bar: set-up, calibration and its report, the transfer,
     6 ground-truth renders (where verified), each comparison re-run and the negative control with its own
     settings, writing. Counted from the same resolved settings the run uses."""
-    scene = scene.at(float(options.time_s or 0.0)) if scene.moving else scene        # the moment run_scene runs
+    scene = _at_moment(scene, options)                   # the moment run_scene runs
     settings = options.resolve(scene)
     calibration = (count_calibration_steps(scene) if will_calibrate(scene, options) else 0) \
         + (1 if _calibrates(options) or options.calibration is not None else 0)
@@ -238,10 +243,9 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     clear_run_folder(out, keep=[options.calibration] if options.calibration is not None else [])
     moment = None
     if scene.moving:                     # one moment of an animated scene, said in the terminal and the report
-        t = float(options.time_s or 0.0)
-        moment = (f"the scene is animated ({scene.frame_times()[-1]:g} s): this run renders its moment t = {t:g} s "
-                  f"(--time for another; lft render renders the animation)")
-        scene = scene.at(t)
+        moment = (f"the scene is animated ({scene.frame_times()[-1]:g} s): this run renders its moment t = "
+                  f"{float(options.time_s or 0.0):g} s (--time for another; lft render renders the animation)")
+    scene = _at_moment(scene, options)
     with tracked_run(out, str(options.rig)):
         opened = None
         try:
@@ -346,7 +350,9 @@ class _Run:
         report = {"verdict": verdict(report), **report}           # first: what a reader looks for first
         self.step("write outputs")
         comp = result.composite()
-        cross_truth = None if gt is None else 0.5 * sum(gt.union[i] - gt.composite_alone(i) for i in range(2))
+        from lftransfer.sim.metrics import cross_term_image
+
+        cross_truth = None if gt is None else cross_term_image(gt)
         write_outputs(self.out, result, gt.image if gt is not None else None, comp, report,
                       captured_raw=result.captured_raw, camera_bits=self.scene.rig.lf_camera_bits,
                       ceiling=emitter_ceiling(known.scene), cross_truth=cross_truth)

@@ -25,8 +25,8 @@ from lftransfer.rig.model import RigModel, nominal_rig
 if TYPE_CHECKING:
     from lftransfer.sim.oracle import Oracle
 
-__all__ = ["NOMINAL", "CalibrationFailedError", "Knowledge", "OpenedRig", "RigSpec", "calibrate", "calibration_key",
-           "know_rig", "knowledge", "open_rig", "will_calibrate", "write_calibration"]
+__all__ = ["NOMINAL", "CalibrationFailedError", "Knowledge", "OpenedRig", "RigSpec", "cached_calibration", "calibrate",
+           "calibration_key", "know_rig", "knowledge", "open_rig", "will_calibrate", "write_calibration"]
 
 Operator = Callable[[str], None]        # shows an instruction to the person at the rig and waits
 NOMINAL = "nominal (rig file)"          # the report's rig_model for the rig file's values
@@ -269,13 +269,20 @@ def calibration_key(scene, options) -> str | None:
     return inputs_sha256(scene, options.truth_seed, options.capture_spp)
 
 
+def cached_calibration(scene, options) -> CachedCalibration | None:
+    """The calibration cache's usable entry a run with these options reuses, or None (none cached, not cached for
+    this run, ``options.recalibrate``, or an entry that fails its checks)."""
+    key = calibration_key(scene, options)
+    entry = None if key is None or options.recalibrate else read_entry(key)
+    return entry if isinstance(entry, CachedCalibration) else None
+
+
 def will_calibrate(scene, options) -> bool:
     """Whether a run with these options calibrates through the rig: the rig model "calibrated", no calibration file,
     and no usable entry in the calibration cache (or ``options.recalibrate``)."""
     if options.calibration is not None or options.rig_model != "calibrated":
         return False
-    key = calibration_key(scene, options)
-    return key is None or options.recalibrate or not isinstance(read_entry(key), CachedCalibration)
+    return cached_calibration(scene, options) is None
 
 
 def _reuse(opened: OpenedRig, scene, options, out_file: Path, resume: bool, warn: Callable[[str], None]):

@@ -80,6 +80,12 @@ def cross_term_truth(gt: GroundTruth, factor: int) -> list[np.ndarray]:
             for i in range(2)]
 
 
+def cross_term_image(gt: GroundTruth) -> np.ndarray:
+    """(H, W, 3) the ground truth's cross term at full resolution, its two seeds' mean (:func:`cross_term_truth`):
+    what ``cross_term.png`` shows beside the transfer's."""
+    return 0.5 * sum(cross_term_truth(gt, 1))
+
+
 @dataclass(frozen=True)
 class CrossCheck:
     """The cross-transfer error of a composite and the ground truth's own noise on it.

@@ -120,16 +120,14 @@ def rig_options(scene, truth: TruthArgs, rig: RigArgs) -> dict:
 def calibrates(scene, rig_opts: dict) -> bool:
     """Whether a command with these rig options (:func:`rig_options`) calibrates through the rig first; where it
     reuses the calibration cache's entry for this simulated rig instead, one line says so."""
-    from lftransfer.runs.calibration_cache import CachedCalibration, read_entry
     from lftransfer.runs.pipeline import RunOptions
-    from lftransfer.runs.rigs import calibration_key
+    from lftransfer.runs.rigs import cached_calibration
 
     options = RunOptions(**rig_opts)
     if options.calibration is not None or options.rig_model != "calibrated":
         return False
-    key = calibration_key(scene, options)
-    entry = None if key is None or options.recalibrate else read_entry(key)
-    if not isinstance(entry, CachedCalibration):
+    entry = cached_calibration(scene, options)
+    if entry is None:
         return True
     say(f"reusing this simulated rig's calibration from the cache ({entry.folder}); --recalibrate makes a new one")
     return False
