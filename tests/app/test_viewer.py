@@ -207,6 +207,28 @@ def test_04_ground_truth_beside_the_composite(session):
     assert side.max() > 0
 
 
+def test_04b_the_depth_layer(session):
+    """The "depth" layer shows the real depth the depth composite uses (orange) beside the synthetic render's
+    (blue), nearer brighter on one scale, black where a side has none; with the over composite (this session) the
+    real tile is black."""
+    from lftransfer.app.viewer.session import depth_layer
+    from lftransfer.real_depth import ViewDepth
+
+    frame = session.live.step(0.0)
+    h, w = frame.composite.shape[:2]
+    image = session._layer(frame, "depth")
+    assert image.shape == (h, 2 * w, 3) and image[:, :w].max() == 0
+    covered = np.isfinite(frame.synthetic_view.depth)
+    assert image[:, w:][covered, 2].min() > 0 and image[:, w:][~covered].max() == 0
+    syn = np.full((2, 3), np.inf)
+    syn[0, 0] = 0.5
+    real = ViewDepth(np.array([[np.nan, 0.2, 0.4], [np.nan] * 3], np.float32), np.full((2, 3), 0.001, np.float32), "x")
+    out = depth_layer(real, syn)
+    left, right = out[:, :3].astype(int), out[:, 3:].astype(int)
+    assert left[0, 1, 0] > left[0, 2, 0] > 0 and left[0, 0].max() == 0 and left[1].max() == 0   # 0.2 m brighter
+    assert right[0, 0, 2] > 0 and right[0, 1:].max() == 0 and right[0, 0, 2] < left[0, 1, 0]    # 0.5 m the farthest
+
+
 def _started(session):
     """Start a session's loop; returns the list its callbacks fill, in order: ("frame", ViewerFrame),
     ("bounces", ViewerBounces) and ("message", dict)."""

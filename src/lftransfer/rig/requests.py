@@ -24,7 +24,7 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["SCREEN_TRANSMISSION", "Board", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "MirrorBall",
+__all__ = ["SCREEN_TRANSMISSION", "Board", "CleanPlate", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "MirrorBall",
            "RealScene", "RigInfo", "Setup", "SETUPS", "ViewCapture", "ViewFrame", "WhiteField", "describe", "image_digest",
            "request_key", "setup_from_json"]
 
@@ -226,9 +226,24 @@ class MirrorBall:
                 "scene, projector black.")
 
 
-Setup = Union[RealScene, Collimator, WhiteField, FocalPlaneDiffuser, Board, MirrorBall]
+@dataclass(frozen=True)
+class CleanPlate:
+    """The clean plate: the rig as the real scene has it (its lights on, the room as it is, projector black) with
+    the real objects taken away, for the view camera to photograph what stands behind them (the array). The real
+    objects' outline in the view camera is where a photograph of the real scene differs from it
+    (:mod:`lftransfer.real_depth.outline`)."""
+
+    kind: str = field(default="clean_plate", init=False)
+
+    def prompt(self) -> str:
+        return ("Take the real objects away and leave everything else as it is (point light on, room lights as for "
+                "the scene, projector black, nothing in front of the array).")
+
+
+Setup = Union[RealScene, Collimator, WhiteField, FocalPlaneDiffuser, Board, MirrorBall, CleanPlate]
 SETUPS: dict[str, type] = {"real_scene": RealScene, "collimator": Collimator, "white_field": WhiteField,
-                           "focal_plane_diffuser": FocalPlaneDiffuser, "board": Board, "mirror_ball": MirrorBall}
+                           "focal_plane_diffuser": FocalPlaneDiffuser, "board": Board, "mirror_ball": MirrorBall,
+                           "clean_plate": CleanPlate}
 
 
 def setup_from_json(data: dict) -> Setup:

@@ -249,11 +249,13 @@ def _composite_note(scene, seq: SequenceOptions, settings: TransferSettings) -> 
     if seq.mode != "live":
         return ["composite: by depth, the real scene's depth measured in every frame from the LF camera and by "
                 "structured light (24 extra view photographs)"]
+    outline = (", kept inside the real objects' outline where the view camera is in front of the array (a view "
+               "photograph against the clean plate, taken once; docs/architecture.md, \"Occlusion\")")
     if _depth_every_frame(scene, settings):
         return ["composite: by depth, the real scene's depth measured by the LF camera in every frame (two extra "
-                "frames each: the real objects move); no structured light, which takes 24 photographs"]
+                f"frames each: the real objects move){outline}; no structured light, which takes 24 photographs"]
     return ["composite: by depth, the real scene's depth measured by the LF camera once, before the first frame "
-            "(the real objects stand still); no structured light, which takes 24 photographs"]
+            f"(the real objects stand still){outline}; no structured light, which takes 24 photographs"]
 
 
 def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float

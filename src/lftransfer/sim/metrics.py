@@ -445,6 +445,11 @@ def depth_errors(estimate, truth: np.ndarray) -> dict:
             "pixels": int(both.sum())}
 
 
+#: The true depth's standard deviation in the depth composite's ceiling (``occlusion_metrics``' ``true_depth``),
+#: metres: as sure as the synthetic render's own depth.
+TRUE_DEPTH_SIGMA_M = 0.001
+
+
 def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> dict | None:
     """How each composite fares where a real object hides a synthetic one, or the reverse (docs/architecture.md,
     "Occlusion").
@@ -464,8 +469,9 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
         (the same for a synthetic object in front of a real one) and, for ``over`` and (where measured) ``depth``:
         ``psnr_hidden_db`` (over the hidden pixels; None where there are none), ``psnr_synthetic_front_db`` (over
         the others; None where none), ``psnr_objects_db``, ``psnr_objects_unhidden_db`` (over the objects' pixels
-        where nothing is hidden) and ``cross_transfer_rel_error``; ``depth_gain_hidden_db``: depth minus over on
-        the hidden pixels.
+        where nothing is hidden) and ``cross_transfer_rel_error``; ``true_depth``, the same for the depth
+        composite given the twin's true depth (what a perfect measurement of the real scene's depth would give,
+        where the truth rendered one); ``depth_gain_hidden_db``: depth minus over on the hidden pixels.
     """
     front, reverse = gt.real_in_front, gt.synthetic_in_front
     if not front.any() and not reverse.any():
@@ -479,6 +485,12 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
     runs = {"over": replace(result, view_depth=None)}
     if result.view_depth is not None:
         runs["depth"] = result
+        if gt.depth_real is not None:         # the depth composite's ceiling: the same transfer, the true depth
+            from lftransfer.real_depth.lightfield import ViewDepth
+
+            true = np.where(np.isfinite(gt.depth_real), gt.depth_real, np.nan).astype(np.float32)
+            sigma = np.where(np.isfinite(true), TRUE_DEPTH_SIGMA_M, np.nan).astype(np.float32)
+            runs["true_depth"] = replace(result, view_depth=ViewDepth(true, sigma, "truth"))
     out: dict = {"hidden_pixels": int(hidden.sum()), "synthetic_front_pixels": int(ahead.sum())}
     for name, run in runs.items():
         frame = downsample(run.composite(), f)

@@ -34,7 +34,7 @@ from lftransfer.render.base import aperture_offsets
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.model import RigModel, nominal_rig
-from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,
+from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, CleanPlate, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,
                                      MirrorBall, RealScene, RigInfo, Setup, ViewCapture, ViewFrame, WhiteField)
 from lftransfer.scenes.frame import scene_in_frame
 
@@ -145,8 +145,9 @@ class SimRig:
     def setup(self, request: Setup) -> None:
         """Arrange the simulated world: the real scene (its objects posed at the request's time), a collimator, a
         white diffuser, the focal-plane diffuser, a board held by the (simulated) operator, who misplaces it by a
-        hidden error (lit by the point light too when the request says ``point_light``), or the mirror ball on its
-        mount in the room's light (the view camera photographs it, path traced; the real objects away)."""
+        hidden error (lit by the point light too when the request says ``point_light``), the mirror ball on its
+        mount in the room's light (the view camera photographs it, path traced; the real objects away), or the
+        clean plate (the real scene's lights, its objects away)."""
         if isinstance(request, Board) and request.light is not None and request.light >= len(self._point_lights):
             raise ValueError(f"Board.light: the scene has {len(self._point_lights)} point light(s); there is no "
                              f"light {request.light} (0-based) to switch on")
@@ -158,6 +159,9 @@ class SimRig:
                                  "rig to show in the ball")
             # the LF camera sees the empty room (the ball's mount stands beside the array, out of the lenslets' view)
             self._world = HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber}, max_depth=1)
+        elif isinstance(request, CleanPlate):       # the real objects away, everything else as it is
+            self._world = HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber},
+                                            max_depth=self._scene.render.max_depth)
         elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
             self._real = self._real_renderer(request.time_s)
             self._world = self._real
@@ -311,14 +315,15 @@ class SimRig:
     def _setup_lights(self) -> list:
         """The lights of the current set-up: the point lights (where they really stand) and the projector in the
         real scene; on a board asked for with the point light on, the one it names (all where it names none)
-        and the projector; the room and the projector for the mirror ball; the projector alone otherwise."""
+        and the projector; the room and the projector for the mirror ball; the real scene's for its clean
+        plate; the projector alone otherwise."""
         if isinstance(self._setup, Board) and self._setup.point_light:
             i = self._setup.light
             on = self._point_lights if i is None else self._point_lights[i:i + 1]
             return [*on, *self._projector_lights()]
         if isinstance(self._setup, MirrorBall):
             return [self._room, *self._projector_lights()]
-        return self._lights() if isinstance(self._setup, RealScene) else self._projector_lights()
+        return self._lights() if isinstance(self._setup, (RealScene, CleanPlate)) else self._projector_lights()
 
     def _expose_frames(self, radiance: np.ndarray, frames: int) -> np.ndarray:
         cam = self._truth.camera

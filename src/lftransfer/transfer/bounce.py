@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -26,13 +26,15 @@ from lftransfer.backend import bound_blas
 from lftransfer.real_depth.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
-from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light, view_depth_from_lightfield
+from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light
+from lftransfer.real_depth.outline import lightfield_view_depths
 from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
-from lftransfer.rig.requests import RealScene
+from lftransfer.rig.requests import CleanPlate, RealScene
 from lftransfer.scenes import SyntheticScene
-from lftransfer.transfer.projection import measure_depth
+from lftransfer.lightfield.depth import plane_sweep
+from lftransfer.transfer.projection import white_response
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -165,8 +167,9 @@ class TransferResult:
         depth: (K, V, U) the real scene's depth the projection prefilter or the depth composite used (measured,
             or given to :func:`run_transfer`), metres (NaN where none was found), or None (neither needs one).
         view_depth: the real scene's depth in the view camera (``composite == "depth"``), else None.
-        depth_sources: the depths it was fused from (the LF camera's carried into the view, then structured
-            light's where measured), for the report; empty with the over composite.
+        depth_sources: the depths it was made of (the LF camera's carried into the view as it is; inside the
+            real objects' measured outline, for a view camera on the real side; structured light's where
+            measured), for the report; empty with the over composite.
         probe: the light probe's measurement on a scene lit by one (photographed here or given), else None.
     """
 
@@ -318,7 +321,8 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
         real_view_direct = rig.capture_view().radiance
     with timer("decode"):
         r0 = decoder(raw0)
-    depth, structured = _real_depth(rig, model, scene, settings, side, r0, depth, step, timer)
+    measured = _real_depth(rig, model, scene, settings, side, r0, depth, time_s, step, timer)
+    depth = measured.depth
     step("render synthetic direct")
     ls0, s0 = side.render(side.direct_lights, settings.seed, timer)
     bounces = [Bounce(0, r0, ls0, s0, real_view=real_view_direct)]
@@ -334,7 +338,7 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
     step("final frame captured")
     rgb = sum(b.synthetic_view.rgb for b in bounces)
     synthetic_view = ViewImage(rgb=rgb.astype(np.float32), alpha=s0.alpha, depth=s0.depth)
-    view_depth, sources = _view_depth(model, scene, settings, depth, structured, view_depth, r0, timer)
+    view_depth, sources = _view_depth(model, scene, settings, measured, view_depth, real_view_direct, timer)
     return TransferResult(bounces=bounces, real_view=real_view, real_view_direct=real_view_direct,
                           synthetic_view=synthetic_view, projected_image=pattern, projected_lf=projected,
                           clipped_fraction=clipped, captured_raw=raw0,
@@ -343,29 +347,44 @@ def run_transfer(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tra
                           depth_sources=sources, probe=probe)
 
 
+class _Measured(NamedTuple):
+    """What :func:`_real_depth` measured of the real scene (each None where not measured)."""
+
+    depth: np.ndarray | None             # (K, V, U) metres along the array's normal
+    structured: ViewDepth | None         # the view camera's depth by structured light
+    response: LightField | None          # the light field under the projector's white light alone
+    plate: np.ndarray | None             # (H, W, 3) the view camera's clean plate, projector black
+
+
 def _real_depth(rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings, side: SyntheticSide,
-                r0: LightField, depth: np.ndarray | None, step: Progress, timer: StageTimer):
+                r0: LightField, depth: np.ndarray | None, time_s: float, step: Progress,
+                timer: StageTimer) -> _Measured:
     """The real scene's depth where the transfer needs it (the projection from a measured depth, the depth
     composite): ``depth`` as given, else measured with one extra frame (projector white); for the depth composite
-    without a given depth also the view camera's by structured light. Returns (depth or None, the structured-light
-    :class:`~lftransfer.real_depth.ViewDepth` or None); the synthetic side projects from the depth."""
-    structured = None
+    without a given depth also the view camera's by structured light and its clean plate (the real objects taken
+    away for one photograph, then posed again at ``time_s``). The synthetic side projects from the depth."""
+    structured = plate = response = None
     if not settings.measures_depth:
-        return None, None                   # nothing needs it: the result carries no depth
+        return _Measured(None, None, None, None)   # nothing needs it: the result carries no depth
     if depth is None and settings.composite == "depth":
-        step("measure the real scene's depth in the view camera (structured light)")
+        step("measure the real scene's depth in the view camera (structured light; the clean plate)")
         with timer("structured_light"):
             structured = measure_structured_light(rig, model, scene.view, side.encoder, settings.angular_samples)
+        with timer("clean_plate"):
+            rig.setup(CleanPlate())
+            plate = rig.capture_view().radiance
+            rig.setup(RealScene(time_s=time_s))
     else:
         step("the real scene's depth in the view camera: from the LF camera alone")
     if depth is None:
         step("measure the real scene's depth (projector white)")
         with timer("measure_depth"):
-            depth = measure_depth(rig, side.decoder, side.encoder, model.projector.max_radiance,
-                                  settings.angular_samples, settings.angular_samples, r0)
+            response = white_response(rig, side.decoder, side.encoder, model.projector.max_radiance,
+                                      settings.angular_samples, settings.angular_samples, r0)
+            depth = plane_sweep(response)
     if settings.prefilters:
         side.set_depth(depth)
-    return depth, structured
+    return _Measured(depth, structured, response, plate)
 
 
 def _bounce(n: int, prev: Bounce, rig: Rig, model: RigModel, settings: TransferSettings, side: SyntheticSide,
@@ -407,17 +426,23 @@ def _final_frame(rig: Rig, model: RigModel, settings: TransferSettings, encoder,
     return pattern, real_view, clipped
 
 
-def _view_depth(model: RigModel, scene: SyntheticScene, settings: TransferSettings, depth, structured,
-                given: ViewDepth | None, r0: LightField, timer: StageTimer):
+def _view_depth(model: RigModel, scene: SyntheticScene, settings: TransferSettings, measured: _Measured,
+                given: ViewDepth | None, photograph: np.ndarray, timer: StageTimer):
     """The real scene's depth in the view camera for the depth composite and what it was made of: the one given,
-    else the LF camera's carried into the view, fused with structured light's where measured; (None, ()) for
-    the over composite."""
+    else the LF camera's carried into the view (for a view camera on the real side, inside the real objects'
+    outline measured through the rig: :func:`~lftransfer.real_depth.outline.lightfield_view_depths`), fused with
+    structured light's where measured; (None, ()) for the over composite. The sources are the LF camera's
+    depth carried into the view as it is, the outline's where made (which the fusion takes instead of it), then
+    structured light's."""
     if settings.composite != "depth":
         return None, ()
     if given is not None:
         return given, (given,)
     with timer("view_depth"):
-        view_depth = view_depth_from_lightfield(depth, r0.u, r0.v, model, scene.view)
-        if structured is None:
-            return view_depth, (view_depth,)
-        return fuse_depths(view_depth, structured), (view_depth, structured)
+        sources = lightfield_view_depths(measured.depth, measured.response, model, scene.view, photograph,
+                                         measured.plate)
+        used = sources[-1]
+        if measured.structured is None:
+            return used, sources
+        return fuse_depths(used, measured.structured), (*sources, measured.structured)
+

@@ -40,15 +40,17 @@ import numpy as np
 from lftransfer import choices
 from lftransfer.backend import bound_blas
 from lftransfer.lightfield import LightField
-from lftransfer.real_depth import ViewDepth, view_depth_from_lightfield
+from lftransfer.lightfield.depth import plane_sweep
+from lftransfer.real_depth import ViewDepth
+from lftransfer.real_depth.outline import lightfield_view_depths, on_real_side
 from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
-from lftransfer.rig.requests import RealScene
+from lftransfer.rig.requests import CleanPlate, RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
-from lftransfer.transfer.projection import measure_depth
+from lftransfer.transfer.projection import white_response
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -174,6 +176,7 @@ class LiveTransfer:
         self._worker: CaptureWorker | None = None
         self._depth: np.ndarray | None = None
         self.view_depth: ViewDepth | None = None     # the real depth in the view camera (the depth composite)
+        self._plate: np.ndarray | None = None        # the view camera's clean plate (photographed once)
         if depth is not None and settings.measures_depth:
             self._set_depth(depth)
 
@@ -188,16 +191,18 @@ class LiveTransfer:
         unknown); None before it is measured or when the settings need none."""
         return self._depth
 
-    def _set_depth(self, depth: np.ndarray) -> None:
+    def _set_depth(self, depth: np.ndarray, response: LightField | None = None,
+                   photograph: np.ndarray | None = None) -> None:
         """Use ``depth`` ((K, V, U) metres): for the prefilter, and carried into the view camera for the depth
-        composite."""
+        composite (inside the real objects' outline where its white ``response`` and the view camera's
+        ``photograph`` with the projector black are given: :func:`~lftransfer.real_depth.outline.lightfield_view_depths`)."""
         self._depth = depth
         self.side.set_depth(depth)                   # prefilters only where the settings ask for it
         if self.side.surface_solve is not None:
             self.side.surface_solve.live = True      # converge over the frames (surface_solve.WARM_ITERATIONS)
         if self.settings.composite == "depth":
-            grid = self._black.lf
-            self.view_depth = view_depth_from_lightfield(depth, grid.u, grid.v, self.model, self.side.scene.view)
+            self.view_depth = lightfield_view_depths(depth, response, self.model, self.side.scene.view, photograph,
+                                                     self._plate)[-1]
 
     @property
     def capture_rate_hz(self) -> float | None:
@@ -272,16 +277,26 @@ class LiveTransfer:
 
     def _measure_depth(self) -> None:
         """The real scene's depth for the projection prefilter (``projection == "depth"``) or the depth composite:
-        two extra frames, projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`).
-        Measured once, at the first step: the real objects are taken to stand still (a sequence whose real objects
-        move projects the box light field and says so), or at every step with ``depth_every_frame``."""
+        two extra frames, projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`), and
+        for the depth composite from a view camera on the real side a view photograph with the projector black
+        and, the first time, the clean plate (the real objects taken away for one photograph: the outline,
+        :mod:`lftransfer.real_depth.outline`). Measured once, at the first step: the real objects are taken to
+        stand still (a sequence whose real objects move projects the box light field and says so), or at every
+        step with ``depth_every_frame``."""
         side = self.side
+        outline = self.settings.composite == "depth" and on_real_side(self.model, side.scene.view)
         with self.holding_rig() as rig:
             rig.project(rig.info.black())
+            if outline and self._plate is None:
+                rig.setup(CleanPlate())
+                self._plate = rig.capture_view().radiance
+                rig.setup(RealScene(time_s=side.time_s))
             direct = side.decoder(rig.capture_lf().codes)
+            photograph = rig.capture_view().radiance if outline else None
             U = self.settings.angular_samples
-            self._set_depth(measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
-                                          direct))
+            response = white_response(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
+                                      direct)
+            self._set_depth(plane_sweep(response), response, photograph)
 
     def _capture(self, time_s: float, timer: StageTimer) -> Capture:
         side = self.side

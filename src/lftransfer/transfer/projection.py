@@ -75,12 +75,24 @@ def measure_depth(rig, decoder, encoder, max_radiance: float, U: int, V: int, di
         (K, V, U) float64 depth along each sample's centre ray, metres along the array's normal; NaN where none
         was found (:func:`~lftransfer.lightfield.depth.plane_sweep`). The projector is left black.
     """
+    return plane_sweep(white_response(rig, decoder, encoder, max_radiance, U, V, direct), depths)
+
+
+def white_response(rig, decoder, encoder, max_radiance: float, U: int, V: int, direct: LightField) -> LightField:
+    """The real scene's light field lit by the projector alone, white (:data:`WHITE_FILL` of its full radiance)
+    on every entry: one frame with the projector white, less ``direct`` (arguments as :func:`measure_depth`'s).
+    What :func:`measure_depth` sweeps, and what tells which rays meet a real object at all
+    (:mod:`lftransfer.real_depth.outline`). The projector is left black.
+
+    Returns:
+        LightField (K, V, U, 3) radiance, W m^-2 sr^-1.
+    """
     white = LightField.zeros(direct.array, U, V)
     white.data[:] = WHITE_FILL * max_radiance * white.mask()[None, :, :, None]
     rig.project(encoder(white))
     lit = decoder(rig.capture_lf().codes) - direct
     rig.project(rig.info.black())
-    return plane_sweep(lit, depths)
+    return lit
 
 
 @dataclass(eq=False)
@@ -239,5 +251,5 @@ class DepthPrefilter:
         return x
 
 
-__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "WARM_CHANGE", "WARM_ITERATIONS",
+__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "WARM_CHANGE", "WARM_ITERATIONS", "white_response",
            "WHITE_FILL", "measure_depth"]

@@ -45,7 +45,7 @@ __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
 
 log = logging.getLogger(__name__)
 
-LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "ground truth")
+LAYERS = ("composite", "panel", "real", "synthetic", "captured", "projected", "depth", "ground truth")
 MAX_EXCHANGES = 8          # live steps per shown frame (the page's "bounces"; synchronous loop)
 LATENCY_FRAMES = 240       # the latency the page shows is over the changes the last this many frames showed
 IDLE_S = 0.005             # a decoupled loop with nothing new to show looks again after this long
@@ -594,6 +594,8 @@ class LiveSession:
             return device_image(frame.captured_raw, rig.lf_camera_bits, stretch=True)
         if layer == "projected":
             return device_image(frame.projected_image, rig.projector_bits)
+        if layer == "depth":
+            return depth_layer(self.live.view_depth, frame.synthetic_view.depth)
         return to_display(np.clip(frame.composite, 0, None), self.scale)
 
     def save(self) -> list[Path]:
@@ -622,6 +624,30 @@ class _FrameTimes:
 
 def frame_times(frame: LiveFrame) -> _FrameTimes:
     return _FrameTimes(frame.started_s, frame.ready_s, frame.scene_version, frame.light_version)
+
+
+def depth_layer(real, synthetic_depth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 the page's "depth" layer: the real scene's depth in the view camera that the depth composite
+    uses (``real``: :class:`~lftransfer.real_depth.ViewDepth`, or None with the over composite) in orange, beside
+    the synthetic render's depth in blue; nearer is brighter, one scale for both (the nearest to the farthest
+    of either), black where a side has none.
+
+    Args:
+        real: the real depth, or None.
+        synthetic_depth: (H, W) metres along each view ray to the synthetic objects (inf where none).
+    """
+    syn = np.where(np.isfinite(synthetic_depth), synthetic_depth, np.nan)
+    rd = np.full(syn.shape, np.nan) if real is None else np.asarray(real.depth, np.float64)
+    both = np.concatenate([syn[np.isfinite(syn)], rd[np.isfinite(rd)]])
+    tiles = []
+    for d, colour in ((rd, (1.0, 0.55, 0.1)), (syn, (0.3, 0.6, 1.0))):
+        if both.size:
+            near, far = float(both.min()), float(both.max())
+            level = np.where(np.isfinite(d), 0.25 + 0.75 * (far - np.nan_to_num(d, nan=far)) / max(far - near, 1e-9), 0.0)
+        else:
+            level = np.zeros(d.shape)
+        tiles.append((level[..., None] * np.asarray(colour)[None, None] * 255).astype(np.uint8))
+    return np.concatenate(tiles, axis=1)
 
 
 def scene_toml(scene) -> str:
