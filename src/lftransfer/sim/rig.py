@@ -270,6 +270,27 @@ class SimRig:
                                       seed=self._seed)
         return ViewFrame(radiance=img.rgb)
 
+    def photograph_from(self, view, spp: int):
+        """The real scene as another camera would photograph it, projector black (test light fields of known depth:
+        :mod:`lftransfer.sim.views`); the rig's set-up and projection are left as they are.
+
+        Args:
+            view: the camera (``lftransfer.scenes.ViewConfig``, world frame).
+            spp: rays per pixel.
+
+        Returns:
+            ``ViewImage`` (rgb radiance, alpha, depth: distance along each pixel's rays to the real objects, inf where
+            none).
+        """
+        from lftransfer.backend import mitsuba
+
+        m = self._world_to_array
+        origin, target = (m[:3, :3] @ np.asarray(p, float) + m[:3, 3] for p in (view.origin, view.target))
+        sensor = mitsuba().load_dict(sensor_dict(origin, target, m[:3, :3] @ np.asarray(view.up, float), view.fov_deg,
+                                                 *view.resolution))
+        return self._real.render_view(sensor, *view.resolution, [*self._point_lights, *([self._room] if self._room
+                                                                                     else [])], spp=spp, seed=self._seed)
+
     def close(self) -> None:
         """Nothing to release."""
 
