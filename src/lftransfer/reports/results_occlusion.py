@@ -27,12 +27,12 @@ def occlusion_tables(stored) -> list[str]:
     ahead = occ.get("synthetic_front_pixels")
     reverse = "" if ahead is None else f", {ahead} a synthetic object in front of a real one (\"synthetic in front\")"
     out += [f"{occ['hidden_pixels']} pixels (at the metrics' resolution) show a real object in front of a synthetic "
-            f"one (\"hidden\"){reverse}. Both composites are of the same transfer; \"unhidden\" is the objects' "
+            f"one (\"hidden\"){reverse}. The composites are of the same transfer; \"unhidden\" is the objects' "
             "other pixels.", "",
             "| composite | PSNR, hidden pixels | PSNR, synthetic in front | PSNR, objects | PSNR, objects unhidden | "
             "cross-transfer error |", "|---|---|---|---|---|---|"]
     for name, label in (("over", "over operator (the paper's)"), ("depth", "depth-aware"),
-                        ("true_depth", "depth-aware with the twin's true depth (its ceiling)")):
+                        ("true_depth", "depth-aware, given the twin's true depth")):
         m = occ.get(name)
         if m:
             out.append(f"| {label} | {fixed(m['psnr_hidden_db'], 2, ' dB')} | "

@@ -600,8 +600,11 @@ class _Run:
             out.update(depth_errors(vd, truth))
         if len(result.depth_sources) > 1:                 # each source alone, and where the fused map took it
             out["sources"] = {}
+            outlined = any(d.source == "outline" for d in result.depth_sources)
             for d in result.depth_sources:
-                entry = {"known_fraction": float(d.known.mean()), "chosen_fraction": share_taken(vd, d)}
+                entry = {"known_fraction": float(d.known.mean())}
+                if not (outlined and d.source == "lightfield"):     # the outline's replaces it, it is not fused
+                    entry["chosen_fraction"] = share_taken(vd, d)
                 if truth is not None:
                     entry.update(depth_errors(d, truth))
                 out["sources"][d.source] = entry

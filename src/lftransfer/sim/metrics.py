@@ -445,8 +445,8 @@ def depth_errors(estimate, truth: np.ndarray) -> dict:
             "pixels": int(both.sum())}
 
 
-#: The true depth's standard deviation in the depth composite's ceiling (``occlusion_metrics``' ``true_depth``),
-#: metres: as sure as the synthetic render's own depth.
+#: The true depth's standard deviation in ``occlusion_metrics``' ``true_depth`` composite, metres: as sure as the
+#: synthetic render's own depth.
 TRUE_DEPTH_SIGMA_M = 0.001
 
 
@@ -470,8 +470,9 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
         ``psnr_hidden_db`` (over the hidden pixels; None where there are none), ``psnr_synthetic_front_db`` (over
         the others; None where none), ``psnr_objects_db``, ``psnr_objects_unhidden_db`` (over the objects' pixels
         where nothing is hidden) and ``cross_transfer_rel_error``; ``true_depth``, the same for the depth
-        composite given the twin's true depth (what a perfect measurement of the real scene's depth would give,
-        where the truth rendered one); ``depth_gain_hidden_db``: depth minus over on the hidden pixels.
+        composite given the twin's true depth, where the truth rendered one (what an exact depth gives; not a bound:
+        a pixel a real object only partly covers is all real with it); ``depth_gain_hidden_db``: depth minus over
+        on the hidden pixels.
     """
     front, reverse = gt.real_in_front, gt.synthetic_in_front
     if not front.any() and not reverse.any():
@@ -485,7 +486,7 @@ def occlusion_metrics(result, gt: GroundTruth, *, target_width: int = 256) -> di
     runs = {"over": replace(result, view_depth=None)}
     if result.view_depth is not None:
         runs["depth"] = result
-        if gt.depth_real is not None:         # the depth composite's ceiling: the same transfer, the true depth
+        if gt.depth_real is not None:         # the same transfer composited with the twin's true depth
             from lftransfer.real_depth.lightfield import ViewDepth
 
             true = np.where(np.isfinite(gt.depth_real), gt.depth_real, np.nan).astype(np.float32)
