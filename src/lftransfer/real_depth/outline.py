@@ -71,7 +71,7 @@ def centre_hits(response: LightField, depth: np.ndarray, share: float = CENTRE_S
 
     Args:
         response: the light field under the projector's white light alone
-            (:func:`lftransfer.transfer.projection.white_response`), (K, V, U, 3).
+            (``MeasuredDepth.response`` of :func:`lftransfer.transfer.projection.measure_depth`), (K, V, U, 3).
         depth: (K, V, U) its plane sweep's depth, metres (NaN: none).
         share: :data:`CENTRE_SHARE`.
     """

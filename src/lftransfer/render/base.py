@@ -173,9 +173,11 @@ class RayRenderer(ABC):
         """Radiance (N, 3) float32 W m^-2 sr^-1, hit mask (N,) bool and hit distance (N,) float32 metres (inf
         where a ray misses) of (N, 3) rays."""
 
-    def _rays(self, key: tuple, make):
+    def _rays(self, key: tuple, make, keep=None):
         """Primary rays are the same from frame to frame: build them once per key (a small memo). The arrays are
-        made read-only, which lets a renderer keep their Dr.Jit copies too (:meth:`jit_rays`)."""
+        made read-only, which lets a renderer keep their Dr.Jit copies too (:meth:`jit_rays`). ``keep``: an object
+        whose ``id`` is in the key (a sensor), held by the memo so that no other object takes its ``id`` while the
+        entry lives (a sensor made for one render and dropped would otherwise hand its rays to the next)."""
         memo = self.__dict__.setdefault("_ray_memo", {})
         if key not in memo:
             if len(memo) >= 8:
@@ -183,8 +185,8 @@ class RayRenderer(ABC):
             arrays = make()
             for a in arrays:
                 a.flags.writeable = False
-            memo[key] = arrays
-        return memo[key]
+            memo[key] = (arrays, keep)
+        return memo[key][0]
 
     def jit_rays(self, origins: np.ndarray, directions: np.ndarray):
         """``mi.Ray3f`` of (N, 3) origins and directions. Read-only arrays (the memoised primary rays) are
@@ -257,7 +259,7 @@ class RayRenderer(ABC):
         from lftransfer.render.camera import view_rays
 
         o, d = self._rays(("view", id(sensor), width, height, spp, seed),
-                          lambda: view_rays(sensor, width, height, spp, seed))
+                          lambda: view_rays(sensor, width, height, spp, seed), keep=sensor)
         means = self.render_samples(o, d, lights, spp, seed=seed)
         return ViewImage(rgb=means.radiance.reshape(height, width, 3), alpha=means.coverage.reshape(height, width),
                          depth=means.depth.reshape(height, width))

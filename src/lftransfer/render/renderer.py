@@ -83,7 +83,7 @@ class HalfSpaceRenderer(RayRenderer):
         if weights.shape != (height, width, 3):
             raise ValueError(f"weights have shape {weights.shape}, expected {(height, width, 3)}")
         o, d = self._rays(("view", id(sensor), width, height, spp, seed),
-                          lambda: view_rays(sensor, width, height, spp, seed))
+                          lambda: view_rays(sensor, width, height, spp, seed), keep=sensor)
         per_ray = np.repeat(weights.reshape(-1, 3), spp, axis=0) * np.float32(1.0 / spp)   # a pixel: its rays' mean
         trace_adjoint(self.scene, o, d, light, per_ray, max_depth=self.max_depth, seed=seed)
 

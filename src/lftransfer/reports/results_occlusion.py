@@ -61,8 +61,9 @@ def occlusion_tables(stored) -> list[str]:
                    f"{fixed(ref, 2)} dB | {_verdict(ok_whole)} |")
         if d.get("psnr_objects_unhidden_db") is not None and ref is not None:
             lag = d["psnr_objects_unhidden_db"] - ref
-            out.append(f"| ... over the objects' pixels where nothing is hidden | {fixed(d['psnr_objects_unhidden_db'], 2)}"
-                       f" dB against {fixed(ref, 2)} dB | {_verdict(lag >= -UNHIDDEN_SLACK_DB)} |")
+            out.append(f"| ... over the objects' pixels where nothing is hidden | "
+                       f"{fixed(d['psnr_objects_unhidden_db'], 2)} dB against {fixed(ref, 2)} dB | "
+                       f"{_verdict(lag >= -UNHIDDEN_SLACK_DB)} |")
         false = (depth or {}).get("false_fraction")
         if false is not None:
             out.append(f"| at most {100 * FALSE_FRACTION:g} % of the real depth's pixels off the real objects | "

@@ -24,9 +24,9 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["SCREEN_TRANSMISSION", "Board", "CleanPlate", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame", "MirrorBall",
-           "RealScene", "RigInfo", "Setup", "SETUPS", "ViewCapture", "ViewFrame", "WhiteField", "describe", "image_digest",
-           "request_key", "setup_from_json"]
+__all__ = ["SCREEN_TRANSMISSION", "Board", "CleanPlate", "Collimator", "FocalPlaneDiffuser", "LFCapture", "LFFrame",
+           "MirrorBall", "RealScene", "RigInfo", "Setup", "SETUPS", "ViewCapture", "ViewFrame", "WhiteField",
+           "describe", "image_digest", "request_key", "setup_from_json"]
 
 
 def _vec3(value, name: str) -> tuple[float, float, float]:

@@ -34,8 +34,9 @@ from lftransfer.render.base import aperture_offsets
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.model import RigModel, nominal_rig
-from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, CleanPlate, Collimator, FocalPlaneDiffuser, LFCapture, LFFrame,
-                                     MirrorBall, RealScene, RigInfo, Setup, ViewCapture, ViewFrame, WhiteField)
+from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, CleanPlate, Collimator, FocalPlaneDiffuser,
+                                     LFCapture, LFFrame, MirrorBall, RealScene, RigInfo, Setup, ViewCapture, ViewFrame,
+                                     WhiteField)
 from lftransfer.scenes.frame import scene_in_frame
 
 ROOM_SAMPLES = 16      # directions of the room's light per shading point (importance-sampled, shadow rays)
@@ -288,8 +289,8 @@ class SimRig:
         origin, target = (m[:3, :3] @ np.asarray(p, float) + m[:3, 3] for p in (view.origin, view.target))
         sensor = mitsuba().load_dict(sensor_dict(origin, target, m[:3, :3] @ np.asarray(view.up, float), view.fov_deg,
                                                  *view.resolution))
-        return self._real.render_view(sensor, *view.resolution, [*self._point_lights, *([self._room] if self._room
-                                                                                     else [])], spp=spp, seed=self._seed)
+        lights = [*self._point_lights, *([self._room] if self._room is not None else [])]
+        return self._real.render_view(sensor, *view.resolution, lights, spp=spp, seed=self._seed)
 
     def close(self) -> None:
         """Nothing to release."""

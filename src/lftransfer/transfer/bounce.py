@@ -33,8 +33,7 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import CleanPlate, RealScene
 from lftransfer.scenes import SyntheticScene
-from lftransfer.lightfield.depth import plane_sweep
-from lftransfer.transfer.projection import white_response
+from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -379,9 +378,9 @@ def _real_depth(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tran
     if depth is None:
         step("measure the real scene's depth (projector white)")
         with timer("measure_depth"):
-            response = white_response(rig, side.decoder, side.encoder, model.projector.max_radiance,
-                                      settings.angular_samples, settings.angular_samples, r0)
-            depth = plane_sweep(response)
+            swept = measure_depth(rig, side.decoder, side.encoder, model.projector.max_radiance,
+                                  settings.angular_samples, settings.angular_samples, r0)
+            depth, response = swept.depth, swept.response
     if settings.prefilters:
         side.set_depth(depth)
     return _Measured(depth, structured, response, plate)

@@ -40,7 +40,6 @@ import numpy as np
 from lftransfer import choices
 from lftransfer.backend import bound_blas
 from lftransfer.lightfield import LightField
-from lftransfer.lightfield.depth import plane_sweep
 from lftransfer.real_depth import ViewDepth
 from lftransfer.real_depth.outline import lightfield_view_depths, on_real_side
 from lftransfer.render.base import ViewImage
@@ -50,7 +49,7 @@ from lftransfer.rig.requests import CleanPlate, RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
-from lftransfer.transfer.projection import white_response
+from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -195,7 +194,8 @@ class LiveTransfer:
                    photograph: np.ndarray | None = None) -> None:
         """Use ``depth`` ((K, V, U) metres): for the prefilter, and carried into the view camera for the depth
         composite (inside the real objects' outline where its white ``response`` and the view camera's
-        ``photograph`` with the projector black are given: :func:`~lftransfer.real_depth.outline.lightfield_view_depths`)."""
+        ``photograph`` with the projector black are given:
+        :func:`~lftransfer.real_depth.outline.lightfield_view_depths`)."""
         self._depth = depth
         self.side.set_depth(depth)                   # prefilters only where the settings ask for it
         if self.side.surface_solve is not None:
@@ -294,9 +294,8 @@ class LiveTransfer:
             direct = side.decoder(rig.capture_lf().codes)
             photograph = rig.capture_view().radiance if outline else None
             U = self.settings.angular_samples
-            response = white_response(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U,
-                                      direct)
-            self._set_depth(plane_sweep(response), response, photograph)
+            swept = measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U, direct)
+            self._set_depth(swept.depth, swept.response, photograph)
 
     def _capture(self, time_s: float, timer: StageTimer) -> Capture:
         side = self.side

@@ -59,9 +59,25 @@ WARM_CHANGE = 0.2
 WHITE_FILL = 0.5
 
 
+@dataclass(frozen=True)
+class MeasuredDepth:
+    """The real scene's depth as :func:`measure_depth` measures it.
+
+    Attributes:
+        depth: (K, V, U) float64 depth along each sample's centre ray, metres along the array's normal; NaN where
+            none was found (:func:`~lftransfer.lightfield.depth.plane_sweep`).
+        response: the light field it was swept from: the real scene lit by the projector alone, white
+            (:data:`WHITE_FILL` of its full radiance) on every entry, (K, V, U, 3) W m^-2 sr^-1; it also tells which
+            rays meet a real object at all (:mod:`lftransfer.real_depth.outline`).
+    """
+
+    depth: np.ndarray
+    response: LightField
+
+
 def measure_depth(rig, decoder, encoder, max_radiance: float, U: int, V: int, direct: LightField, *,
-                  depths: np.ndarray = SWEEP_DEPTHS) -> np.ndarray:
-    """The real scene's depth, measured through the rig: one extra frame with the projector white.
+                  depths: np.ndarray = SWEEP_DEPTHS) -> MeasuredDepth:
+    """The real scene's depth, measured through the rig: one extra frame with the projector white, less ``direct``.
 
     Args:
         rig: the rig (``project``, ``capture_lf``, ``info.black()``), set up in the real scene.
@@ -72,27 +88,14 @@ def measure_depth(rig, decoder, encoder, max_radiance: float, U: int, V: int, di
         depths: candidate depths of the sweep, metres.
 
     Returns:
-        (K, V, U) float64 depth along each sample's centre ray, metres along the array's normal; NaN where none
-        was found (:func:`~lftransfer.lightfield.depth.plane_sweep`). The projector is left black.
-    """
-    return plane_sweep(white_response(rig, decoder, encoder, max_radiance, U, V, direct), depths)
-
-
-def white_response(rig, decoder, encoder, max_radiance: float, U: int, V: int, direct: LightField) -> LightField:
-    """The real scene's light field lit by the projector alone, white (:data:`WHITE_FILL` of its full radiance)
-    on every entry: one frame with the projector white, less ``direct`` (arguments as :func:`measure_depth`'s).
-    What :func:`measure_depth` sweeps, and what tells which rays meet a real object at all
-    (:mod:`lftransfer.real_depth.outline`). The projector is left black.
-
-    Returns:
-        LightField (K, V, U, 3) radiance, W m^-2 sr^-1.
+        :class:`MeasuredDepth`. The projector is left black.
     """
     white = LightField.zeros(direct.array, U, V)
     white.data[:] = WHITE_FILL * max_radiance * white.mask()[None, :, :, None]
     rig.project(encoder(white))
     lit = decoder(rig.capture_lf().codes) - direct
     rig.project(rig.info.black())
-    return lit
+    return MeasuredDepth(plane_sweep(lit, depths), lit)
 
 
 @dataclass(eq=False)
@@ -251,5 +254,5 @@ class DepthPrefilter:
         return x
 
 
-__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "WARM_CHANGE", "WARM_ITERATIONS", "white_response",
-           "WHITE_FILL", "measure_depth"]
+__all__ = ["BIN_M", "DAMP", "DepthPrefilter", "ITERATIONS", "WARM_CHANGE", "WARM_ITERATIONS",
+           "WHITE_FILL", "MeasuredDepth", "measure_depth"]

@@ -643,7 +643,8 @@ def depth_layer(real, synthetic_depth: np.ndarray) -> np.ndarray:
     for d, colour in ((rd, (1.0, 0.55, 0.1)), (syn, (0.3, 0.6, 1.0))):
         if both.size:
             near, far = float(both.min()), float(both.max())
-            level = np.where(np.isfinite(d), 0.25 + 0.75 * (far - np.nan_to_num(d, nan=far)) / max(far - near, 1e-9), 0.0)
+            nearness = (far - np.nan_to_num(d, nan=far)) / max(far - near, 1e-9)
+            level = np.where(np.isfinite(d), 0.25 + 0.75 * nearness, 0.0)
         else:
             level = np.zeros(d.shape)
         tiles.append((level[..., None] * np.asarray(colour)[None, None] * 255).astype(np.uint8))
