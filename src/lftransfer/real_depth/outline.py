@@ -200,7 +200,7 @@ def outline_view_depth(response: LightField, depth: np.ndarray, model, view, pho
 
     Returns:
         :class:`ViewDepth` (source ``"outline"``): inside the outline, the centre rays' splatted depth where it
-        has one, else the hull's (sigma: an angular step's width at that depth), else the nearest splatted
+        has one, else the hull's (sigma: half an angular step's width at that distance), else the nearest splatted
         depth (sigma growing by a pixel's width per pixel away); NaN outside.
     """
     U = depth.shape[2]
