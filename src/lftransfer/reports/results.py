@@ -364,6 +364,12 @@ def bench_tables(s: StoredRun) -> list[str]:
         rows.append(["decoupled loop: frames per second with the captures beside them (`decoupled.render_fps`)",
                      f"{num(dec.get('render_fps'))} ({dec.get('frames')} frames, {fixed(dec.get('frame_ms'), 0)} ms "
                      f"per frame)"])
+        if dec.get("render_fps_alone") is not None:
+            rows.append(["decoupled loop: frames per second with the captures held, the renderer alone "
+                         "(`decoupled.render_fps_alone`); the share kept beside the simulator "
+                         "(`rate_with_simulator`); cores busy with and without it",
+                         f"{num(dec['render_fps_alone'])}; {fixed(100 * dec['rate_with_simulator'], 0)} %; "
+                         f"{fixed(dec.get('cores_busy'), 2)} and {fixed(dec.get('cores_busy_alone'), 2)}"])
         age = dec.get("capture_age_s") or {}
         rows.append(["decoupled loop: captures per second, capture age (median, largest)",
                      f"{num(dec.get('capture_hz'))}; {fixed(age.get('median'), 2)} s, {fixed(age.get('max'), 2)} s"])

@@ -199,6 +199,9 @@ def _bench_table(result) -> None:
     if d is not None:
         row(table, "decoupled: frames per second (captures beside them)",
              f"{d.render_fps:.2f} ({d.frames} frames in {d.seconds:.1f} s, {d.frame_ms:.0f} ms per frame)")
+        row(table, "decoupled: frames per second, captures held (the renderer alone)",
+             f"{d.render_fps_alone:.2f}: with the simulator beside it {100 * d.rate_with_simulator:.0f} % of that; "
+             f"cores busy {d.cores_busy:.2f} against {d.cores_busy_alone:.2f}")
         row(table, "decoupled: capture rate, capture age",
              f"{d.capture_hz:.3g} /s ({d.captures} captures), median {d.capture_age_s['median']:.2f} s, "
              f"at most {d.capture_age_s['max']:.2f} s")

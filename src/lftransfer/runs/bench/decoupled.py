@@ -7,6 +7,10 @@ the machine's cores: the frame rate measured here is lower than a physical rig's
 cameras expose on their own. It is what ``lft live`` on the simulated rig shows. What it measures beside the rates
 is the latency a person feels (:mod:`lftransfer.transfer.latency`): from each move to the first composite that
 shows it, and to the first whose real objects' light reflects it.
+
+In the same run it renders as many frames again with the captures held (the newest capture reused, the simulator
+idle): the renderer alone. The ratio of the two rates is what the simulator capturing beside the renderer costs
+the page, and the process's CPU time over each phase says how many cores were busy.
 """
 
 from __future__ import annotations
@@ -43,6 +47,12 @@ class DecoupledRun:
         latency: motion-to-composite latency (:class:`~lftransfer.transfer.latency.MotionLatency` as JSON).
         stages_ms: median milliseconds per render-side stage.
         capture_stages_ms: median milliseconds per capture-side stage (encode, capture, decode, capture_view).
+        render_fps_alone: frames per second over as many frames with the captures held (the simulator idle).
+        rate_with_simulator: ``render_fps / render_fps_alone``: the share of the renderer's own rate the page
+            keeps while the simulator captures beside it.
+        cores_busy, cores_busy_alone: the process's CPU seconds per wall-clock second (every thread, Dr.Jit's
+            included) while capturing and with the captures held; their difference is at least what the simulator
+            takes (the renderer, slowed beside it, takes less).
     """
 
     frames: int
@@ -56,6 +66,10 @@ class DecoupledRun:
     latency: dict
     stages_ms: dict
     capture_stages_ms: dict
+    render_fps_alone: float
+    rate_with_simulator: float
+    cores_busy: float
+    cores_busy_alone: float
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -82,12 +96,16 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         min_captures: distinct captures the counted frames must have used.
         progress: called with one message as it starts.
     """
-    (progress or (lambda _m: None))(f"decoupled loop: {frames} frames and {min_captures} captures at least")
+    (progress or (lambda _m: None))(f"decoupled loop: {frames} frames and {min_captures} captures at least, then "
+                                    "as many with the captures held")
     done = []
     with LiveTransfer(rig, model, scene, settings, loop="decoupled") as live:
-        start = time.perf_counter()
+        start = wall0 = time.perf_counter()
+        cpu0 = time.process_time()
         i = 0
         while True:
+            if i == WARMUP_FRAMES:                      # the counted frames' CPU time
+                wall0, cpu0 = time.perf_counter(), time.process_time()
             frame = live.step(float(times[i % len(times)]))
             i += 1
             if i > WARMUP_FRAMES:
@@ -100,8 +118,10 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
                 break
             if time.perf_counter() - start > MAX_SECONDS and len(done) >= 2:
                 break
+        cores = (time.process_time() - cpu0) / max(time.perf_counter() - wall0, 1e-9)
         capture_hz = live.capture_rate_hz or 0.0
         latency = motion_latency(list(live.changes), done, "decoupled")
+        alone, cores_alone = _renderer_alone(live, times, i, len(done))
     seconds = done[-1].ready_s - done[0].started_s
     render = sorted({k for f in done for k in f.timings_s if k != "total"})
     captured = sorted({k for f in done for k in f.capture_timings_s})
@@ -115,4 +135,17 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         latency=latency.to_json(),
         stages_ms={k: round(1000 * statistics.median(f.timings_s.get(k, 0.0) for f in done), 2) for k in render},
         capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
-                           for k in captured})
+                           for k in captured},
+        render_fps_alone=round(alone, 3), rate_with_simulator=round(len(done) / seconds / alone, 3),
+        cores_busy=round(cores, 2), cores_busy_alone=round(cores_alone, 2))
+
+
+def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float]:
+    """(frames per second, cores busy) of ``frames`` frames rendered with the captures held, from time index
+    ``first`` on: the capture in progress finishes first, then no new one begins."""
+    with live.holding_rig():                     # waits for the capture in progress; none begins meanwhile
+        start, cpu = time.perf_counter(), time.process_time()
+        for i in range(first, first + frames):
+            live.step(float(times[i % len(times)]))
+        wall = time.perf_counter() - start
+        return frames / wall, (time.process_time() - cpu) / wall
