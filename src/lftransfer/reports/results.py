@@ -359,20 +359,8 @@ def bench_tables(s: StoredRun) -> list[str]:
         if isinstance(lat, dict):
             rows.append([f"motion to composite / to its light, ms, median (95 %) ({loop} loop)",
                          f"{median_p95(lat.get('view'))} / {median_p95(lat.get('light'))}"])
-    dec = d.get("decoupled")
-    if isinstance(dec, dict):
-        rows.append(["decoupled loop: frames per second with the captures beside them (`decoupled.render_fps`)",
-                     f"{num(dec.get('render_fps'))} ({dec.get('frames')} frames, {fixed(dec.get('frame_ms'), 0)} ms "
-                     f"per frame)"])
-        if dec.get("render_fps_alone") is not None:
-            rows.append(["decoupled loop: frames per second with the captures held, the renderer alone "
-                         "(`decoupled.render_fps_alone`); the share kept beside the simulator "
-                         "(`rate_with_simulator`); cores busy with and without it",
-                         f"{num(dec['render_fps_alone'])}; {fixed(100 * dec['rate_with_simulator'], 0)} %; "
-                         f"{fixed(dec.get('cores_busy'), 2)} and {fixed(dec.get('cores_busy_alone'), 2)}"])
-        age = dec.get("capture_age_s") or {}
-        rows.append(["decoupled loop: captures per second, capture age (median, largest)",
-                     f"{num(dec.get('capture_hz'))}; {fixed(age.get('median'), 2)} s, {fixed(age.get('max'), 2)} s"])
+    if isinstance(d.get("decoupled"), dict):
+        rows += _decoupled_rows(d["decoupled"])
     fve = d.get("fast_vs_exact")
     rows.append(["`fast_vs_exact`: PSNR all pixels / the synthetic objects'",
                  f"{db(fve.get('psnr_db'))} / {db(fve.get('psnr_objects_db'))}" if isinstance(fve, dict)
@@ -396,6 +384,23 @@ def bench_tables(s: StoredRun) -> list[str]:
     if d.get("notes"):
         out += [f"- {n}" for n in d["notes"]] + [""]
     return out
+
+
+def _decoupled_rows(dec: dict) -> list[list[str]]:
+    """The bench table's rows of ``lft bench --live``'s decoupled run (``decoupled`` of its JSON)."""
+    rows = [["decoupled loop: frames per second with the captures beside them (`decoupled.render_fps`)",
+             f"{num(dec.get('render_fps'))} ({dec.get('frames')} frames, {fixed(dec.get('frame_ms'), 0)} ms "
+             f"per frame)"]]
+    if dec.get("render_fps_alone") is not None:
+        rows.append(["decoupled loop: frames per second with the captures held, the renderer alone "
+                     "(`decoupled.render_fps_alone`); the share kept beside the simulator "
+                     "(`rate_with_simulator`); cores busy with and without it",
+                     f"{num(dec['render_fps_alone'])}; {fixed(100 * dec['rate_with_simulator'], 0)} %; "
+                     f"{fixed(dec.get('cores_busy'), 2)} and {fixed(dec.get('cores_busy_alone'), 2)}"])
+    age = dec.get("capture_age_s") or {}
+    rows.append(["decoupled loop: captures per second, capture age (median, largest)",
+                 f"{num(dec.get('capture_hz'))}; {fixed(age.get('median'), 2)} s, {fixed(age.get('max'), 2)} s"])
+    return rows
 
 
 def sequence_tables(s: StoredRun) -> list[str]:
