@@ -236,11 +236,13 @@ def on_real_side(model, view) -> bool:
 
 
 def lightfield_view_depths(depth: np.ndarray, response: LightField | None, model, view,
-                           photograph: np.ndarray | None, plate: np.ndarray | None) -> tuple[ViewDepth, ...]:
+                           photograph: np.ndarray | None, plate: np.ndarray | None, *,
+                           as_it_is: bool = True) -> tuple[ViewDepth, ...]:
     """The LF camera's depth in the view camera: as it is (:func:`~lftransfer.real_depth.view_depth_from_lightfield`,
     source ``"lightfield"``), then, where the white response and the photograph are at hand and the camera is
     on the real side, inside the real objects' outline (:func:`outline_view_depth`, source ``"outline"``), which
-    is the one to use (the last).
+    is the one to use (the last). With ``as_it_is`` False the depth as it is is left out where the outline is
+    made (a live loop, which shows only the one it uses).
 
     Args:
         depth: (K, V, U) metres along the array's normal.
@@ -251,8 +253,10 @@ def lightfield_view_depths(depth: np.ndarray, response: LightField | None, model
     """
     from lftransfer.real_depth.lightfield import view_depth_from_lightfield
 
-    grid = response if response is not None else LightField.zeros(model.array, depth.shape[2], depth.shape[1])
-    plain = view_depth_from_lightfield(depth, grid.u, grid.v, model, view)
-    if response is None or photograph is None or not on_real_side(model, view):
-        return (plain,)
-    return plain, outline_view_depth(response, depth, model, view, photograph, plate)
+    if response is not None and photograph is not None and on_real_side(model, view):
+        outlined = outline_view_depth(response, depth, model, view, photograph, plate)
+        if not as_it_is:
+            return (outlined,)
+        return view_depth_from_lightfield(depth, response.u, response.v, model, view), outlined
+    grid = LightField.zeros(model.array, depth.shape[2], depth.shape[1])
+    return (view_depth_from_lightfield(depth, grid.u, grid.v, model, view),)

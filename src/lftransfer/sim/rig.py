@@ -159,10 +159,9 @@ class SimRig:
                 raise ValueError("MirrorBall: the scene has no [environment] (the room's light) for the simulated "
                                  "rig to show in the ball")
             # the LF camera sees the empty room (the ball's mount stands beside the array, out of the lenslets' view)
-            self._world = HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber}, max_depth=1)
+            self._world = self._without_real_objects()
         elif isinstance(request, CleanPlate):       # the real objects away, everything else as it is
-            self._world = HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber},
-                                            max_depth=self._scene.render.max_depth)
+            self._world = self._without_real_objects()
         elif isinstance(request, RealScene) and request.time_s != self._time_s and self._world_scene.moving:
             self._real = self._real_renderer(request.time_s)
             self._world = self._real
@@ -221,6 +220,11 @@ class SimRig:
     def real_objects(self) -> list:
         """The real objects as they stand now (world frame; the simulator's hidden truth)."""
         return list(self._world_scene.real)
+
+    def _without_real_objects(self) -> HalfSpaceRenderer:
+        """The world in front of the array with the real objects taken away: the array's black absorber alone (it
+        reflects nothing, so one bounce is all its light)."""
+        return HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber}, max_depth=1)
 
     def _real_renderer(self, t: float) -> HalfSpaceRenderer:
         """The real objects posed at time ``t`` (seconds), seen from the true array's frame."""
@@ -289,8 +293,7 @@ class SimRig:
         origin, target = (m[:3, :3] @ np.asarray(p, float) + m[:3, 3] for p in (view.origin, view.target))
         sensor = mitsuba().load_dict(sensor_dict(origin, target, m[:3, :3] @ np.asarray(view.up, float), view.fov_deg,
                                                  *view.resolution))
-        lights = [*self._point_lights, *([self._room] if self._room is not None else [])]
-        return self._real.render_view(sensor, *view.resolution, lights, spp=spp, seed=self._seed)
+        return self._real.render_view(sensor, *view.resolution, self._scene_lights(), spp=spp, seed=self._seed)
 
     def close(self) -> None:
         """Nothing to release."""
@@ -307,9 +310,12 @@ class SimRig:
                                                         aperture_samples=self.aperture_samples, seed=self._seed + 3)
         return [self._projector_light] if self._projector_light is not None else []
 
+    def _scene_lights(self) -> list:
+        """The real scene's own lights: the point lights and the room (where the scene has one)."""
+        return [*self._point_lights, *([] if self._room is None else [self._room])]
+
     def _lights(self):
-        room = [] if self._room is None else [self._room]
-        return [*self._point_lights, *room, *self._projector_lights()]
+        return [*self._scene_lights(), *self._projector_lights()]
 
     def _ball_photo(self, ball: MirrorBall, spp: int) -> np.ndarray:
         """(H, W, 3) float32 the view camera's image of the mirror ball in the room's light, the lens array's

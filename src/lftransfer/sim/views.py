@@ -23,16 +23,6 @@ from lftransfer.lightfield.view_grid import ViewGrid
 __all__ = ["render_view_grid"]
 
 
-def _camera_axes(view) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(forward, right, down) unit vectors of a view camera (world), as :func:`lftransfer.optics.geometry.view_camera`
-    orients it."""
-    origin, target, up = (np.asarray(v, np.float64) for v in (view.origin, view.target, view.up))
-    fwd = (target - origin) / np.linalg.norm(target - origin)
-    right = np.cross(fwd, up)
-    right /= np.linalg.norm(right)
-    return fwd, right, np.cross(fwd, right)
-
-
 def render_view_grid(scene, *, n: int = 9, baseline_m: float = 0.002, shift_px: int = 1, spp: int = 16,
                      truth_seed: int | None = 0) -> tuple[ViewGrid, np.ndarray, np.ndarray]:
     """Render an ``n`` x ``n`` grid of views of ``scene``'s real objects around its view camera (module docstring).
@@ -49,6 +39,7 @@ def render_view_grid(scene, *, n: int = 9, baseline_m: float = 0.002, shift_px: 
         (the grid, (H, W) float32 true disparity of the centre view, pixels per view step, (H, W) float32 true
         depth along the optical axis, metres; inf where nothing is seen).
     """
+    from lftransfer.optics.geometry import pixel_rays, view_camera
     from lftransfer.scenes.models import ViewConfig
     from lftransfer.sim.oracle import open_simulated_rig
 
@@ -63,7 +54,7 @@ def render_view_grid(scene, *, n: int = 9, baseline_m: float = 0.002, shift_px: 
     c = n // 2
     margin = c * shift_px
     wide_fov = float(np.degrees(2.0 * np.arctan((w + 2 * margin) / 2.0 / f_px)))
-    fwd, right, down = _camera_axes(view)
+    right, down, fwd = view_camera(view)[1]         # the rotation's rows: x right, y down, z forward (world)
     views = np.empty((n, n, h, w), np.float32)
     centre_depth = None
     for t in range(n):
@@ -79,8 +70,6 @@ def render_view_grid(scene, *, n: int = 9, baseline_m: float = 0.002, shift_px: 
                 centre_depth = image.depth[y0:y0 + h, x0:x0 + w]
     bright = float(np.percentile(views, 99.5))
     views = np.clip(views / bright, 0.0, 1.0) if bright > 0 else views
-    from lftransfer.optics.geometry import pixel_rays
-
     ys, xs = np.mgrid[0:h, 0:w]
     rays = pixel_rays(view, np.stack([xs.ravel(), ys.ravel()], -1))[1].reshape(h, w, 3)
     z = np.where(np.isfinite(centre_depth), centre_depth * (rays @ fwd), np.inf)

@@ -202,7 +202,7 @@ class LiveTransfer:
             self.side.surface_solve.live = True      # converge over the frames (surface_solve.WARM_ITERATIONS)
         if self.settings.composite == "depth":
             self.view_depth = lightfield_view_depths(depth, response, self.model, self.side.scene.view, photograph,
-                                                     self._plate)[-1]
+                                                     self._plate, as_it_is=False)[-1]
 
     @property
     def capture_rate_hz(self) -> float | None:
