@@ -69,6 +69,15 @@ def variant() -> str:
     return mitsuba().variant()
 
 
+def set_drjit_threads(threads: int, variant_name: str | None = None) -> None:
+    """Give this process's Dr.Jit thread pool ``threads`` threads (>= 1), the variant set first (``variant_name``
+    or the default choice, as :func:`mitsuba` makes it)."""
+    mitsuba(variant_name)
+    import drjit as dr
+
+    dr.set_thread_count(int(threads))
+
+
 def _check_blas_threads(value, where: str) -> int:
     try:
         n = int(value)

@@ -53,6 +53,11 @@ LiveLoop = Literal["decoupled", "sync"]
 """The live loop: ``"decoupled"`` (captures on their own thread at the devices' rate, frames at the renderer's
 rate with the newest capture) or ``"sync"`` (one capture inside every frame; :mod:`lftransfer.transfer.live`)."""
 
+Simulator = Literal["process", "thread"]
+"""Where the simulated rig renders its captures in a live loop: ``"process"`` (a child process of its own, at a
+lower scheduling priority and with its own Dr.Jit threads, so that the renderer has the cores when it wants them;
+:mod:`lftransfer.sim.process`) or ``"thread"`` (in the loop's own process, sharing the renderer's threads)."""
+
 LIGHTING_MODELS: tuple[str, ...] = get_args(LightingModel)
 RECONSTRUCTIONS: tuple[str, ...] = get_args(Reconstruction)
 PROJECTIONS: tuple[str, ...] = get_args(Projection)
@@ -62,6 +67,7 @@ RIG_MODELS: tuple[str, ...] = get_args(RigModel)
 LIVE_LOOPS: tuple[str, ...] = get_args(LiveLoop)
 COMPOSITES: tuple[str, ...] = get_args(Composite)
 DIRECT_LIGHTS: tuple[str, ...] = get_args(DirectLight)
+SIMULATORS: tuple[str, ...] = get_args(Simulator)
 
 DEFAULT_LIGHTING_MODEL: LightingModel = "area"
 DEFAULT_RECONSTRUCTION: Reconstruction = "linear"
@@ -76,6 +82,17 @@ DEFAULT_LIVE_LOOP: LiveLoop = "decoupled"
 DEFAULT_SEQUENCE_LOOP: LiveLoop = "sync"
 """A written sequence (``lft render --mode live``) is synchronous unless asked: its frames then depend on no
 clock, so a rerun writes the same frames."""
+
+DEFAULT_SIMULATOR: Simulator = "process"
+"""A live loop on the simulated rig runs the simulator in a process of its own (a run's bounce loop, which waits for
+each capture and renders nothing beside it, keeps the simulated rig in its own process)."""
+DEFAULT_SIMULATOR_THREADS = 1
+"""Dr.Jit threads of the simulator's process: the page's frame rate before the captures' rate."""
+DEFAULT_SIMULATOR_NICE = 7
+"""How much lower the simulator process's scheduling priority is (``nice``, 0 to 19): Linux then gives it about a
+sixth of a core the renderer also wants, and every core the renderer leaves idle. Measured on 2 cores at quarter
+resolution (docs/performance.md, "The simulator beside the renderer"), the page keeps 84 % of its rate at 7 (69 % at
+5, 64 % at 0, 31 % in process) while the captures come at 0.5 per second (0.6, 1.1, 1.8)."""
 
 LENSLET_RECONSTRUCTION: Reconstruction = "box"
 LENSLET_WINDOW: Window = "cut"

@@ -19,7 +19,7 @@ from lftransfer import choices
 from lftransfer.render.selection import resolve_renderer
 from lftransfer.transfer.bounce import TransferSettings
 
-__all__ = ["COMPARABLE", "Overrides", "RunSettings", "resolve_settings"]
+__all__ = ["COMPARABLE", "Overrides", "RunSettings", "SimulatorSettings", "resolve_settings"]
 
 COMPARABLE = ("lighting_model", "reconstruction", "projection", "window")
 """The choices a run may measure beside its own (``compare``): each alternative is the same run with that one
@@ -54,6 +54,8 @@ class Overrides:
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
         reference_budget_s: seconds the quiet reference's later rounds may take (None: as long as the run took
             before them).
+        simulator, simulator_threads, simulator_nice, renderer_threads: where a live loop's simulated rig renders
+            its captures and the threads each side gets (:class:`SimulatorSettings`).
         compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
             reconstruction, projection and window only under the area model), e.g.
             ``{"lighting_model": ("area", "point")}``.
@@ -100,6 +102,19 @@ class Overrides:
         "Seconds the quiet reference's later rounds may take, all together (default: as long as the run took "
         "before them, so a judged run takes at most twice as long; raise it where the run says the target was not "
         "met).", flag="--reference-budget", min=1.0, metavar="SECONDS")
+    simulator: choices.Simulator | None = _setting(
+        f"Live loops on the simulated rig: where it renders its captures, in a process of its own at a lower "
+        f"priority (the renderer keeps the cores it wants) or in a thread of this process (sharing the renderer's "
+        f"threads; default: {choices.DEFAULT_SIMULATOR}).", choice=choices.Simulator)
+    simulator_threads: int | None = _setting(
+        f"Dr.Jit threads of the simulator's process (default: {choices.DEFAULT_SIMULATOR_THREADS}).",
+        min=1, metavar="N")
+    simulator_nice: int | None = _setting(
+        f"How much lower the simulator process's priority is, 0 to 19: higher keeps more of the page's frame rate, "
+        f"lower gives more captures per second (default: {choices.DEFAULT_SIMULATOR_NICE}).",
+        min=0, max=19, metavar="N")
+    renderer_threads: int | None = _setting(
+        "Dr.Jit threads of the renderer's process in a live loop (default: one per core).", min=1, metavar="N")
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self) -> None:
@@ -112,9 +127,15 @@ class Overrides:
             problems.append(f"reference_budget_s: expected a number of seconds >= 1, got {self.reference_budget_s!r}")
         if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
+        for name, low, high in (("simulator_threads", 1, None), ("simulator_nice", 0, 19), ("renderer_threads", 1, None)):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, int) and not isinstance(value, bool) and value >= low
+                                          and (high is None or value <= high)):
+                problems.append(f"{name}: expected an integer from {low}" + (f" to {high}" if high else " up")
+                                + f" (or None: the default), got {value!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
                  "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer,
-                 "composite": choices.Composite, "direct_light": choices.DirectLight}
+                 "composite": choices.Composite, "direct_light": choices.DirectLight, "simulator": choices.Simulator}
         for name, kind in kinds.items():
             try:
                 choices.check_choice(name, getattr(self, name), kind)
@@ -143,6 +164,28 @@ class Overrides:
 
 
 @dataclass(frozen=True)
+class SimulatorSettings:
+    """Where a live loop's simulated rig renders its captures, and the threads each side gets (resolved once by
+    :func:`resolve_settings`; :func:`lftransfer.runs.rigs.open_rig` opens the rig with it).
+
+    Attributes:
+        where: "process" (:class:`lftransfer.sim.process.SimulatorProcess`) or "thread" (in the loop's process;
+            :data:`lftransfer.choices.Simulator`).
+        threads: Dr.Jit threads of the simulator's process (with "process").
+        nice: how much lower its scheduling priority is (with "process"), 0 to 19.
+        renderer_threads: Dr.Jit threads of the loop's own process (None: Dr.Jit's default, one per core).
+    """
+
+    where: choices.Simulator = choices.DEFAULT_SIMULATOR
+    threads: int = choices.DEFAULT_SIMULATOR_THREADS
+    nice: int = choices.DEFAULT_SIMULATOR_NICE
+    renderer_threads: int | None = None
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """The settings a run uses, resolved once (:func:`resolve_settings`).
 
@@ -159,6 +202,9 @@ class RunSettings:
             (:meth:`rerun`).
         adjustments: what the resolution changed from what the scene and the overrides asked for, and why, one
             sentence each (a live loop's projection where the real objects move).
+        simulator: where a live loop's simulated rig renders its captures and the threads each side gets (the live
+            loops open their rig with it: ``lft live``, ``lft render --mode live``, ``lft bench --live``; other
+            runs, whose loop waits for each capture, render their captures in their own process).
     """
 
     transfer: TransferSettings
@@ -168,6 +214,7 @@ class RunSettings:
     quiet_reference: bool = False
     adjustments: tuple[str, ...] = ()
     reference_budget_s: float | None = None
+    simulator: SimulatorSettings = SimulatorSettings()
 
     @property
     def bounces(self) -> int:
@@ -248,4 +295,12 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
                        quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments),
-                       reference_budget_s=overrides.reference_budget_s)
+                       reference_budget_s=overrides.reference_budget_s, simulator=_simulator(overrides))
+
+
+def _simulator(overrides: Overrides) -> SimulatorSettings:
+    """A live loop's simulator: its place and threads as the overrides ask, else the defaults."""
+    where = overrides.simulator or choices.DEFAULT_SIMULATOR
+    threads = overrides.simulator_threads or choices.DEFAULT_SIMULATOR_THREADS
+    nice = choices.DEFAULT_SIMULATOR_NICE if overrides.simulator_nice is None else overrides.simulator_nice
+    return SimulatorSettings(where=where, threads=threads, nice=nice, renderer_threads=overrides.renderer_threads)

@@ -5,6 +5,9 @@ set-up (scripts/bootstrap.sh) installs both, so CI runs it."""
 from __future__ import annotations
 
 import base64
+import os
+import re
+import signal
 import shutil
 import socket
 import threading
@@ -132,6 +135,12 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
         while time.time() < end and "capture" not in driver.find_element(By.ID, "rates").text:
             time.sleep(0.05)
         assert "decoupled: capture" in driver.find_element(By.ID, "rates").text
+        # the simulator renders in its own process, and the page says how much of the machine it takes
+        end = time.time() + 30
+        while time.time() < end and "the simulator's process" not in driver.find_element(By.ID, "rates").text:
+            time.sleep(0.2)
+        assert re.search(r"cores busy of \d+: this loop [\d.]+, the simulator's process [\d.]+ \(\d+ % of the "
+                         r"machine\)", driver.find_element(By.ID, "rates").text)
         before = _pixels(frame_src(10, first))
         slider = driver.find_element(By.CSS_SELECTOR, 'fieldset.object[data-side="synthetic"] input.pose[data-key="translate"][data-axis="1"]')
         driver.execute_script("arguments[0].value = Number(arguments[0].value) + 0.04;"
@@ -425,6 +434,20 @@ def test_08_decoupled_session_compare_and_record(variant, tmp_path):
         assert session.live._worker.count == count
         session.submit({"type": "resume"})
         _wait(lambda: session.live._worker.count > count, 30, "captures after resuming")
+
+        # the simulator renders in its own process; the frames say the cores each side keeps busy
+        busy = frames()[-1].cores_busy
+        assert busy["cores"] >= 1 and busy["loop"] > 0 and busy["simulator"] is not None
+        # a simulator that dies ends the loop with one line naming it; the page is told
+        pid = session.live.rig.pid
+        os.kill(pid, signal.SIGKILL)
+        _wait(lambda: session.failed is not None, 60, "the loop to stop")
+        assert session.failed.startswith(f"the live loop stopped: the capture worker stopped: RigError: the "
+                                         f"simulator process (pid {pid}) died")
+        assert "\n" not in session.failed and any(k == "error" and x == session.failed for k, x in events)
+        count = len(frames())
+        time.sleep(1.0)
+        assert len(frames()) == count                           # no frame after it
     finally:
         session.stop()
 

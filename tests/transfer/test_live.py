@@ -10,6 +10,7 @@ from lftransfer.runs.pipeline import RunOptions, open_rig
 
 from lftransfer.scenes import quick_scene
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+from lftransfer.settings import SimulatorSettings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.live import LiveTransfer
 
@@ -138,18 +139,24 @@ class _SlowRig:
         return self.inner.capture_lf(*args, **kwargs)
 
 
-def test_04_decoupled_loop_converges_to_the_same_light(quick):
+@pytest.mark.parametrize("where", ["thread", "process"])
+def test_04_decoupled_loop_converges_to_the_same_light(quick, where):
     """Captures on their own thread, each under the newest light field rendered: after a few captures the real
     view is the bounce loop's (as the synchronous loop's is, test_01); frames that found no new capture reuse the
-    newest one and say how old it is."""
+    newest one and say how old it is. The same with the simulated rig in a process of its own (``lft live``'s
+    default), against the bounce loop run in process."""
     scene, settings = quick
     opened = open_rig(scene, RunOptions(truth_seed=None))
     reference = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
+    if where == "process":
+        opened = open_rig(scene, RunOptions(truth_seed=None), simulator=SimulatorSettings(where="process"))
+        assert type(opened.rig).__name__ == "SimulatorProcess"
     with LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
         frames = [live.step(0.0)]
         while frames[-1].capture_index < 6:
             frames.append(live.step(0.0))
         assert live.capture_rate_hz > 0
+    opened.rig.close()
     assert all(f.loop == "decoupled" and "capture" not in f.timings_s for f in frames)
     assert all(set(f.capture_timings_s) == {"encode", "capture", "decode", "capture_view"} for f in frames)
     assert not frames[0].projected_lf.data.any() and frames[0].light_version == -1
@@ -210,6 +217,33 @@ def test_06_decoupled_worker_failure_and_holding_the_rig(quick):
             for _ in range(200):
                 live.step(0.0)
                 time.sleep(0.05)
+
+
+def test_06b_a_simulator_that_dies_stops_the_loop_in_one_line(quick):
+    """The simulated rig in its own process, killed while the decoupled loop runs: the next steps raise one
+    RigError that names the simulator process, its pid and how it ended; leaving the loop and closing the rig raise
+    nothing more."""
+    import os
+    import signal
+    import time
+
+    from lftransfer.rig.base import RigError
+
+    scene, settings = quick
+    opened = open_rig(scene, RunOptions(truth_seed=None), simulator=SimulatorSettings(where="process"))
+    pid = opened.rig.pid
+    with LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
+        live.step(0.0)
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(RigError) as raised:
+            for _ in range(400):
+                live.step(0.0)
+                time.sleep(0.05)
+    message = str(raised.value)
+    assert "\n" not in message
+    assert f"the simulator process (pid {pid}) died (exit code -9)" in message
+    opened.rig.close()
+    opened.rig.close()                                   # idempotent on a dead simulator
 
 
 def test_07_motion_latency_on_known_frames():

@@ -397,6 +397,13 @@ def _decoupled_rows(dec: dict) -> list[list[str]]:
                      "(`rate_with_simulator`); cores busy with and without it",
                      f"{num(dec['render_fps_alone'])}; {fixed(100 * dec['rate_with_simulator'], 0)} %; "
                      f"{fixed(dec.get('cores_busy'), 2)} and {fixed(dec.get('cores_busy_alone'), 2)}"])
+    sim = dec.get("simulator")
+    if sim is not None:
+        rows.append(["decoupled loop: where the simulator rendered its captures (`decoupled.simulator`), its cores "
+                     "busy (`simulator_cores_busy`)",
+                     f"its own process, {sim['threads']} thread(s), nice {sim['nice']}; "
+                     f"{fixed(dec.get('simulator_cores_busy'), 2)}" if sim.get("where") == "process" else
+                     "the loop's process (counted in its cores busy)"])
     age = dec.get("capture_age_s") or {}
     rows.append(["decoupled loop: captures per second, capture age (median, largest)",
                  f"{num(dec.get('capture_hz'))}; {fixed(age.get('median'), 2)} s, {fixed(age.get('max'), 2)} s"])

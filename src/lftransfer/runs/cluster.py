@@ -152,13 +152,11 @@ class Worker:
     """
 
     def __init__(self, threads: int | None = None) -> None:
-        from lftransfer.backend import mitsuba
+        from lftransfer.backend import mitsuba, set_drjit_threads
 
         mitsuba()
         if threads:
-            import drjit as dr
-
-            dr.set_thread_count(max(MIN_THREADS, int(threads)))
+            set_drjit_threads(max(MIN_THREADS, int(threads)))
 
     def pid(self) -> int:
         """The worker's process id (its set-up is done when this answers)."""

@@ -149,16 +149,31 @@ class OpenedRig:
             start(index)
 
 
-def open_rig(scene, options, *, operator: Operator | None = None) -> OpenedRig:
+def open_rig(scene, options, *, operator: Operator | None = None, simulator=None) -> OpenedRig:
     """Open the rig a run asks for (:class:`RigSpec`), wrapped in a recorder when ``options.record`` is set.
 
     Args:
         scene: the whole scene file (the simulated rig takes its real objects; other rigs ignore them).
         options: :class:`lftransfer.runs.pipeline.RunOptions` (its rig, truth seed, capture rays, recording).
         operator: shows an instruction to the person at a physical rig and waits (hardware rigs only).
+        simulator: a live loop's :class:`~lftransfer.settings.SimulatorSettings` (its ``RunSettings.simulator``):
+            with ``where="process"`` the simulated rig renders in a process of its own
+            (:class:`lftransfer.sim.process.SimulatorProcess`); its ``renderer_threads`` set this process's Dr.Jit
+            threads. None: the simulated rig in this process, the threads as they are.
     """
     spec = options.rig
-    if spec.kind == "sim":
+    if simulator is not None and simulator.renderer_threads:
+        from lftransfer.backend import set_drjit_threads
+
+        set_drjit_threads(simulator.renderer_threads)
+    if spec.kind == "sim" and simulator is not None and simulator.where == "process":
+        from lftransfer.sim.oracle import hidden_oracle
+        from lftransfer.sim.process import SimulatorProcess
+
+        rig = SimulatorProcess(scene, options.truth_seed, capture_spp=options.capture_spp, threads=simulator.threads,
+                               nice=simulator.nice)
+        opened = OpenedRig(rig=rig, oracle=hidden_oracle(scene, options.truth_seed))
+    elif spec.kind == "sim":
         from lftransfer.sim.oracle import open_simulated_rig
 
         rig, oracle = open_simulated_rig(scene, options.truth_seed, capture_spp=options.capture_spp)

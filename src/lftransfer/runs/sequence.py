@@ -394,7 +394,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     with tracked_run(out, str(options.rig), interrupted="interrupted (Ctrl-C); --resume continues"):
         opened = None
         try:
-            opened = open_rig(scene, options)
+            opened = open_rig(scene, options, simulator=resolved.simulator if seq.mode == "live" else None)
             known = acquire_model(opened, scene, options, out, seq.resume, step)
             model, rig_model, ps = known.model, known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "loop": seq.loop if seq.mode == "live" else None,

@@ -26,7 +26,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from lftransfer.lightfield import LightField
-from lftransfer.rig.base import Rig
+from lftransfer.rig.base import Rig, RigError
 from lftransfer.rig.requests import RealScene
 from lftransfer.transfer.timer import StageTimer, rate_hz
 
@@ -265,9 +265,11 @@ class CaptureWorker:
                 log.warning("the capture worker did not stop within %g s", timeout)
 
     def _raise(self) -> None:
+        """The worker's error, as a :class:`~lftransfer.rig.base.RigError` where the rig failed (a device, a dead
+        simulator: the faces end on it in one line), else a RuntimeError."""
         if self.error is not None:
-            raise RuntimeError(f"the capture worker stopped: {type(self.error).__name__}: {self.error}") \
-                from self.error
+            kind = RigError if isinstance(self.error, RigError) else RuntimeError
+            raise kind(f"the capture worker stopped: {type(self.error).__name__}: {self.error}") from self.error
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -19,7 +19,8 @@ from lftransfer.reports.results_format import surface_solve_text
 
 __all__ = ["register"]
 
-BenchSettings = setting_options("lighting_model", "reconstruction", "projection", "renderer")
+BenchSettings = setting_options("lighting_model", "reconstruction", "projection", "renderer", "simulator",
+                                "simulator_threads", "simulator_nice", "renderer_threads")
 
 
 def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE.toml",
@@ -202,6 +203,11 @@ def _bench_table(result) -> None:
         row(table, "decoupled: frames per second, captures held (the renderer alone)",
              f"{d.render_fps_alone:.2f}: with the simulator beside it {100 * d.rate_with_simulator:.0f} % of that; "
              f"cores busy {d.cores_busy:.2f} against {d.cores_busy_alone:.2f}")
+        sim = d.simulator
+        row(table, "decoupled: the simulator",
+             f"in its own process ({sim['threads']} thread(s), nice {sim['nice']}), {d.simulator_cores_busy:.2f} cores "
+             f"busy" if sim["where"] == "process" and d.simulator_cores_busy is not None else
+             "in the loop's process (its cores busy counted with the loop's)")
         row(table, "decoupled: capture rate, capture age",
              f"{d.capture_hz:.3g} /s ({d.captures} captures), median {d.capture_age_s['median']:.2f} s, "
              f"at most {d.capture_age_s['max']:.2f} s")

@@ -16,12 +16,14 @@ from lftransfer.app.cli.common import (calibrates, check_before_work, cluster_sp
                                        progress_bar, rig_options, row)
 from lftransfer.app.cli.options import (Cluster, MaxMemory, NoCache, NoFloor, OutDir, Quick, RigArgs, SceneArg,
                                         TruthArgs, Workers, choice_check, flag, metavar, option, setting_options)
-from lftransfer.app.terminal import console, fail, warn
+from lftransfer.app.terminal import FAILED, console, fail, warn
 
 __all__ = ["register"]
 
-LiveSettings = setting_options("renderer")
-RenderSettings = setting_options("bounces", "gt_spp", "renderer", "composite", "direct_light", "quiet_reference")
+SIMULATOR_SETTINGS = ("simulator", "simulator_threads", "simulator_nice", "renderer_threads")
+LiveSettings = setting_options("renderer", *SIMULATOR_SETTINGS)
+RenderSettings = setting_options("bounces", "gt_spp", "renderer", "composite", "direct_light", "quiet_reference",
+                                 *SIMULATOR_SETTINGS)
 
 
 def _sequence_table(report: dict, out: Path, mode: str, check) -> None:
@@ -122,6 +124,8 @@ def live(scene_file: SceneArg,
                                warn=warn)
     console.print(f"lft live: open http://127.0.0.1:{port}/ (Ctrl-C stops)")
     serve(session, port=port)
+    if session.failed is not None:
+        fail(session.failed, FAILED)
     console.print("lft live: stopped")
 
 

@@ -28,11 +28,12 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     out = Path(out)
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
                          settings=settings, recalibrate=recalibrate)
-    opened = open_rig(scene, options)
+    resolved = options.resolve(scene, live=True)
+    opened = open_rig(scene, options, simulator=resolved.simulator)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:
         (warn or (lambda _m: None))(note)
-    live = LiveTransfer(opened.rig, known.model, known.scene, options.resolve(scene, live=True).transfer, loop=loop)
+    live = LiveTransfer(opened.rig, known.model, known.scene, resolved.transfer, loop=loop)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
     return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle, lights=known.scene.lights,
                        overrides=options.settings)

@@ -20,6 +20,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import threading
+import time
 from pathlib import Path
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
@@ -141,7 +143,17 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
 
 
 def serve(session: LiveSession, *, host: str = "127.0.0.1", port: int = 8080, log_level: str = "warning") -> None:
-    """Run the page until Ctrl-C (uvicorn handles the signal and the app stops the loop)."""
+    """Run the page until Ctrl-C (uvicorn handles the signal and the app stops the loop), or until the session's
+    loop ends on its own (its rig failed: ``session.failed`` says why)."""
     import uvicorn
 
-    uvicorn.run(make_app(session), host=host, port=port, log_level=log_level)
+    server = uvicorn.Server(uvicorn.Config(make_app(session), host=host, port=port, log_level=log_level))
+
+    def watch() -> None:
+        while not server.should_exit:
+            if session.failed is not None:
+                server.should_exit = True
+            time.sleep(0.2)
+
+    threading.Thread(target=watch, name="lft-live-watch", daemon=True).start()
+    server.run()

@@ -34,12 +34,13 @@ from lftransfer.app.viewer.recorder import Recorder
 from lftransfer.reports.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
 from lftransfer.render.lights import LIGHTING_MODELS
+from lftransfer.rig.base import RigError
 from lftransfer.scenes import SceneError, with_overrides
 from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
-from lftransfer.transfer.timer import rate_hz
+from lftransfer.transfer.timer import CoreMeter, rate_hz
 
 __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
 
@@ -77,6 +78,8 @@ class ViewerFrame:
         recording: whether the frames are being recorded.
         edits: edits of the synthetic objects applied before this frame was rendered (a page that sent its n-th
             edit sees it from the first frame with ``edits >= n``: edit-to-pixel latency).
+        cores_busy: the cores the loop's process and the simulator's keep busy (:class:`CoreMeter`; "simulator"
+            None: no simulator process beside the loop).
     """
 
     index: int
@@ -93,6 +96,7 @@ class ViewerFrame:
     latency_ms: dict = field(default_factory=dict)
     recording: bool = False
     edits: int = 0
+    cores_busy: dict = field(default_factory=dict)
 
     def message(self, layer: str) -> dict:
         """The JSON message for a page that shows ``layer``."""
@@ -104,7 +108,7 @@ class ViewerFrame:
                 "capture_age_s": round(self.capture_age_s, 3), "capture_index": self.capture_index,
                 "capture_ms": {k: round(v, 1) for k, v in self.capture_ms.items()},
                 "latency_ms": self.latency_ms, "recording": self.recording, "edits": self.edits,
-                "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
+                "cores_busy": self.cores_busy, "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
 
 
 @dataclass
@@ -216,6 +220,7 @@ class LiveSession:
         self.last: LiveFrame | None = None
         self.scale: float | None = None
         self.error: str | None = None
+        self.failed: str | None = None                # why the loop ended on its own (the rig failed), one line
         self._pending = _Pending()
         self._stop = threading.Event()
         self._step_once = threading.Event()
@@ -226,6 +231,7 @@ class LiveSession:
         self.edits = 0                                # synthetic object edits applied
         self._recent: deque = deque(maxlen=LATENCY_FRAMES)    # (started, ready, versions) of the latest frames
         self.recorder = Recorder()
+        self._cores = CoreMeter(getattr(live.rig, "cpu_seconds", None))   # the simulator process's, if it has one
         self.compare = GroundTruthCompare(oracle, lambda image, scale: _jpeg(to_display(image, scale), 92)) \
             if oracle is not None else None
 
@@ -439,6 +445,11 @@ class LiveSession:
                 self.last = frame
                 self._recent.append(frame_times(frame))
                 self._on_frame(self._viewer_frame(frame))
+            except RigError as exc:      # the rig is gone (a dead simulator, a device fault): the loop ends here
+                self.error = self.failed = f"the live loop stopped: {exc}"
+                log.error("%s", self.failed)
+                self._on_error(self.error)
+                return
             except Exception as exc:  # noqa: BLE001 - the loop keeps running; the page shows why a frame failed
                 self.error = f"{type(exc).__name__}: {exc}"
                 self._on_error(self.error)
@@ -526,7 +537,7 @@ class LiveSession:
                            capture_ms={k: 1000.0 * v for k, v in frame.capture_timings_s.items()},
                            latency_ms={"view": latency.view and asdict(latency.view),
                                        "light": latency.light and asdict(latency.light)},
-                           recording=self.recorder.recording, edits=self.edits)
+                           recording=self.recorder.recording, edits=self.edits, cores_busy=self._cores.sample())
 
     def _request_compare(self) -> None:
         """Start the ground truth of the frame on the screen (:class:`GroundTruthCompare`); the page hears when

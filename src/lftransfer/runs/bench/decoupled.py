@@ -2,15 +2,17 @@
 the simulated rig's rate, frames rendered as fast as the renderer goes with the newest capture, a synthetic object
 moving every frame.
 
-On the simulated rig the captures are the simulator's renders, so the capture thread and the render loop share
-the machine's cores: the frame rate measured here is lower than a physical rig's computer would give, whose
-cameras expose on their own. It is what ``lft live`` on the simulated rig shows. What it measures beside the rates
+On the simulated rig the captures are the simulator's renders, so the simulator and the render loop share the
+machine's cores: the frame rate measured here is lower than a physical rig's computer would give, whose cameras
+expose on their own. It is what ``lft live`` on the simulated rig shows, with the simulator where ``lft live``
+puts it (:class:`~lftransfer.settings.SimulatorSettings`: by default a process of its own at a lower priority,
+:mod:`lftransfer.sim.process`). What it measures beside the rates
 is the latency a person feels (:mod:`lftransfer.transfer.latency`): from each move to the first composite that
 shows it, and to the first whose real objects' light reflects it.
 
 In the same run it renders as many frames again with the captures held (the newest capture reused, the simulator
 idle): the renderer alone. The ratio of the two rates is what the simulator capturing beside the renderer costs
-the page, and the process's CPU time over each phase says how many cores were busy.
+the page, and the CPU time over each phase says how many cores each side kept busy.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 
+from lftransfer.settings import SimulatorSettings
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LiveTransfer
 
@@ -50,9 +53,12 @@ class DecoupledRun:
         render_fps_alone: frames per second over as many frames with the captures held (the simulator idle).
         rate_with_simulator: ``render_fps / render_fps_alone``: the share of the renderer's own rate the page
             keeps while the simulator captures beside it.
-        cores_busy, cores_busy_alone: the process's CPU seconds per wall-clock second (every thread, Dr.Jit's
-            included) while capturing and with the captures held; their difference is at least what the simulator
-            takes (the renderer, slowed beside it, takes less).
+        cores_busy, cores_busy_alone: the loop's process's CPU seconds per wall-clock second (every thread, Dr.Jit's
+            included) while capturing and with the captures held. With the simulator in this process their
+            difference is at least what the simulator takes (the renderer, slowed beside it, takes less).
+        simulator: where the simulator ran and its threads (:class:`~lftransfer.settings.SimulatorSettings` as JSON).
+        simulator_cores_busy: the simulator process's CPU seconds per wall-clock second while capturing (None: it
+            ran in the loop's process, counted in ``cores_busy``).
     """
 
     frames: int
@@ -70,6 +76,8 @@ class DecoupledRun:
     rate_with_simulator: float
     cores_busy: float
     cores_busy_alone: float
+    simulator: dict
+    simulator_cores_busy: float | None = None
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -81,6 +89,7 @@ def _med_max(values) -> dict:
 
 
 def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int, min_captures: int = 3,
+                  simulator: SimulatorSettings = SimulatorSettings(where="thread"),
                   progress: Callable[[str], None] | None = None) -> DecoupledRun:
     """Run the decoupled loop over the scene times ``times`` (cycled) for at least ``frames`` counted frames and
     until the counted frames used ``min_captures`` captures and a change's light has reached one of them (or
@@ -91,6 +100,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         model: the rig model.
         scene: the synthetic part of the scene (its animation moves the object).
         settings: the transfer settings.
+        simulator: where the rig's simulator runs (reported; the rig was opened with it).
         times: (F,) scene times of the frames, seconds.
         frames: frames to count (>= 2).
         min_captures: distinct captures the counted frames must have used.
@@ -99,13 +109,14 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
     (progress or (lambda _m: None))(f"decoupled loop: {frames} frames and {min_captures} captures at least, then "
                                     "as many with the captures held")
     done = []
+    child_cpu = getattr(rig, "cpu_seconds", lambda: None)     # the simulator process's CPU seconds, if it has one
     with LiveTransfer(rig, model, scene, settings, loop="decoupled") as live:
         start = wall0 = time.perf_counter()
-        cpu0 = time.process_time()
+        cpu0, sim0 = time.process_time(), child_cpu()
         i = 0
         while True:
             if i == WARMUP_FRAMES:                      # the counted frames' CPU time
-                wall0, cpu0 = time.perf_counter(), time.process_time()
+                wall0, cpu0, sim0 = time.perf_counter(), time.process_time(), child_cpu()
             frame = live.step(float(times[i % len(times)]))
             i += 1
             if i > WARMUP_FRAMES:
@@ -118,7 +129,9 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
                 break
             if time.perf_counter() - start > MAX_SECONDS and len(done) >= 2:
                 break
-        cores = (time.process_time() - cpu0) / max(time.perf_counter() - wall0, 1e-9)
+        wall, sim1 = max(time.perf_counter() - wall0, 1e-9), child_cpu()
+        cores = (time.process_time() - cpu0) / wall
+        sim_cores = None if sim0 is None or sim1 is None else (sim1 - sim0) / wall
         capture_hz = live.capture_rate_hz or 0.0
         latency = motion_latency(list(live.changes), done, "decoupled")
         alone, cores_alone = _renderer_alone(live, times, i, len(done))
@@ -137,7 +150,8 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
                            for k in captured},
         render_fps_alone=round(alone, 3), rate_with_simulator=round(len(done) / seconds / alone, 3),
-        cores_busy=round(cores, 2), cores_busy_alone=round(cores_alone, 2))
+        cores_busy=round(cores, 2), cores_busy_alone=round(cores_alone, 2), simulator=simulator.to_json(),
+        simulator_cores_busy=None if sim_cores is None else round(sim_cores, 2))
 
 
 def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float]:

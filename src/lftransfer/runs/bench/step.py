@@ -302,15 +302,23 @@ def _settings_json(scene, options: BenchOptions, settings: TransferSettings, rig
     }
 
 
-def _beside(scene, options: BenchOptions, opened, model, live: LiveTransfer, settings, times: list[float], last,
+def _beside(scene, options: BenchOptions, simulator, model, live: LiveTransfer, settings, times: list[float], last,
             say: Progress):
-    """What the bench measures beside the timed steps, each where asked for: the decoupled loop's run, the fast
-    path's accuracy on the last frame, Mitsuba's own path tracer on the light field job. Returns (decoupled,
-    accuracy, peer), None where not asked for."""
+    """What the bench measures beside the timed steps, each where asked for: the decoupled loop's run (on a
+    simulated rig of its own, opened as ``lft live`` opens it: ``simulator``, a
+    :class:`~lftransfer.settings.SimulatorSettings`), the fast path's accuracy on the last frame, Mitsuba's own path
+    tracer on the light field job. Returns (decoupled, accuracy, peer), None where not asked for."""
+    from lftransfer.runs.pipeline import RunOptions
+    from lftransfer.runs.rigs import open_rig
+
     decoupled = accuracy = peer = None
     if options.decoupled:
-        decoupled = run_decoupled(opened.rig, model, scene.synthetic_part(), settings, np.asarray(times),
-                                  frames=max(options.iterations, 10), progress=say)
+        own = open_rig(scene, RunOptions(truth_seed=options.truth_seed), simulator=simulator)
+        try:
+            decoupled = run_decoupled(own.rig, model, scene.synthetic_part(), settings, np.asarray(times),
+                                      frames=max(options.iterations, 10), simulator=simulator, progress=say)
+        finally:
+            own.rig.close()
     if options.accuracy:
         say("accuracy: the exact path on the last frame (dense aperture sampling)")
         accuracy = fast_vs_exact(last, live.side, settings, aperture_samples=options.exact_aperture_samples)
@@ -321,7 +329,7 @@ def _beside(scene, options: BenchOptions, opened, model, live: LiveTransfer, set
     return decoupled, accuracy, peer
 
 
-def _notes(options: BenchOptions, renderer: str, rig_model: str, sync_moved: bool, decoupled: bool,
+def _notes(options: BenchOptions, renderer: str, rig_model: str, sync_moved: bool, decoupled,
            extra: list[str]) -> list[str]:
     """What the bench's result says of how it measured: where the fast path approximates, the rig model, the peer,
     what the latencies include, the stages counted beside the usual ones (``extra``)."""
@@ -339,9 +347,13 @@ def _notes(options: BenchOptions, renderer: str, rig_model: str, sync_moved: boo
     if sync_moved:
         notes.append("latency_ms.sync: each capture runs inside its frame, so on the simulated rig the simulator's "
                      "capture is in the latency (a physical rig's exposure would be instead)")
-    if decoupled:
-        notes.append("decoupled: the simulator's captures share the cores with the render loop, so its frame rate "
-                     "is lower than the pipeline's alone (what lft live on the simulated rig shows)")
+    if decoupled is not None:
+        sim = decoupled.simulator
+        where = (f"in a process of its own ({sim['threads']} Dr.Jit thread(s), nice {sim['nice']})"
+                 if sim["where"] == "process" else "in the render loop's process (one Dr.Jit thread pool)")
+        notes.append(f"decoupled: the simulator renders its captures {where}, on the same cores as the render "
+                     "loop (what lft live on the simulated rig shows); render_fps_alone is the loop with the "
+                     "captures held")
     if extra:
         notes.append(f"stages counted in the pipeline besides the usual ones: {', '.join(extra)}")
     return notes
@@ -387,7 +399,8 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     opened = open_rig(scene, RunOptions(truth_seed=options.truth_seed))
     try:
         model, rig_model, calibration_s = _rig_model(scene, opened, options, say)
-        settings = transfer_settings(scene, options)
+        resolved = resolve_settings(scene, options.settings)
+        settings = resolved.transfer
         say("set up the live loop (renderer, codecs)")
         live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
         renderer = settings.renderer
@@ -414,13 +427,14 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
                           renderer_scene=live.side.renderer.scene)
         last = frames[-1]
         sync_latency = motion_latency(list(live.changes), frames, "sync")
-        decoupled, accuracy, peer = _beside(scene, options, opened, model, live, settings, times, last, say)
+        decoupled, accuracy, peer = _beside(scene, options, resolved.simulator, model, live, settings, times, last,
+                                            say)
     finally:
         opened.rig.close()
 
     timed = _timings(frames)
     pipeline = list(timed["stages_ms"])
-    notes = _notes(options, renderer, rig_model, sync_latency.view is not None, decoupled is not None,
+    notes = _notes(options, renderer, rig_model, sync_latency.view is not None, decoupled,
                    [k for k in pipeline if k not in PIPELINE_STAGES])
     return BenchResult(
         **timed,

@@ -1,0 +1,90 @@
+"""The simulated rig in a process of its own (lftransfer.sim.process): the same captures as in process, the
+simulated rig's own methods forwarded, errors carried back, and a dead child named in one line."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from lftransfer.rig.base import RigError
+from lftransfer.rig.requests import RealScene
+from lftransfer.scenes import builtin_scene, load_scene, quick_scene
+from lftransfer.settings import Overrides, SimulatorSettings, resolve_settings
+from lftransfer.sim.oracle import open_simulated_rig
+from lftransfer.sim.process import SimulatorProcess
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return quick_scene(load_scene(builtin_scene("fig5")))
+
+
+def _pattern(info) -> np.ndarray:
+    black = info.black()
+    rng = np.random.default_rng(1)
+    return (rng.random(black.shape) * 200).astype(black.dtype)
+
+
+def test_01_captures_equal_the_simulated_rig_in_process(variant, scene):
+    """The same frame's noise, real scene time and projection give the same codes and view, to the bit (the
+    child renders with one Dr.Jit thread, this process with every core)."""
+    rig, _oracle = open_simulated_rig(scene, 3, capture_spp=2)
+    with SimulatorProcess(scene, 3, capture_spp=2, threads=1, nice=5) as child:
+        assert child.info == rig.info
+        got = []
+        for r in (child, rig):
+            r.start_frame(2)
+            r.setup(RealScene(time_s=0.5))
+            r.project(_pattern(r.info))
+            got.append((r.capture_lf().codes, r.capture_view().radiance))
+        assert np.array_equal(got[0][0], got[1][0])
+        assert np.array_equal(got[0][1], got[1][1])
+        # negative control: another frame's noise gives other codes
+        child.start_frame(3)
+        assert not np.array_equal(child.capture_lf().codes, got[1][0])
+        assert child.noise_state().keys() == rig.noise_state().keys()
+        assert child.cpu_seconds() > 0
+
+
+def test_02_forwarded_methods_errors_and_the_real_objects(variant, scene):
+    with SimulatorProcess(scene, None, capture_spp=1) as child:
+        names = [o.name for o in child.real_objects]
+        assert names == [o.name for o in scene.real]
+        moved = [o.model_dump() for o in child.real_objects]
+        moved[0]["translate"] = [moved[0]["translate"][0] + 0.01, *moved[0]["translate"][1:]]
+        child.place_real(moved)
+        assert child.real_objects[0].translate[0] == pytest.approx(moved[0]["translate"][0])
+        with pytest.raises(TypeError, match="not a set-up request"):      # the child's error, its own type
+            child.setup("a board")
+        with pytest.raises(AttributeError, match="no 'calibrate'"):
+            child.calibrate()
+        child.capture_lf()                                                 # it still serves after an error
+    with pytest.raises(RigError, match="was closed"):
+        child.capture_lf()
+
+
+def test_03_a_dead_simulator_is_named_in_one_line(variant, scene):
+    child = SimulatorProcess(scene, None, capture_spp=1)
+    os.kill(child.pid, signal.SIGKILL)
+    for _ in range(2):                                   # the request in progress and every later one
+        with pytest.raises(RigError) as raised:
+            child.capture_lf()
+        assert str(raised.value) == (f"the simulator process (pid {child.pid}) died (exit code -9) during "
+                                     "capture_lf; the simulated rig is gone")
+    child.close()
+    assert child.cpu_seconds() is None
+
+
+def test_04_settings_resolved_once_with_checked_bounds(scene):
+    assert resolve_settings(scene).simulator == SimulatorSettings(where="process", threads=1, nice=7)
+    asked = Overrides(simulator="thread", simulator_threads=2, simulator_nice=0, renderer_threads=1)
+    assert resolve_settings(scene, asked).simulator == SimulatorSettings("thread", 2, 0, 1)
+    for bad, field in ((dict(simulator_nice=20), "simulator_nice"), (dict(simulator_threads=0), "simulator_threads"),
+                       (dict(simulator="gpu"), "simulator"), (dict(renderer_threads=True), "renderer_threads")):
+        with pytest.raises(ValueError, match=field):
+            Overrides(**bad)
+    with pytest.raises(ValueError, match="threads"):
+        SimulatorProcess(scene, None, capture_spp=1, threads=0)
