@@ -204,17 +204,20 @@ def test_a_material_the_fast_path_has_not_verified_resolves_to_the_exact_path():
 
 
 def test_every_setting_is_one_option_made_from_its_field():
-    """Each field of Overrides but ``compare`` is an option of ``lft run`` whose flag, help and values are the
-    field's (the command line, the page's validation and docs/cli.md read the same definition); an unknown
-    setting is refused."""
+    """Each field of Overrides but ``compare`` is an option of ``lft run`` (the live loop's simulator settings: of
+    ``lft live``) whose flag, help and values are the field's (the command line, the page's validation and
+    docs/cli.md read the same definition); an unknown setting is refused."""
     import typer.main
     from rich.markup import escape
 
     from lftransfer.app.cli import app
     from lftransfer.app.cli.options import setting_options
 
-    run = typer.main.get_command(app).commands["run"]
-    params = {p.name: p for p in run.params}
+    commands = typer.main.get_command(app).commands
+    params = {p.name: p for p in commands["live"].params}
+    params.update({p.name: p for p in commands["run"].params})
+    live_only = {"simulator", "simulator_threads", "simulator_nice", "renderer_threads"}
+    assert live_only.isdisjoint(p.name for p in commands["run"].params)
     for f in dataclasses.fields(Overrides):
         if f.name == "compare":
             continue

@@ -84,8 +84,9 @@ DEFAULT_SEQUENCE_LOOP: LiveLoop = "sync"
 clock, so a rerun writes the same frames."""
 
 DEFAULT_SIMULATOR: Simulator = "process"
-"""A live loop on the simulated rig runs the simulator in a process of its own (a run's bounce loop, which waits for
-each capture and renders nothing beside it, keeps the simulated rig in its own process)."""
+"""The decoupled live loop on the simulated rig runs the simulator in a process of its own. A loop that waits for
+each capture (the synchronous live loop, a run's bounce loop) renders nothing beside it and keeps it in process,
+where it has every core."""
 DEFAULT_SIMULATOR_THREADS = 1
 """Dr.Jit threads of the simulator's process: the page's frame rate before the captures' rate."""
 DEFAULT_SIMULATOR_NICE = 7

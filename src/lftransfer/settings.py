@@ -176,7 +176,7 @@ class SimulatorSettings:
         renderer_threads: Dr.Jit threads of the loop's own process (None: Dr.Jit's default, one per core).
     """
 
-    where: choices.Simulator = choices.DEFAULT_SIMULATOR
+    where: choices.Simulator = "thread"
     threads: int = choices.DEFAULT_SIMULATOR_THREADS
     nice: int = choices.DEFAULT_SIMULATOR_NICE
     renderer_threads: int | None = None
@@ -203,8 +203,8 @@ class RunSettings:
         adjustments: what the resolution changed from what the scene and the overrides asked for, and why, one
             sentence each (a live loop's projection where the real objects move).
         simulator: where a live loop's simulated rig renders its captures and the threads each side gets (the live
-            loops open their rig with it: ``lft live``, ``lft render --mode live``, ``lft bench --live``; other
-            runs, whose loop waits for each capture, render their captures in their own process).
+            loops open their rig with it: ``lft live``, ``lft render --mode live``, ``lft bench --live``): by
+            default its own process beside the decoupled loop, this process where the loop waits for each capture.
     """
 
     transfer: TransferSettings
@@ -237,7 +237,7 @@ class RunSettings:
 
 
 def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = False,
-                     **transfer_changes) -> RunSettings:
+                     loop: choices.LiveLoop | None = None, **transfer_changes) -> RunSettings:
     """The settings a run on ``scene`` uses with ``overrides``.
 
     In order: :mod:`lftransfer.choices`' defaults (through the scene model's defaults), the scene file's
@@ -251,6 +251,8 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
         scene: ``SceneConfig`` (or its synthetic part).
         overrides: what the caller asks for (:class:`Overrides`).
         live: the settings of a live loop (a live sequence), which measures the real scene's depth once.
+        loop: the live loop they are for ("decoupled" or "sync"; None: no live loop), which sets where the simulated
+            rig renders by default (:class:`SimulatorSettings`).
         transfer_changes: further :class:`~lftransfer.transfer.bounce.TransferSettings` fields that are not
             choices (``bounce_views``, ``seed``, ``lf_spp``, ...), applied last.
 
@@ -295,12 +297,14 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
     gt_spp = overrides.gt_spp if overrides.gt_spp is not None else render.gt_spp
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
                        quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments),
-                       reference_budget_s=overrides.reference_budget_s, simulator=_simulator(overrides))
+                       reference_budget_s=overrides.reference_budget_s,
+                       simulator=_simulator(overrides, loop))
 
 
-def _simulator(overrides: Overrides) -> SimulatorSettings:
-    """A live loop's simulator: its place and threads as the overrides ask, else the defaults."""
-    where = overrides.simulator or choices.DEFAULT_SIMULATOR
+def _simulator(overrides: Overrides, loop: str | None) -> SimulatorSettings:
+    """The simulator's place and threads as the overrides ask, else the defaults: its own process beside a
+    decoupled loop, this process where the loop waits for each capture (a synchronous loop, a run)."""
+    where = overrides.simulator or (choices.DEFAULT_SIMULATOR if loop == "decoupled" else "thread")
     threads = overrides.simulator_threads or choices.DEFAULT_SIMULATOR_THREADS
     nice = choices.DEFAULT_SIMULATOR_NICE if overrides.simulator_nice is None else overrides.simulator_nice
     return SimulatorSettings(where=where, threads=threads, nice=nice, renderer_threads=overrides.renderer_threads)

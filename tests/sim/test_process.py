@@ -79,7 +79,9 @@ def test_03_a_dead_simulator_is_named_in_one_line(variant, scene):
 
 
 def test_04_settings_resolved_once_with_checked_bounds(scene):
-    assert resolve_settings(scene).simulator == SimulatorSettings(where="process", threads=1, nice=7)
+    assert resolve_settings(scene, loop="decoupled").simulator == SimulatorSettings("process", threads=1, nice=7)
+    assert resolve_settings(scene, live=True, loop="sync").simulator.where == "thread"     # it waits for each capture
+    assert resolve_settings(scene).simulator.where == "thread"
     asked = Overrides(simulator="thread", simulator_threads=2, simulator_nice=0, renderer_threads=1)
     assert resolve_settings(scene, asked).simulator == SimulatorSettings("thread", 2, 0, 1)
     for bad, field in ((dict(simulator_nice=20), "simulator_nice"), (dict(simulator_threads=0), "simulator_threads"),

@@ -110,10 +110,10 @@ class RunOptions:
         if problems:
             raise ValueError("; ".join(problems))
 
-    def resolve(self, scene, *, live: bool = False, **transfer_changes) -> RunSettings:
-        """The settings this run uses on ``scene`` (:func:`lftransfer.settings.resolve_settings`; ``live`` and
-        ``transfer_changes`` as it takes them)."""
-        return resolve_settings(scene, self.settings, live=live, **transfer_changes)
+    def resolve(self, scene, *, live: bool = False, loop: str | None = None, **transfer_changes) -> RunSettings:
+        """The settings this run uses on ``scene`` (:func:`lftransfer.settings.resolve_settings`; ``live``,
+        ``loop`` and ``transfer_changes`` as it takes them)."""
+        return resolve_settings(scene, self.settings, live=live, loop=loop, **transfer_changes)
 
 
 def _calibrates(options: RunOptions) -> bool:

@@ -381,7 +381,8 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     step = step or (lambda _msg: None)
     times = sequence_times(scene, seq)
     n = len(times)
-    resolved = options.resolve(scene, live=seq.mode == "live", bounce_views=seq.mode == "converged")
+    resolved = options.resolve(scene, live=seq.mode == "live", loop=seq.loop if seq.mode == "live" else None,
+                               bounce_views=seq.mode == "converged")
     settings, projection_note = resolved.transfer, _projection(seq, resolved)
     if seq.cluster is not None and options.rig.kind != "sim":
         raise SequenceError(f"--cluster needs the simulated rig (--rig sim), not {options.rig}: a physical rig or a "

@@ -28,7 +28,7 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     out = Path(out)
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
                          settings=settings, recalibrate=recalibrate)
-    resolved = options.resolve(scene, live=True)
+    resolved = options.resolve(scene, live=True, loop=loop)
     opened = open_rig(scene, options, simulator=resolved.simulator)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:

@@ -399,7 +399,7 @@ def run_bench(scene, options: BenchOptions = BenchOptions(), *, progress: Progre
     opened = open_rig(scene, RunOptions(truth_seed=options.truth_seed))
     try:
         model, rig_model, calibration_s = _rig_model(scene, opened, options, say)
-        resolved = resolve_settings(scene, options.settings)
+        resolved = resolve_settings(scene, options.settings, loop="decoupled" if options.decoupled else None)
         settings = resolved.transfer
         say("set up the live loop (renderer, codecs)")
         live = LiveTransfer(opened.rig, model, scene.synthetic_part(), settings)
