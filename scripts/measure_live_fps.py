@@ -111,7 +111,7 @@ async def _watch(url: str, seconds: float, start_translate: list[float], edit_ev
                 "longest_gap_s": round(float(gaps.max()), 3) if len(gaps) else None,
                 "capture_hz": last.get("capture_hz"), "capture_age_s": last.get("capture_age_s"),
                 "latency_ms": last.get("latency_ms"), "last_frame_stages_ms": last.get("stages_ms"),
-                "last_capture_ms": last.get("capture_ms")}
+                "last_capture_ms": last.get("capture_ms"), "cores_busy": last.get("cores_busy")}
 
 
 def measure(scene, loop: str, args, *, seconds: float | None = None, edit_every: float = EDIT_EVERY_S) -> dict:
@@ -129,8 +129,10 @@ def measure(scene, loop: str, args, *, seconds: float | None = None, edit_every:
     while not server.started:
         time.sleep(0.1)
     try:
-        return asyncio.run(_watch(f"ws://127.0.0.1:{args.port}/ws", args.seconds if seconds is None else seconds,
-                                  list(scene.synthetic[0].translate), edit_every))
+        watched = asyncio.run(_watch(f"ws://127.0.0.1:{args.port}/ws", args.seconds if seconds is None else seconds,
+                                     list(scene.synthetic[0].translate), edit_every))
+        # where the simulated rig rendered: its own process (lftransfer.sim.process) or this one
+        return {**watched, "simulator": "process" if hasattr(session.live.rig, "cpu_seconds") else "thread"}
     finally:
         server.should_exit = True
         thread.join(120)

@@ -33,6 +33,8 @@ def live_fps_tables(s) -> list[str]:
             ["captures per second", *(num(loops[k].get("capture_hz")) if loops[k].get("capture_hz") else
                                       "one per frame" for k in names)],
             ["longest gap between frames, s", *(num(loops[k].get("longest_gap_s")) for k in names)],
+            ["the simulator renders in", *(f"{loops[k]['simulator']} ({_cores(loops[k].get('cores_busy'))})"
+                                          if loops[k].get("simulator") else "-" for k in names)],
             ["edits sent (one every ... s)", *(f"{loops[k].get('edits_sent')} ({num(loops[k].get('edit_every_s'))})"
                                                for k in names)]]
     stages = {k: loops[k].get("last_frame_stages_ms") or {} for k in names}
@@ -42,6 +44,15 @@ def live_fps_tables(s) -> list[str]:
     for stage in dict.fromkeys(x for k in names for x in captured[k]):
         rows.append([f"its capture: `{stage}`, ms", *(fixed(captured[k].get(stage), 1) for k in names)])
     return out + table(["quantity", *names], rows)
+
+
+def _cores(busy: dict | None) -> str:
+    """The cores each side kept busy over the page's last frames (``cores_busy`` of its frame message)."""
+    if not busy:
+        return "cores busy not measured"
+    sim = busy.get("simulator")
+    return f"cores busy of {busy.get('cores')}: the loop {num(busy.get('loop'))}" + \
+        ("" if sim is None else f", the simulator {num(sim)}")
 
 
 def soak_tables(s) -> list[str]:
