@@ -8,7 +8,7 @@ edit-to-pixel latency is the time from sending it to receiving the first frame m
 
 Usage:
     python scripts/measure_live_fps.py [SCENE.toml] [--quick] [--seconds 60] [--loop both|decoupled|sync]
-        [--calibration FILE] [--rig-model calibrated|nominal|oracle] [--json OUT]
+        [--calibration FILE] [--rig-model calibrated|nominal|oracle] [--edit-every 0.1] [--json OUT]
 """
 
 from __future__ import annotations
@@ -149,6 +149,9 @@ def main() -> None:
     parser.add_argument("--calibration", type=Path, default=None)
     parser.add_argument("--rig-model", default=DEFAULT_RIG_MODEL, choices=RIG_MODELS)
     parser.add_argument("--port", type=int, default=8787)
+    parser.add_argument("--edit-every", type=float, default=EDIT_EVERY_S,
+                        help="seconds between the dragged slider's edits (a browser sends one per animation frame, "
+                             "1/60 s; the page renders at most one frame per edit or capture)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
     scene = load(args.scene, args.quick)
@@ -157,7 +160,7 @@ def main() -> None:
               "lf_camera": list(scene.rig.lf_camera), "seconds": args.seconds, "rig_model": args.rig_model,
               "calibration": str(args.calibration) if args.calibration else None,
               "machine": {"cpus": os.cpu_count(), "load_average": [round(x, 2) for x in os.getloadavg()]},
-              "loops": {loop: measure(scene, loop, args) for loop in loops}}
+              "loops": {loop: measure(scene, loop, args, edit_every=args.edit_every) for loop in loops}}
     report(result, args.json)
 
 

@@ -90,10 +90,10 @@ where it has every core."""
 DEFAULT_SIMULATOR_THREADS = 1
 """Dr.Jit threads of the simulator's process: the page's frame rate before the captures' rate."""
 DEFAULT_SIMULATOR_NICE = 7
-"""How much lower the simulator process's scheduling priority is (``nice``, 0 to 19): Linux then gives it about a
-sixth of a core the renderer also wants, and every core the renderer leaves idle. Measured on 2 cores at quarter
-resolution (docs/performance.md, "The simulator beside the renderer"), the page keeps 84 % of its rate at 7 (69 % at
-5, 64 % at 0, 31 % in process) while the captures come at 0.5 per second (0.6, 1.1, 1.8)."""
+"""How much lower the simulator process's scheduling priority is (``nice``, 0 to 19). Linux then gives the renderer
+a core whenever it wants one and the simulator what the renderer leaves: the higher, the more of the page's frame
+rate is kept and the fewer captures per second come (docs/performance.md, "The simulator beside the renderer";
+measured in docs/results.md, "Where the simulator renders beside the decoupled loop")."""
 
 LENSLET_RECONSTRUCTION: Reconstruction = "box"
 LENSLET_WINDOW: Window = "cut"

@@ -31,7 +31,8 @@ from pathlib import Path
 from lftransfer.reports.results_demo import demo_tables
 from lftransfer.reports.results_format import (db, fixed, median_p95, num, resolution_text, surface_solve_text,
                                                 table)
-from lftransfer.reports.results_live import live_fps_tables, paired_tables, profile_tables, soak_tables
+from lftransfer.reports.results_live import (live_fps_tables, paired_tables, profile_tables,
+                                             simulator_places_tables, soak_tables)
 from lftransfer.reports.results_occlusion import occlusion_tables
 from lftransfer.reports.results_probe import probe_tables
 from lftransfer.reports.results_study import study_tables
@@ -81,6 +82,11 @@ def _seq(name: str, title: str, scene: str, *, quick: bool, calibrate: tuple[str
                (("report", f"{out}/report.json"), ("effect", f"{out}/effect.json")), quick=quick, needs=needs)
 
 
+SIMULATOR_PLACES = (("thread", ("--simulator", "thread")), ("nice0", ("--simulator-nice", "0")),
+                    ("nice3", ("--simulator-nice", "3")), ("nice7", ()), ("nice10", ("--simulator-nice", "10")))
+"""The places the simulator is measured at beside the decoupled loop (:func:`simulator_places_tables`): a name and
+the bench's options."""
+
 RUNS: tuple[Run, ...] = (
     Run("demo", "demo", "Fig. 4 at the paper's resolution (`lft demo`)",
         (("lft", "demo", "--out", "out/runs/demo"),), (("", "out/runs/demo/report.json"),)),
@@ -122,6 +128,12 @@ RUNS: tuple[Run, ...] = (
     Run("bench_quick", "bench", "The live step at quarter resolution (`lft bench --quick`)",
         (("lft", "bench", "--quick", "--json", "out/runs/bench_quick.json"),),
         (("", "out/runs/bench_quick.json"),), quick=True),
+    Run("simulator_places_quick", "simulator_places",
+        "Where the simulator renders beside the decoupled loop, quarter resolution (`lft bench --quick --live` with "
+        "`--simulator thread`, then its own process at `--simulator-nice` 0, 3, 7 (the default) and 10)",
+        tuple(("lft", "bench", "--quick", "--live", "--no-peer", "--no-accuracy", *place,
+               "--json", f"out/runs/simulator_{name}.json") for name, place in SIMULATOR_PLACES),
+        tuple((name, f"out/runs/simulator_{name}.json") for name, _place in SIMULATOR_PLACES), quick=True),
     Run("bench", "bench", "The live step at the paper's resolution, still scene (`lft bench`)",
         (("lft", "bench", "--no-peer", "--calibration", "out/runs/demo/calibration.json",
           "--json", "out/runs/bench.json"),), (("", "out/runs/bench.json"),), needs=("demo",)),
@@ -166,6 +178,11 @@ RUNS: tuple[Run, ...] = (
     Run("live_fps_quick", "live_fps", "`lft live` as a page sees it, quarter resolution: decoupled against --sync",
         (("python", "scripts/measure_live_fps.py", "--quick", "--seconds", "60", "--json",
           "out/runs/live_fps_quick.json"),), (("", "out/runs/live_fps_quick.json"),), quick=True),
+    Run("live_fps_quick_drag", "live_fps", "`lft live` as a page sees it, quarter resolution, the decoupled loop "
+        "with an edit every 1/30 s (a slider dragged faster than the page renders)",
+        (("python", "scripts/measure_live_fps.py", "--quick", "--seconds", "60", "--loop", "decoupled",
+          "--edit-every", "0.0333", "--json", "out/runs/live_fps_quick_drag.json"),),
+        (("", "out/runs/live_fps_quick_drag.json"),), quick=True),
     Run("live_fps", "live_fps", "`lft live` as a page sees it, the paper's resolution: decoupled against --sync",
         (("python", "scripts/measure_live_fps.py", "--seconds", "90", "--calibration",
           "out/runs/demo/calibration.json", "--json", "out/runs/live_fps.json"),), (("", "out/runs/live_fps.json"),),
@@ -228,7 +245,7 @@ class StoredRun:
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
 KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
-         "occlusion", "probe", "paired")
+         "occlusion", "probe", "paired", "simulator_places")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -530,12 +547,14 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
           "study": lambda s: study_tables(s.data),
           "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
-          "probe": probe_tables, "paired": paired_tables}
+          "probe": probe_tables, "paired": paired_tables,
+          "simulator_places": lambda s: simulator_places_tables(s, [name for name, _ in SIMULATOR_PLACES])}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
-          ("The live step: `lft bench`", ("bench_quick", "bench", "bench_live", "bench_live_box",
+          ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live",
+                                          "bench_live_box",
                                           "paired_84066a4", "paired_8184fa7")),
-          ("The live page: `lft live`", ("live_fps_quick", "live_fps", "soak_live_quick", "profile_before",
+          ("The live page: `lft live`", ("live_fps_quick", "live_fps_quick_drag", "live_fps", "soak_live_quick", "profile_before",
                                           "profile")),
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig6_quick_quiet",
                                             "fig1b_quick", "fig5", "fig6", "fig1b")),

@@ -55,6 +55,27 @@ def _cores(busy: dict | None) -> str:
         ("" if sim is None else f", the simulator {num(sim)}")
 
 
+def simulator_places_tables(s, names: list[str]) -> list[str]:
+    """The decoupled loop of ``lft bench --live`` with the simulator in each place (kind ``simulator_places``:
+    ``data[name]``, one bench JSON each): the render rate beside it and alone, the captures' rate, the cores."""
+    rows = []
+    for name in names:
+        dec = s.need(name, "decoupled")
+        sim = dec.get("simulator") or {}
+        where = f"own process, nice {sim.get('nice')}, {sim.get('threads')} thread(s)" \
+            if sim.get("where") == "process" else "the loop's process"
+        light = ((dec.get("latency") or {}).get("light") or {}).get("median")
+        rows.append([where, num(dec.get("render_fps")), num(dec.get("render_fps_alone")),
+                     f"{fixed(100 * dec['rate_with_simulator'], 0)} %" if dec.get("rate_with_simulator") else "-",
+                     num(dec.get("capture_hz")), fixed(light, 0), num(dec.get("cores_busy")),
+                     num(dec.get("simulator_cores_busy")) if dec.get("simulator_cores_busy") is not None else
+                     "(in the loop's)"])
+    return ["Each row is one `lft bench --quick --live` run, one after another on one machine; the rate alone is "
+            "the same loop with the captures held, in the same run (target: at least 70 % kept).", ""] + \
+        table(["the simulator renders in", "frames/s beside it", "frames/s alone", "kept", "captures/s",
+               "motion to its light, ms (median)", "loop's cores busy", "simulator's cores busy"], rows)
+
+
 def soak_tables(s) -> list[str]:
     d = s.data
     rss = s.need("rss_mb")
