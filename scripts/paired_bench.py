@@ -35,7 +35,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CLONES = ROOT / "out" / "paired"
 DEFAULT_BENCH = ("--rig-model", "oracle", "--no-peer", "--no-accuracy", "--iterations", "10")
-STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "render_view", "composite")
+STAGES = ("pose", "encode", "decode", "incident_light", "render_lightfield", "prefilter", "surface_target",
+          "render_view", "composite")
 TOTALS = ("pipeline_iteration_ms", "floor_ms", "capture_ms")
 
 

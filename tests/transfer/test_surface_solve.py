@@ -165,3 +165,24 @@ def test_05_the_measured_surface(encoder):
     assert len(empty) == 0
     with pytest.raises(ValueError, match="depth has shape"):
         measured_surface(np.zeros((2, U, U)), array, U, U)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_06_row_blocks_multiply_as_scipy_does_to_the_bit(threads):
+    """The solve's sparse products, split into row blocks on threads and one column at a time, equal SciPy's
+    product of the whole matrix with every column at once, bit for bit (the same sums in the same order)."""
+    import scipy.sparse as sp
+
+    from lftransfer.transfer.solver import RowBlocks
+
+    rng = np.random.default_rng(4)
+    matrix = sp.random(300, 500, density=0.05, format="csr", random_state=5, dtype=np.float32)
+    blocks = RowBlocks(matrix, threads=threads)
+    for x in (rng.random((500, 3), dtype=np.float32), rng.random(500, dtype=np.float32),
+              rng.random((500, 1), dtype=np.float32)):
+        got = blocks @ x
+        assert got.shape == (matrix @ x).shape and got.dtype == np.float32
+        assert np.array_equal(got, matrix @ x)
+    # negative control: another order of the sums (float64, rounded) is not always the same
+    x = rng.random((500, 3), dtype=np.float32)
+    assert not np.array_equal((matrix.astype(np.float64) @ x.astype(np.float64)).astype(np.float32), blocks @ x)

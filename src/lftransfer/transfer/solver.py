@@ -50,10 +50,22 @@ class RowBlocks:
         self._blocks = [matrix[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        """The product with ``x``: (columns,) or (columns, C). Each of C > 1 columns is multiplied on its own:
+        SciPy's product with several columns at once runs a slow inner loop per nonzero (a solve's 4.8 M nonzeros
+        by 3 columns: 18 ms, against 13 ms for the three columns apart, on one core), and adds the same terms in
+        the same order, so the result is the same to the bit."""
+        x = np.asarray(x)
+        if x.ndim == 2 and x.shape[1] > 1:
+            columns = [np.ascontiguousarray(x[:, c]) for c in range(x.shape[1])]
+
+            def product(block):
+                return np.stack([np.asarray(block @ column) for column in columns], axis=1)
+        else:
+            def product(block):
+                return np.asarray(block @ x)
         if len(self._blocks) == 1:
-            return np.asarray(self._blocks[0] @ x)
-        parts = _pool(len(self._blocks)).map(lambda block: np.asarray(block @ x), self._blocks)
-        return np.concatenate(list(parts))
+            return product(self._blocks[0])
+        return np.concatenate(list(_pool(len(self._blocks)).map(product, self._blocks)))
 
 
 @dataclass(frozen=True)
