@@ -470,3 +470,42 @@ def test_09_the_page_resolves_its_settings_as_the_command_line_does(session):
     finally:
         session.scene = saved
     assert session.resolved(bounces=3, bounce_views=True).bounces == 3
+
+
+def test_10_the_server_stops_when_the_loop_stopped_on_a_failed_rig(monkeypatch):
+    """``serve`` returns once the session's loop has ended on its own (``session.failed``: a dead simulator), so
+    that ``lft live`` can end on that one line; before that it keeps serving."""
+    from lftransfer.app.viewer import server
+
+    class Session:                     # the little of a LiveSession that serving needs
+        failed = None
+        started = stopped = False
+
+        def start(self, *callbacks):
+            self.started = True
+
+        def stop(self):
+            self.stopped = True
+
+    session = Session()
+    monkeypatch.setattr(server, "make_app", lambda s: server.FastAPI(lifespan=_lifespan(s)))
+    thread = threading.Thread(target=server.serve, args=(session,), kwargs={"port": _free_port()}, daemon=True)
+    thread.start()
+    time.sleep(1.5)
+    assert thread.is_alive() and session.started                 # serving while the loop runs
+    session.failed = "the live loop stopped: the simulator process (pid 1) died (exit code -9) during capture_lf"
+    thread.join(10)
+    assert not thread.is_alive() and session.stopped
+
+
+def _lifespan(session):
+    import contextlib
+
+    @contextlib.asynccontextmanager
+    async def lifespan(_app):
+        session.start()
+        try:
+            yield
+        finally:
+            session.stop()
+    return lifespan

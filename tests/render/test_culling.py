@@ -93,3 +93,33 @@ def test_03_culled_renders_equal_whole_ones(variant, monkeypatch):
     np.testing.assert_allclose(view_c.rgb, view.rgb, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(view_c.depth, view.depth, rtol=1e-6)
     np.testing.assert_allclose(lf_c.data, lf.data, rtol=1e-6, atol=1e-9)
+
+
+def test_04_a_still_scene_culls_once_and_a_moved_object_culls_again(variant, monkeypatch):
+    """The tiles are tested against the objects' spheres once while nothing moves (the same rays cast, the same
+    image); a moved object is culled again, and its render equals one of a renderer that never culled."""
+    from lftransfer.backend import mitsuba
+
+    mi = mitsuba()
+    light = [PointLight(np.array([0.2, 0.15, 0.0]), np.array([1.0, 0.8, 0.6]))]
+    sensor = mi.load_dict(sensor_dict([0.3, 0.1, 0.0], [0.0, 0.0, -0.07], [0, 1, 0], 30.0, 192, 144))
+    calls = []
+    meeting = RayTiles.meeting
+    monkeypatch.setattr(RayTiles, "meeting", lambda self, c, r: calls.append(1) or meeting(self, c, r))
+    monkeypatch.setattr(rays_module, "CULL_BELOW", 1.0)
+    r = CachedRenderer(_objects())
+    views = [r.render_view(sensor, 192, 144, light, spp=4) for _ in range(4)]
+    assert len(calls) == 1                                   # tiles built at the 2nd render, tested once
+    for v in views[2:]:
+        np.testing.assert_array_equal(v.rgb, views[1].rgb)
+    moved = [o.model_copy(update={"translate": [o.translate[0] + 0.01, *o.translate[1:]]}) for o in _objects()]
+    assert r.update(moved)
+    after = r.render_view(sensor, 192, 144, light, spp=4)
+    assert len(calls) == 2                                   # culled again for the moved spheres
+    monkeypatch.setattr(rays_module, "CULL_BELOW", 0.0)       # the control: every ray cast
+    whole = CachedRenderer(moved)
+    for _ in range(2):
+        reference = whole.render_view(sensor, 192, 144, light, spp=4)
+    np.testing.assert_array_equal(after.alpha, reference.alpha)
+    np.testing.assert_allclose(after.rgb, reference.rgb, rtol=1e-6, atol=1e-9)
+    assert not np.array_equal(after.alpha, views[-1].alpha)   # negative control: the object did move

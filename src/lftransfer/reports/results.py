@@ -149,8 +149,8 @@ RUNS: tuple[Run, ...] = (
         "`scripts/paired_bench.py`",
         (("python", "scripts/paired_bench.py", "--against", "84066a4", "--with", "HEAD", "--json",
           "out/runs/paired_84066a4.json"),), (("", "out/runs/paired_84066a4.json"),)),
-    Run("paired_beed803", "paired", "The pipeline against commit beed803 (before the solve's products one column at a "
-        "time), paired",
+    Run("paired_beed803", "paired", "The pipeline against commit beed803 (before the solve's products one column "
+        "at a time and the primary rays culled once while nothing moves), paired",
         (("python", "scripts/paired_bench.py", "--against", "beed803", "--with", "HEAD", "--rounds", "3", "--json",
           "out/runs/paired_beed803.json"),), (("", "out/runs/paired_beed803.json"),)),
     Run("paired_8184fa7", "paired", "The pipeline against commit 8184fa7 (before the regression), paired",
@@ -557,7 +557,8 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
           ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live",
                                           "bench_live_box",
-                                          "paired_84066a4", "paired_8184fa7", "paired_beed803")),
+                                          "paired_84066a4", "paired_8184fa7",
+                                          "paired_beed803")),
           ("The live page: `lft live`", ("live_fps_quick", "live_fps_quick_drag", "live_fps", "soak_live_quick",
                                           "profile_before", "profile")),
           ("Sequences: Figs. 5, 6 and 1b", ("fig5_quick", "fig5_quick_decoupled", "fig6_quick", "fig6_quick_quiet",

@@ -23,6 +23,8 @@ class RaySet:
         origins, directions: weak references to its (N, 3) float32 arrays (identity is the key).
         renders: how many renders cast it.
         tiles: its cones for culling, once built (:func:`ray_tiles`).
+        culled: the bounding spheres of the last culling and the rays cast for them (a still scene culls once).
+        cast_rays: those rays' indices and the renderer's Dr.Jit rays gathered for them.
     """
 
     origins: weakref.ref
@@ -30,6 +32,8 @@ class RaySet:
     renders: int = 0
     tiles: RayTiles | None = None
     _centre: tuple = ()        # (centre,) once looked for
+    culled: tuple | None = None    # (the spheres' bytes, the rays cast for them): :func:`rays_to_cast`'s last answer
+    cast_rays: tuple | None = None  # (those rays' indices, their gathered Dr.Jit rays): kept by the renderer
 
     def centre(self) -> np.ndarray | None:
         """(3,) the one origin every ray starts from (a view camera), or None; looked for once, when first asked
@@ -76,13 +80,21 @@ def ray_tiles(ray_set: RaySet | None, origins: np.ndarray, directions: np.ndarra
 def rays_to_cast(ray_set: RaySet | None, origins: np.ndarray, directions: np.ndarray, scene) -> np.ndarray | None:
     """(C,) int64 indices of the rays to cast, those of the tiles whose cone meets an object's bounding sphere in
     ``scene`` (:mod:`lftransfer.render.culling`: the rays left out miss), where fewer than ``CULL_BELOW`` of the
-    tiles may hit; None: cast every ray (no tiles, or too many of them may hit)."""
+    tiles may hit; None: cast every ray (no tiles, or too many of them may hit). The answer is kept with the ray
+    set and given again (the same read-only array) while the spheres stay where they were."""
     tiles = ray_tiles(ray_set, origins, directions)
-    if tiles is not None:
-        chosen = tiles.meeting(*bounding_spheres(scene))
-        if chosen.mean() < CULL_BELOW:
-            return tiles.rays(chosen)
-    return None
+    if tiles is None:
+        return None
+    spheres = bounding_spheres(scene)
+    key = (spheres[0].tobytes(), spheres[1].tobytes())
+    if ray_set.culled is not None and ray_set.culled[0] == key:     # nothing moved since the last render
+        return ray_set.culled[1]
+    chosen = tiles.meeting(*spheres)
+    cast = tiles.rays(chosen) if chosen.mean() < CULL_BELOW else None
+    if cast is not None:
+        cast.flags.writeable = False
+    ray_set.culled = (key, cast)
+    return cast
 
 
 def group_means(idx: np.ndarray, colour: np.ndarray, t_hit: np.ndarray, groups: int, spp: int) -> SampleMeans:

@@ -170,8 +170,12 @@ class CachedRenderer(RayRenderer):
         ray_set = self._ray_sets.find(origins, directions)
         cast = rays_to_cast(ray_set, origins, directions, self.scene)   # indices of the rays cast (None: all)
         if cast is not None:
-            rays = dr.gather(mi.Ray3f, rays, jit_array(mi.UInt32, cast.astype(np.uint32)))
-            dr.eval(rays)                    # one kernel (the intersection would gather each field in its own)
+            if ray_set.cast_rays is not None and ray_set.cast_rays[0] is cast:     # culled as at the last render
+                rays = ray_set.cast_rays[1]
+            else:
+                rays = dr.gather(mi.Ray3f, rays, jit_array(mi.UInt32, cast.astype(np.uint32)))
+                dr.eval(rays)                # one kernel (the intersection would gather each field in its own)
+                ray_set.cast_rays = (cast, rays)
         pi = self.scene.ray_intersect_preliminary(rays)
         dr.eval(pi)          # every field in one kernel (read apart, each would intersect again)
         t = np.array(pi.t, dtype=np.float32)
