@@ -127,7 +127,8 @@ class Overrides:
             problems.append(f"reference_budget_s: expected a number of seconds >= 1, got {self.reference_budget_s!r}")
         if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
-        for name, low, high in (("simulator_threads", 1, None), ("simulator_nice", 0, 19), ("renderer_threads", 1, None)):
+        for name, low, high in (("simulator_threads", 1, None), ("simulator_nice", 0, 19),
+                                ("renderer_threads", 1, None)):
             value = getattr(self, name)
             if value is not None and not (isinstance(value, int) and not isinstance(value, bool) and value >= low
                                           and (high is None or value <= high)):

@@ -108,7 +108,8 @@ class ViewerFrame:
                 "capture_age_s": round(self.capture_age_s, 3), "capture_index": self.capture_index,
                 "capture_ms": {k: round(v, 1) for k, v in self.capture_ms.items()},
                 "latency_ms": self.latency_ms, "recording": self.recording, "edits": self.edits,
-                "cores_busy": self.cores_busy, "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
+                "cores_busy": self.cores_busy,
+                "image": "data:image/jpeg;base64," + base64.b64encode(image).decode("ascii")}
 
 
 @dataclass
