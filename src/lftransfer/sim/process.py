@@ -2,17 +2,18 @@
 renderer's way.
 
 On the simulated rig a capture is a path-traced render. Run on the live loop's capture thread it shares the
-renderer's Dr.Jit thread pool and cores, and the page's frame rate falls to a quarter. :class:`SimulatorProcess`
-runs the same :class:`~lftransfer.sim.rig.SimRig` in a child process instead, with a thread budget of its own and
-a lower scheduling priority (``nice``), so that the operating system gives the renderer the cores whenever it
-wants them and the simulator the rest. The pipeline talks to it through the :class:`~lftransfer.rig.base.Rig`
-protocol as to any rig; the simulated rig's own further methods (posing a real object, its random streams) are
-forwarded too. Requests and answers cross a pipe as pickles (a capture at the paper's resolution: some 20 MB,
-some 10 ms).
+renderer's Dr.Jit thread pool and cores, and the page keeps under a third of its frame rate.
+:class:`SimulatorProcess` runs the same :class:`~lftransfer.sim.rig.SimRig` in a child process instead, with a thread
+budget of its own and a lower scheduling priority (``nice``), so that the operating system gives the renderer the
+cores whenever it wants them and the simulator the rest. The pipeline talks to it through the
+:class:`~lftransfer.rig.base.Rig` protocol as to any rig; the simulated rig's own further methods (posing a real
+object, its random streams) are forwarded too. Requests and answers cross a socket pair as pickles: an LF camera and
+a view capture at the paper's resolution, 28 MB, take 80 to 130 ms on 2 cores, beside the capture's own seconds of
+path tracing.
 
-The child builds the rig from the scene and the truth seed exactly as :func:`~lftransfer.sim.oracle.open_simulated_rig`
-does in process, so its captures are the same (Dr.Jit's sums over a pixel's samples may add in another order
-with another thread count: float rounding).
+The child builds the rig from the scene and the truth seed exactly as
+:func:`~lftransfer.sim.oracle.open_simulated_rig` does in process: its captures are the same to the bit, whatever
+its thread count (tests/sim/test_process.py).
 
 A child that dies (killed, out of memory) makes the request in progress and every later one raise a
 :class:`~lftransfer.rig.base.RigError` of one line that names the simulator process, its pid and exit code.

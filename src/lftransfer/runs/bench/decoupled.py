@@ -6,9 +6,9 @@ On the simulated rig the captures are the simulator's renders, so the simulator 
 machine's cores: the frame rate measured here is lower than a physical rig's computer would give, whose cameras
 expose on their own. It is what ``lft live`` on the simulated rig shows, with the simulator where ``lft live``
 puts it (:class:`~lftransfer.settings.SimulatorSettings`: by default a process of its own at a lower priority,
-:mod:`lftransfer.sim.process`). What it measures beside the rates
-is the latency a person feels (:mod:`lftransfer.transfer.latency`): from each move to the first composite that
-shows it, and to the first whose real objects' light reflects it.
+:mod:`lftransfer.sim.process`). What it measures beside the rates is the latency a person feels
+(:mod:`lftransfer.transfer.latency`): from each move to the first composite that shows it, and to the first whose
+real objects' light reflects it.
 
 In the same run it renders as many frames again with the captures held (the newest capture reused, the simulator
 idle): the renderer alone. The ratio of the two rates is what the simulator capturing beside the renderer costs
