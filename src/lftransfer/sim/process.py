@@ -33,6 +33,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from lftransfer import choices
 from lftransfer.rig.base import RigError
 from lftransfer.rig.requests import RigInfo
 
@@ -87,7 +88,7 @@ def _serve(conn: Connection) -> None:
 
 
 def _portable(exc: BaseException) -> BaseException:
-    """``exc`` if it pickles, else a RuntimeError carrying its type, text and traceback."""
+    """``exc`` if it pickles, else a RuntimeError carrying its type and text."""
     import pickle
 
     try:
@@ -109,10 +110,13 @@ class SimulatorProcess:
         nice: how much lower the child's scheduling priority is than this process's (0 .. 19; 0: the same).
 
     Raises:
-        RigError: the child could not start (its error as the message) or died while starting.
+        ValueError: ``threads`` or ``nice`` out of range.
+        RigError: the child died while starting, or did not start within :data:`START_TIMEOUT_S`.
+        Exception: the child's own error where building the rig failed (of its own type where it pickles).
     """
 
-    def __init__(self, scene, truth_seed: int | None, *, capture_spp: int, threads: int = 1, nice: int = 10) -> None:
+    def __init__(self, scene, truth_seed: int | None, *, capture_spp: int,
+                 threads: int = choices.DEFAULT_SIMULATOR_THREADS, nice: int = choices.DEFAULT_SIMULATOR_NICE) -> None:
         from lftransfer.backend import variant
 
         if not (isinstance(threads, int) and threads >= 1):
