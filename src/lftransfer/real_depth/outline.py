@@ -41,10 +41,11 @@ from scipy.spatial import cKDTree
 from lftransfer.lightfield import LightField
 from lftransfer.optics.geometry import pixel_rays, view_camera
 from lftransfer.real_depth.lightfield import ViewDepth, lightfield_points, splat_depth
+from lftransfer.rig.requests import CleanPlate, RealScene
 
 __all__ = ["CENTRE_SHARE", "CLOSING_STEPS", "HULL_LIT_FRACTION", "PLATE_THRESHOLD", "centre_hits",
-           "closing_radius_px", "lightfield_view_depths", "on_real_side", "outline_view_depth", "plate_matte",
-           "visual_hull"]
+           "closing_radius_px", "lightfield_view_depths", "on_real_side", "outline_view_depth", "photograph_clean_plate",
+           "plate_matte", "visual_hull"]
 
 #: A sample's centre ray meets the surface where the sample is at least this share as bright as the brightest
 #: sample of its lenslet's 3 x 3 angular neighbourhood (on the occlusion scene: 0.3 leaves 13 % of the view depth
@@ -80,6 +81,16 @@ def centre_hits(response: LightField, depth: np.ndarray, share: float = CENTRE_S
     return np.isfinite(depth) & (lum >= share * brightest) & (brightest > 0)
 
 
+def photograph_clean_plate(rig, time_s: float) -> np.ndarray:
+    """(H, W, 3) the view camera's photograph of the clean plate (:class:`~lftransfer.rig.requests.CleanPlate`: the
+    real objects taken away, everything else as it is; the projector as it was left, black for
+    :func:`plate_matte`); the real scene is then set up again at ``time_s`` seconds."""
+    rig.setup(CleanPlate())
+    plate = rig.capture_view().radiance
+    rig.setup(RealScene(time_s=time_s))
+    return plate
+
+
 def plate_matte(photograph: np.ndarray, plate: np.ndarray, threshold: float = PLATE_THRESHOLD) -> np.ndarray:
     """(H, W) bool: the view pixels where the real scene's photograph differs from the clean plate.
 
@@ -107,10 +118,10 @@ def closing_radius_px(depth: np.ndarray, U: int, model, view, steps: float = CLO
         return 1
     zm = float(np.median(z))
     width_m = steps * zm * 2.0 * model.array.half_width / U
-    K, R, t = view_camera(view)
+    K = view_camera(view)[0]
     to_world = np.linalg.inv(model.world_to_array())
     centre = to_world[:3, :3] @ np.array([0.0, 0.0, zm]) + to_world[:3, 3]   # on the array's axis at that depth
-    distance = float(np.linalg.norm(centre - (-R.T @ t)))
+    distance = float(np.linalg.norm(centre - np.asarray(view.origin, np.float64)))   # from the camera's centre
     return max(1, int(np.ceil(width_m * K[0, 0] / max(distance, 1e-6))))
 
 
@@ -230,9 +241,8 @@ def outline_view_depth(response: LightField, depth: np.ndarray, model, view, pho
 def on_real_side(model, view) -> bool:
     """Whether the view camera's centre is in front of the array (on the real side, by more than a millimetre),
     where the outline can be measured (:func:`visual_hull` marches from there towards the array)."""
-    _K, R, t = view_camera(view)
     m = model.world_to_array()
-    return float(m[2, :3] @ (-R.T @ t) + m[2, 3]) > 1e-3
+    return float(m[2, :3] @ np.asarray(view.origin, np.float64) + m[2, 3]) > 1e-3
 
 
 def lightfield_view_depths(depth: np.ndarray, response: LightField | None, model, view,

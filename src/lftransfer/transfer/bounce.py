@@ -27,11 +27,11 @@ from lftransfer.real_depth.probe import ProbeMeasurement
 from lftransfer.composite import composite, composite_depth
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth, fuse_depths, measure_structured_light
-from lftransfer.real_depth.outline import lightfield_view_depths
+from lftransfer.real_depth.outline import lightfield_view_depths, photograph_clean_plate
 from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
-from lftransfer.rig.requests import CleanPlate, RealScene
+from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
@@ -370,9 +370,7 @@ def _real_depth(rig: Rig, model: RigModel, scene: SyntheticScene, settings: Tran
         with timer("structured_light"):
             structured = measure_structured_light(rig, model, scene.view, side.encoder, settings.angular_samples)
         with timer("clean_plate"):
-            rig.setup(CleanPlate())
-            plate = rig.capture_view().radiance
-            rig.setup(RealScene(time_s=time_s))
+            plate = photograph_clean_plate(rig, time_s)
     else:
         step("the real scene's depth in the view camera: from the LF camera alone")
     if depth is None:

@@ -41,11 +41,11 @@ from lftransfer import choices
 from lftransfer.backend import bound_blas
 from lftransfer.lightfield import LightField
 from lftransfer.real_depth import ViewDepth
-from lftransfer.real_depth.outline import lightfield_view_depths, on_real_side
+from lftransfer.real_depth.outline import lightfield_view_depths, on_real_side, photograph_clean_plate
 from lftransfer.render.base import ViewImage
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
-from lftransfer.rig.requests import CleanPlate, RealScene
+from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
@@ -288,9 +288,7 @@ class LiveTransfer:
         with self.holding_rig() as rig:
             rig.project(rig.info.black())
             if outline and self._plate is None:
-                rig.setup(CleanPlate())
-                self._plate = rig.capture_view().radiance
-                rig.setup(RealScene(time_s=side.time_s))
+                self._plate = photograph_clean_plate(rig, side.time_s)
             direct = side.decoder(rig.capture_lf().codes)
             photograph = rig.capture_view().radiance if outline else None
             U = self.settings.angular_samples
