@@ -50,11 +50,12 @@ def render_view_grid(scene, *, n: int = 9, baseline_m: float = 0.002, shift_px: 
     rig, _oracle = open_simulated_rig(scene, truth_seed)
     view = scene.view
     w, h = view.resolution
-    f_px = w / 2.0 / np.tan(np.radians(view.fov_deg) / 2.0)
+    K, R, _t = view_camera(view)
+    f_px = K[0, 0]
     c = n // 2
     margin = c * shift_px
     wide_fov = float(np.degrees(2.0 * np.arctan((w + 2 * margin) / 2.0 / f_px)))
-    right, down, fwd = view_camera(view)[1]         # the rotation's rows: x right, y down, z forward (world)
+    right, down, fwd = R                            # the rotation's rows: x right, y down, z forward (world)
     views = np.empty((n, n, h, w), np.float32)
     centre_depth = None
     for t in range(n):

@@ -17,6 +17,7 @@ the page, and the CPU time over each phase says how many cores each side kept bu
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from dataclasses import asdict, dataclass
@@ -27,6 +28,7 @@ import numpy as np
 from lftransfer.settings import SimulatorSettings
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LiveTransfer
+from lftransfer.transfer.timer import CoreMeter
 
 __all__ = ["DecoupledRun", "run_decoupled"]
 
@@ -109,14 +111,14 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
     (progress or (lambda _m: None))(f"decoupled loop: {frames} frames and {min_captures} captures at least, then "
                                     "as many with the captures held")
     done = []
-    child_cpu = getattr(rig, "cpu_seconds", lambda: None)     # the simulator process's CPU seconds, if it has one
+    child_cpu = getattr(rig, "cpu_seconds", None)     # the simulator process's CPU seconds, if it has one
     with LiveTransfer(rig, model, scene, settings, loop="decoupled") as live:
-        start = wall0 = time.perf_counter()
-        cpu0, sim0 = time.process_time(), child_cpu()
+        start = time.perf_counter()
         i = 0
         while True:
-            if i == WARMUP_FRAMES:                      # the counted frames' CPU time
-                wall0, cpu0, sim0 = time.perf_counter(), time.process_time(), child_cpu()
+            if i == WARMUP_FRAMES:                      # the counted frames' CPU time, from here to the end
+                cores = CoreMeter(child_cpu, window_s=math.inf)
+                cores.sample()
             frame = live.step(float(times[i % len(times)]))
             i += 1
             if i > WARMUP_FRAMES:
@@ -129,9 +131,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
                 break
             if time.perf_counter() - start > MAX_SECONDS and len(done) >= 2:
                 break
-        wall, sim1 = max(time.perf_counter() - wall0, 1e-9), child_cpu()
-        cores = (time.process_time() - cpu0) / wall
-        sim_cores = None if sim0 is None or sim1 is None else (sim1 - sim0) / wall
+        busy = cores.sample()
         capture_hz = live.capture_rate_hz or 0.0
         latency = motion_latency(list(live.changes), done, "decoupled")
         alone, cores_alone = _renderer_alone(live, times, i, len(done))
@@ -150,16 +150,18 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
                            for k in captured},
         render_fps_alone=round(alone, 3), rate_with_simulator=round(len(done) / seconds / alone, 3),
-        cores_busy=round(cores, 2), cores_busy_alone=round(cores_alone, 2), simulator=simulator.to_json(),
-        simulator_cores_busy=None if sim_cores is None else round(sim_cores, 2))
+        cores_busy=busy["loop"], cores_busy_alone=cores_alone, simulator=simulator.to_json(),
+        simulator_cores_busy=busy["simulator"])
 
 
 def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float]:
     """(frames per second, cores busy) of ``frames`` frames rendered with the captures held, from time index
     ``first`` on: the capture in progress finishes first, then no new one begins."""
     with live.holding_rig():                     # waits for the capture in progress; none begins meanwhile
-        start, cpu = time.perf_counter(), time.process_time()
+        cores = CoreMeter(window_s=math.inf)
+        cores.sample()
+        start = time.perf_counter()
         for i in range(first, first + frames):
             live.step(float(times[i % len(times)]))
         wall = time.perf_counter() - start
-        return frames / wall, (time.process_time() - cpu) / wall
+        return frames / wall, cores.sample()["loop"]
