@@ -37,7 +37,7 @@ def session(variant, tmp_path_factory):
 
     session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path_factory.mktemp("live"))
     yield session
-    session.live.close()
+    session.close()
 
 
 def test_01_edits_are_checked_before_the_loop_sees_them(session):
@@ -312,7 +312,7 @@ def test_05_bounce_layers_on_demand(variant, tmp_path):
         session.submit({"type": "resume"})
         _wait(lambda: sum(k == "frame" for k, _ in events) >= count + 2, 30, "live frames after resuming")
     finally:
-        session.stop()
+        session.close()
 
 
 def test_06_bounce_layers_failure_is_shown(variant, tmp_path, monkeypatch):
@@ -340,7 +340,7 @@ def test_06_bounce_layers_failure_is_shown(variant, tmp_path, monkeypatch):
         session.submit({"type": "bounces"})
         _wait(lambda: any(k == "bounces" and b.state == "done" for k, b in events), 60, "the bounce layers")
     finally:
-        session.stop()
+        session.close()
 
 
 class _LostPage:
@@ -449,7 +449,7 @@ def test_08_decoupled_session_compare_and_record(variant, tmp_path):
         time.sleep(1.0)
         assert len(frames()) == count                           # no frame after it
     finally:
-        session.stop()
+        session.close()
 
 
 def test_09_the_page_resolves_its_settings_as_the_command_line_does(session):

@@ -64,7 +64,8 @@ class _Clients:
 
 
 def make_app(session: LiveSession, *, title: str = "lft live"):
-    """The FastAPI application around a session; the session's loop starts with the app and stops with it.
+    """The FastAPI application around a session; the session's loop starts with the app, and the session is closed
+    with it (its rig released).
 
     (FastAPI and jinja2 are imported at module level: FastAPI resolves the handlers' annotations, such as
     ``WebSocket``, from this module's names.)"""
@@ -91,7 +92,7 @@ def make_app(session: LiveSession, *, title: str = "lft live"):
         try:
             yield
         finally:
-            await asyncio.to_thread(session.stop)
+            await asyncio.to_thread(session.close)
 
     app = FastAPI(title=title, lifespan=lifespan)
 

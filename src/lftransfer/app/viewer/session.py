@@ -376,6 +376,12 @@ class LiveSession:
             self._on_message(self.recorder.stop().message())
         self.live.close()
 
+    def close(self) -> None:
+        """Stop the loop (:meth:`stop`) and release the rig the session was opened with (the simulated rig's
+        process, where it has one: :class:`~lftransfer.sim.process.SimulatorProcess`); the session ends here."""
+        self.stop()
+        self.live.rig.close()
+
     def _apply(self) -> None:
         while True:
             try:
