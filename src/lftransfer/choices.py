@@ -95,6 +95,13 @@ a core whenever it wants one and the simulator what the renderer leaves: the hig
 rate is kept and the fewer captures per second come (docs/performance.md, "The simulator beside the renderer";
 measured in docs/results.md, "Where the simulator renders beside the decoupled loop")."""
 
+DEFAULT_SIMULATOR_SHARE = 0.0
+"""Side by side: the simulator process runs beside the frames at its lower priority, which keeps some 90 % of the
+page's frame rate. A share above 0 makes them take turns instead (:class:`lftransfer.transfer.share.TurnTaking`):
+the simulator stopped while a frame renders, then alone for its share of the time with all its threads. At the
+paper's resolution that gives more captures per second for fewer frames (docs/performance.md, "The simulator
+beside the renderer")."""
+
 LENSLET_RECONSTRUCTION: Reconstruction = "box"
 LENSLET_WINDOW: Window = "cut"
 """What one lenslet physically sends or records: one radiance per direction over its whole aperture, nothing beyond

@@ -54,8 +54,9 @@ class Overrides:
             of the error (:mod:`lftransfer.sim.reference`; ``gt_spp`` is then the first round's).
         reference_budget_s: seconds the quiet reference's later rounds may take (None: as long as the run took
             before them).
-        simulator, simulator_threads, simulator_nice, renderer_threads: where a live loop's simulated rig renders
-            its captures and the threads each side gets (:class:`SimulatorSettings`).
+        simulator, simulator_threads, simulator_nice, simulator_share, renderer_threads: where a live loop's
+            simulated rig renders its captures, the threads each side gets and how they take turns
+            (:class:`SimulatorSettings`).
         compare: per choice of :data:`COMPARABLE`, further values measured beside the run's own (full re-runs;
             reconstruction, projection and window only under the area model), e.g.
             ``{"lighting_model": ("area", "point")}``.
@@ -113,6 +114,10 @@ class Overrides:
         f"How much lower the simulator process's priority is, 0 to 19: higher keeps more of the page's frame rate, "
         f"lower gives more captures per second (default: {choices.DEFAULT_SIMULATOR_NICE}).",
         min=0, max=19, metavar="N")
+    simulator_share: float | None = _setting(
+        f"The simulator process's share of the time while frames render one after another: stopped while a frame "
+        f"renders, it runs alone for its share before the next; 0: side by side at its lower priority (default: "
+        f"{choices.DEFAULT_SIMULATOR_SHARE}).", min=0.0, max=0.9, metavar="FRACTION")
     renderer_threads: int | None = _setting(
         "Dr.Jit threads of the renderer's process in a live loop (default: one per core).", min=1, metavar="N")
     compare: tuple[tuple[str, tuple[str, ...]], ...] = ()
@@ -134,6 +139,10 @@ class Overrides:
                                           and (high is None or value <= high)):
                 problems.append(f"{name}: expected an integer from {low}" + (f" to {high}" if high else " up")
                                 + f" (or None: the default), got {value!r}")
+        if self.simulator_share is not None and not (isinstance(self.simulator_share, (int, float))
+                                                     and 0 <= self.simulator_share <= 0.9):
+            problems.append(f"simulator_share: expected a fraction from 0 to 0.9 (or None: the default), got "
+                            f"{self.simulator_share!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
                  "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer,
                  "composite": choices.Composite, "direct_light": choices.DirectLight, "simulator": choices.Simulator}
@@ -159,6 +168,10 @@ class Overrides:
     def comparing_all(cls, **overrides) -> "Overrides":
         """Overrides that also measure every other value of every comparable choice (``lft demo``,
         ``lft run --compare-models``)."""
+        if self.simulator_share is not None and not (isinstance(self.simulator_share, (int, float))
+                                                     and 0 <= self.simulator_share <= 0.9):
+            problems.append(f"simulator_share: expected a fraction from 0 to 0.9 (or None: the default), got "
+                            f"{self.simulator_share!r}")
         kinds = {"lighting_model": choices.COMPARED_LIGHTING_MODELS, "reconstruction": choices.RECONSTRUCTIONS,
                  "projection": choices.PROJECTIONS, "window": choices.WINDOWS}
         return cls(**overrides, compare=tuple(kinds.items()))
@@ -174,12 +187,15 @@ class SimulatorSettings:
             :data:`lftransfer.choices.Simulator`).
         threads: Dr.Jit threads of the simulator's process (with "process").
         nice: how much lower its scheduling priority is (with "process"), 0 to 19.
+        share: with "process", the simulator's share of the time while frames render one after another, taken in
+            turns with them (:class:`lftransfer.transfer.share.TurnTaking`); 0: side by side, at its priority only.
         renderer_threads: Dr.Jit threads of the loop's own process (None: Dr.Jit's default, one per core).
     """
 
     where: choices.Simulator = "thread"
     threads: int = choices.DEFAULT_SIMULATOR_THREADS
     nice: int = choices.DEFAULT_SIMULATOR_NICE
+    share: float = choices.DEFAULT_SIMULATOR_SHARE
     renderer_threads: int | None = None
 
     def to_json(self) -> dict:
@@ -308,4 +324,6 @@ def _simulator(overrides: Overrides, loop: str | None) -> SimulatorSettings:
     where = overrides.simulator or (choices.DEFAULT_SIMULATOR if loop == "decoupled" else "thread")
     threads = overrides.simulator_threads or choices.DEFAULT_SIMULATOR_THREADS
     nice = choices.DEFAULT_SIMULATOR_NICE if overrides.simulator_nice is None else overrides.simulator_nice
-    return SimulatorSettings(where=where, threads=threads, nice=nice, renderer_threads=overrides.renderer_threads)
+    share = choices.DEFAULT_SIMULATOR_SHARE if overrides.simulator_share is None else float(overrides.simulator_share)
+    return SimulatorSettings(where=where, threads=threads, nice=nice, share=share,
+                             renderer_threads=overrides.renderer_threads)

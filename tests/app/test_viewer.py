@@ -141,6 +141,7 @@ def test_03_page_in_a_real_browser(variant, tmp_path):
             time.sleep(0.2)
         assert re.search(r"cores busy of \d+: this loop [\d.]+, the simulator's process [\d.]+ \(\d+ % of the "
                          r"machine\)", driver.find_element(By.ID, "rates").text)
+        assert "in turns" not in driver.find_element(By.ID, "rates").text           # side by side by default
         before = _pixels(frame_src(10, first))
         slider = driver.find_element(By.CSS_SELECTOR, 'fieldset.object[data-side="synthetic"] input.pose[data-key="translate"][data-axis="1"]')
         driver.execute_script("arguments[0].value = Number(arguments[0].value) + 0.04;"
@@ -437,7 +438,7 @@ def test_08_decoupled_session_compare_and_record(variant, tmp_path):
 
         # the simulator renders in its own process; the frames say the cores each side keeps busy
         busy = frames()[-1].cores_busy
-        assert busy["cores"] >= 1 and busy["loop"] > 0 and busy["simulator"] is not None
+        assert busy["cores"] >= 1 and busy["loop"] > 0 and busy["simulator"] is not None and busy["turns"] is None
         # a simulator that dies ends the loop with one line naming it; the page is told
         pid = session.live.rig.pid
         os.kill(pid, signal.SIGKILL)

@@ -15,12 +15,8 @@ import pytest
 from lftransfer.reports.calibration_report import (REPORT_NAME, SECTIONS, render_calibration_report,
                                                write_calibration_report)
 from lftransfer.reports.templating import environment
-from lftransfer.calibration.rig import calibrate_rig, load_calibration
+from lftransfer.calibration.rig import load_calibration
 from lftransfer.calibration.targets import TARGETS
-from lftransfer.scenes import quick_scene
-from lftransfer.sim.rig import SimRig
-from lftransfer.sim.truth import perturbed_rig
-from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.sim.calibration_errors import calibration_errors
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
@@ -61,11 +57,9 @@ def _embedded(text: str) -> list[tuple[str, bytes]]:
 
 
 @pytest.fixture(scope="module")
-def calibrated(variant, tmp_path_factory):
-    """A rig with hidden truth (seed 1) at quarter resolution, calibrated from its images, and its report."""
-    scene = quick_scene(load_scene(builtin_scene("fig4")))
-    rig = SimRig(scene, truth=perturbed_rig(scene.rig, 1))
-    cal = calibrate_rig(rig, scene.synthetic_part())
+def calibrated(calibrated_rig, tmp_path_factory):
+    """The shared calibrated rig (tests/calibration/conftest.py: hidden truth seed 3) and its report."""
+    scene, rig, cal, _messages = calibrated_rig
     errors = calibration_errors(cal, rig.truth)
     path = write_calibration_report(tmp_path_factory.mktemp("report"), cal, errors)
     return scene, cal, errors.to_json(), path

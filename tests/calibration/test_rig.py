@@ -8,26 +8,22 @@ import numpy as np
 import pytest
 
 from lftransfer.calibration.targets import target
-from lftransfer.calibration.rig import CalibrationFileError, calibrate_rig, count_calibration_steps, load_calibration
+from lftransfer.calibration.rig import CalibrationFileError, count_calibration_steps, load_calibration
 from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import LIGHT_BOARDS
 from lftransfer.calibration.pose import POSE_DEPTHS, POSE_ROUNDS
 from lftransfer.rig.requests import RealScene
 from lftransfer.sim.rig import SimRig
-from lftransfer.sim.truth import perturbed_rig, true_light_scene
+from lftransfer.sim.truth import true_light_scene
 from lftransfer.scenes import builtin_scene, load_scene
 from lftransfer.sim.calibration_errors import calibration_errors
 
 
 @pytest.fixture(scope="module")
-def calibrated(variant):
-    """A rig with hidden truth (seed 3) at quarter resolution, calibrated from its images alone; the simulated
-    operator misplaces every board by a hidden hand error."""
-    scene = quick_scene(load_scene(builtin_scene("fig4")))
-    rig = SimRig(true_light_scene(scene, 3), truth=perturbed_rig(scene.rig, 3), operator_seed=3)
-    messages = []
-    cal = calibrate_rig(rig, scene.synthetic_part(), progress=messages.append)
-    return scene, rig, cal, messages
+def calibrated(calibrated_rig):
+    """The shared calibrated rig (tests/calibration/conftest.py): hidden truth seed 3, a hidden hand error on every
+    board."""
+    return calibrated_rig
 
 
 def test_01_recovers_the_hidden_rig(calibrated):

@@ -79,14 +79,50 @@ def test_03_a_dead_simulator_is_named_in_one_line(variant, scene):
 
 
 def test_04_settings_resolved_once_with_checked_bounds(scene):
-    assert resolve_settings(scene, loop="decoupled").simulator == SimulatorSettings("process", threads=1, nice=7)
+    assert resolve_settings(scene, loop="decoupled").simulator == SimulatorSettings("process", threads=1, nice=7,
+                                                                                    share=0.0)
     assert resolve_settings(scene, live=True, loop="sync").simulator.where == "thread"     # it waits for each capture
     assert resolve_settings(scene).simulator.where == "thread"
-    asked = Overrides(simulator="thread", simulator_threads=2, simulator_nice=0, renderer_threads=1)
-    assert resolve_settings(scene, asked).simulator == SimulatorSettings("thread", 2, 0, 1)
+    assert resolve_settings(scene, Overrides(simulator_share=0.25), loop="decoupled").simulator.share == 0.25
+    asked = Overrides(simulator="thread", simulator_threads=2, simulator_nice=0, simulator_share=0,
+                      renderer_threads=1)
+    assert resolve_settings(scene, asked).simulator == SimulatorSettings("thread", threads=2, nice=0, share=0.0,
+                                                                        renderer_threads=1)
     for bad, field in ((dict(simulator_nice=20), "simulator_nice"), (dict(simulator_threads=0), "simulator_threads"),
-                       (dict(simulator="gpu"), "simulator"), (dict(renderer_threads=True), "renderer_threads")):
+                       (dict(simulator="gpu"), "simulator"), (dict(renderer_threads=True), "renderer_threads"),
+                       (dict(simulator_share=0.95), "simulator_share"), (dict(simulator_share=-0.1), "simulator_share")):
         with pytest.raises(ValueError, match=field):
             Overrides(**bad)
     with pytest.raises(ValueError, match="threads"):
         SimulatorProcess(scene, None, capture_spp=1, threads=0)
+
+
+def test_05_a_paused_simulator_takes_no_core_and_resumes_where_it_stood(variant, scene):
+    """pause() stops the child mid-capture: its CPU time stands still and the capture waits; after resume() the
+    capture finishes with the same codes as one never paused (the negative control: it does run when resumed)."""
+    import threading
+    import time
+
+    with SimulatorProcess(scene, 3, capture_spp=8, threads=1) as child:
+        child.start_frame(1)
+        plain = child.capture_lf().codes
+        child.start_frame(1)
+        got = {}
+        request = threading.Thread(target=lambda: got.update(codes=child.capture_lf().codes))
+        request.start()
+        time.sleep(0.05)
+        assert child.busy
+        child.pause()
+        child.pause()                                            # idempotent
+        time.sleep(0.2)                                          # the stop has landed
+        before = child.cpu_seconds()
+        time.sleep(0.6)
+        assert child.cpu_seconds() == before                     # stopped: no CPU time at all
+        assert request.is_alive() and "codes" not in got         # the capture waits
+        child.resume()
+        request.join(60)
+        assert np.array_equal(got["codes"], plain)
+        assert not child.busy
+        child.pause()
+        # a child closed while paused is let go on first, and ends
+    assert child._process.poll() is not None

@@ -144,19 +144,23 @@ def test_04_decoupled_loop_converges_to_the_same_light(quick, where):
     """Captures on their own thread, each under the newest light field rendered: after a few captures the real
     view is the bounce loop's (as the synchronous loop's is, test_01); frames that found no new capture reuse the
     newest one and say how old it is. The same with the simulated rig in a process of its own (``lft live``'s
-    default), against the bounce loop run in process."""
+    default), taking turns with the frames (``--simulator-share``), against the bounce loop run in process."""
     scene, settings = quick
     opened = open_rig(scene, RunOptions(truth_seed=None))
     reference = run_transfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings)
     if where == "process":
-        opened = open_rig(scene, RunOptions(truth_seed=None), simulator=SimulatorSettings(where="process"))
-        assert type(opened.rig).__name__ == "SimulatorProcess"
-    with LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled") as live:
+        opened = open_rig(scene, RunOptions(truth_seed=None),
+                          simulator=SimulatorSettings(where="process", threads=2, share=0.25))
+        assert type(opened.rig).__name__ == "SimulatorProcess" and opened.turns.share == 0.25
+    with LiveTransfer(opened.rig, opened.oracle.model, scene.synthetic_part(), settings, loop="decoupled",
+                      turns=opened.turns) as live:
         frames = [live.step(0.0)]
         while frames[-1].capture_index < 6:
             frames.append(live.step(0.0))
         assert live.capture_rate_hz > 0
     opened.rig.close()
+    if where == "process":
+        assert opened.turns.waited_s > 0                     # the frames gave the simulator its turns
     assert all(f.loop == "decoupled" and "capture" not in f.timings_s for f in frames)
     assert all(set(f.capture_timings_s) == {"encode", "capture", "decode", "capture_view"} for f in frames)
     assert not frames[0].projected_lf.data.any() and frames[0].light_version == -1

@@ -83,9 +83,12 @@ def _seq(name: str, title: str, scene: str, *, quick: bool, calibrate: tuple[str
 
 
 SIMULATOR_PLACES = (("thread", ("--simulator", "thread")), ("nice0", ("--simulator-nice", "0")),
-                    ("nice3", ("--simulator-nice", "3")), ("nice7", ()), ("nice10", ("--simulator-nice", "10")))
+                    ("nice3", ("--simulator-nice", "3")), ("nice7", ()), ("nice10", ("--simulator-nice", "10")),
+                    ("turns25", ("--simulator-share", "0.25", "--simulator-threads", "2")))
 """The places the simulator is measured at beside the decoupled loop (:func:`simulator_places_tables`): a name and
 the bench's options."""
+SIMULATOR_PLACES_FULL = (("nice7", ()), ("turns25", ("--simulator-share", "0.25", "--simulator-threads", "2")))
+"""The same at the paper's resolution: side by side (the default) and in turns."""
 
 RUNS: tuple[Run, ...] = (
     Run("demo", "demo", "Fig. 4 at the paper's resolution (`lft demo`)",
@@ -130,10 +133,19 @@ RUNS: tuple[Run, ...] = (
         (("", "out/runs/bench_quick.json"),), quick=True),
     Run("simulator_places_quick", "simulator_places",
         "Where the simulator renders beside the decoupled loop, quarter resolution (`lft bench --quick --live` with "
-        "`--simulator thread`, then its own process at `--simulator-nice` 0, 3, 7 (the default) and 10)",
+        "`--simulator thread`, then its own process at `--simulator-nice` 0, 3, 7 (the default) and 10, then in "
+        "turns with the frames, `--simulator-share 0.25 --simulator-threads 2`)",
         tuple(("lft", "bench", "--quick", "--live", "--no-peer", "--no-accuracy", *place,
                "--json", f"out/runs/simulator_{name}.json") for name, place in SIMULATOR_PLACES),
         tuple((name, f"out/runs/simulator_{name}.json") for name, _place in SIMULATOR_PLACES), quick=True),
+    Run("simulator_places", "simulator_places",
+        "Where the simulator renders beside the decoupled loop, the paper's resolution (`lft bench --live`: side by "
+        "side at nice 7, the default, then in turns with the frames, `--simulator-share 0.25 --simulator-threads 2`)",
+        tuple(("lft", "bench", "--live", "--no-peer", "--no-accuracy", "--calibration",
+               "out/runs/demo/calibration.json", *place, "--json", f"out/runs/simulator_full_{name}.json")
+              for name, place in SIMULATOR_PLACES_FULL),
+        tuple((name, f"out/runs/simulator_full_{name}.json") for name, _place in SIMULATOR_PLACES_FULL),
+        needs=("demo",)),
     Run("bench", "bench", "The live step at the paper's resolution, still scene (`lft bench`)",
         (("lft", "bench", "--no-peer", "--calibration", "out/runs/demo/calibration.json",
           "--json", "out/runs/bench.json"),), (("", "out/runs/bench.json"),), needs=("demo",)),
@@ -552,10 +564,10 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "study": lambda s: study_tables(s.data),
           "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
           "probe": probe_tables, "paired": paired_tables,
-          "simulator_places": lambda s: simulator_places_tables(s, [name for name, _ in SIMULATOR_PLACES])}
+          "simulator_places": lambda s: simulator_places_tables(s, list(s.data))}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
-          ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live",
+          ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live", "simulator_places",
                                           "bench_live_box",
                                           "paired_84066a4", "paired_8184fa7",
                                           "paired_beed803")),

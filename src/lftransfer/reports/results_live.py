@@ -62,7 +62,8 @@ def simulator_places_tables(s, names: list[str]) -> list[str]:
     for name in names:
         dec = s.need(name, "decoupled")
         sim = dec.get("simulator") or {}
-        where = f"own process, nice {sim.get('nice')}, {sim.get('threads')} thread(s)" \
+        turns = f", in turns ({fixed(100 * sim['share'], 0)} % of the time)" if sim.get("share") else ""
+        where = f"own process, nice {sim.get('nice')}, {sim.get('threads')} thread(s){turns}" \
             if sim.get("where") == "process" else "the loop's process"
         light = ((dec.get("latency") or {}).get("light") or {}).get("median")
         rows.append([where, num(dec.get("render_fps")), num(dec.get("render_fps_alone")),
@@ -70,7 +71,7 @@ def simulator_places_tables(s, names: list[str]) -> list[str]:
                      num(dec.get("capture_hz")), fixed(light, 0), num(dec.get("cores_busy")),
                      num(dec.get("simulator_cores_busy")) if dec.get("simulator_cores_busy") is not None else
                      "(in the loop's)"])
-    return ["Each row is one `lft bench --quick --live` run, one after another on one machine; the rate alone is "
+    return ["Each row is one `lft bench --live` run, one after another on one machine; the rate alone is "
             "the same loop with the captures held, in the same run (target: at least 70 % kept).", ""] + \
         table(["the simulator renders in", "frames/s beside it", "frames/s alone", "kept", "captures/s",
                "motion to its light, ms (median)", "loop's cores busy", "simulator's cores busy"], rows)

@@ -21,6 +21,7 @@ from lftransfer.runs.calibration_cache import CachedCalibration, inputs_sha256, 
 from lftransfer.sim.gt_cache import CacheProblem
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.transfer.share import TurnTaking
 
 if TYPE_CHECKING:
     from lftransfer.sim.oracle import Oracle
@@ -130,10 +131,14 @@ class OpenedRig:
         rig: the rig the pipeline talks to (wrapped in a recorder when recording).
         oracle: the hidden truth behind it (:class:`~lftransfer.sim.oracle.Oracle`: the simulated rig, or a replay
             of a recording made on it), for verification and the oracle baseline only; None for a physical rig.
+        turns: how a decoupled live loop's frames take turns with the simulator process
+            (:class:`~lftransfer.transfer.share.TurnTaking`, for :class:`~lftransfer.transfer.live.LiveTransfer`);
+            None: no simulator process, or one that runs side by side.
     """
 
     rig: Rig
     oracle: Oracle | None = None
+    turns: TurnTaking | None = None
 
     @property
     def truth_seed(self) -> int | None:
@@ -158,8 +163,9 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
         operator: shows an instruction to the person at a physical rig and waits (hardware rigs only).
         simulator: a live loop's :class:`~lftransfer.settings.SimulatorSettings` (its ``RunSettings.simulator``):
             with ``where="process"`` the simulated rig renders in a process of its own
-            (:class:`lftransfer.sim.process.SimulatorProcess`); its ``renderer_threads`` set this process's Dr.Jit
-            threads. None: the simulated rig in this process, the threads as they are.
+            (:class:`lftransfer.sim.process.SimulatorProcess`), in turns with the frames where its ``share`` is
+            above 0 (``OpenedRig.turns``); its ``renderer_threads`` set this process's Dr.Jit threads. None: the
+            simulated rig in this process, the threads as they are.
     """
     spec = options.rig
     if simulator is not None and simulator.renderer_threads:
@@ -172,7 +178,8 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
 
         rig = SimulatorProcess(scene, options.truth_seed, capture_spp=options.capture_spp, threads=simulator.threads,
                                nice=simulator.nice)
-        opened = OpenedRig(rig=rig, oracle=hidden_oracle(scene, options.truth_seed))
+        turns = TurnTaking(rig.pause, rig.resume, lambda: rig.busy, simulator.share) if simulator.share > 0 else None
+        opened = OpenedRig(rig=rig, oracle=hidden_oracle(scene, options.truth_seed), turns=turns)
     elif spec.kind == "sim":
         from lftransfer.sim.oracle import open_simulated_rig
 

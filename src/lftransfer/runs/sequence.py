@@ -528,7 +528,7 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
     depth = read_depth(out) if done else None
     with LiveTransfer(opened.rig, model, ps, settings, projected=projected,
                       time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop,
-                      depth_every_frame=_depth_every_frame(scene, settings)) as live:
+                      depth_every_frame=_depth_every_frame(scene, settings), turns=opened.turns) as live:
         live.index = len(done)
         for i in range(len(done), n):
             t0 = time.perf_counter()

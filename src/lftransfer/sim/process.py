@@ -53,6 +53,7 @@ def _serve(conn: Connection) -> None:
     RuntimeError of its text). The first answer is ``("ready", (info, methods, properties))``.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # Ctrl-C is the parent's to handle: it closes the child
+    _die_with_parent()
     try:
         scene, truth_seed, capture_spp, threads, nice, variant = conn.recv()
         if nice:
@@ -85,6 +86,18 @@ def _serve(conn: Connection) -> None:
         if name == "close":
             break
     conn.close()
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent ends: a child the parent stopped (:meth:`SimulatorProcess.pause`)
+    could not see its socket close. Elsewhere the socket's end is the only sign."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)                   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def _portable(exc: BaseException) -> BaseException:
@@ -136,6 +149,7 @@ class SimulatorProcess:
         self._lock = threading.Lock()               # one request at a time (the capture thread and the loop's)
         self._dead: str | None = None
         self._closed = False
+        self._stopped = False                       # pause(): the child is stopped (SIGSTOP) until resume()
         self._conn.send((scene, truth_seed, int(capture_spp), threads, nice, variant()))
         info, methods, properties = self._answer("start", START_TIMEOUT_S, expect="ready")
         self._info: RigInfo = info
@@ -160,6 +174,25 @@ class SimulatorProcess:
         except OSError:
             return None
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")      # utime + stime
+
+    @property
+    def busy(self) -> bool:
+        """Whether a request is in progress (a capture being rendered, or waiting while paused)."""
+        return self._lock.locked()
+
+    def pause(self) -> None:
+        """Stop the child where it is (``SIGSTOP``): its threads take no core, and a request in progress waits, until
+        :meth:`resume`. Idempotent; nothing to do once the child has ended."""
+        if not self._stopped and self._dead is None and not self._closed and self._process.poll() is None:
+            os.kill(self._process.pid, signal.SIGSTOP)
+            self._stopped = True
+
+    def resume(self) -> None:
+        """Let a paused child go on (``SIGCONT``). Idempotent."""
+        if self._stopped:
+            self._stopped = False
+            if self._process.poll() is None:
+                os.kill(self._process.pid, signal.SIGCONT)
 
     @property
     def real_objects(self) -> list:
@@ -234,6 +267,7 @@ class SimulatorProcess:
         """Close the rig and end the child (idempotent; a dead child is only reaped)."""
         if self._closed:
             return
+        self.resume()
         if self._dead is None and self._process.poll() is None:
             try:
                 self._call("close")

@@ -50,6 +50,7 @@ from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
 from lftransfer.transfer.projection import measure_depth
+from lftransfer.transfer.share import TurnTaking
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
@@ -138,6 +139,9 @@ class LiveTransfer:
             the depth composite of real objects that move.
         probe: on a scene lit by a light probe, its :class:`~lftransfer.real_depth.probe.ProbeMeasurement` made
             earlier; None: photographed when the loop is made.
+        turns: a decoupled loop's captures and frames in turns
+            (:class:`~lftransfer.transfer.share.TurnTaking`: the simulator process stopped while a frame renders);
+            None: side by side.
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP
@@ -147,13 +151,14 @@ class LiveTransfer:
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
                  *, projected: LightField | None = None, time_s: float = 0.0,
                  depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync",
-                 depth_every_frame: bool = False, probe=None) -> None:
+                 depth_every_frame: bool = False, probe=None, turns: TurnTaking | None = None) -> None:
         choices.check_choice("loop", loop, choices.LiveLoop)
         self.rig = rig
         self.model = model
         self.settings = settings
         self.loop = loop
         self.depth_every_frame = bool(depth_every_frame)
+        self.turns = turns
         self.side = SyntheticSide(model, scene, settings, time_s=time_s)
         # a light probe's room is still: photographed once (or given, another run's), before the first capture
         self.probe = None
@@ -312,6 +317,10 @@ class LiveTransfer:
             cap = self._worker.newest() or self._worker.wait(timeout=FIRST_CAPTURE_TIMEOUT_S)
         return cap
 
+    def _renderer_turn(self):
+        """The frame's render in its turn where the captures take turns with it (``turns``); else at once."""
+        return self.turns.rendering() if self.turns is not None and self._worker is not None else nullcontext()
+
     def step(self, time_s: float) -> LiveFrame:
         """Run one frame at scene time ``time_s`` (seconds); see the module docstring."""
         t0 = time.perf_counter()
@@ -328,12 +337,13 @@ class LiveTransfer:
             with timer("measure_depth"):
                 self._measure_depth()
         cap = self._capture(time_s, timer)
-        # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
-        with timer("incident_light"):
-            lights = [*side.direct_lights, side.incident_light(cap.captured_lf, s.seed)]
-        synthetic_lf, view = side.render(lights, s.seed, timer)
-        with timer("composite"):
-            comp = composite_view(view, cap.real_view, self.view_depth)
+        with self._renderer_turn():
+            # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
+            with timer("incident_light"):
+                lights = [*side.direct_lights, side.incident_light(cap.captured_lf, s.seed)]
+            synthetic_lf, view = side.render(lights, s.seed, timer)
+            with timer("composite"):
+                comp = composite_view(view, cap.real_view, self.view_depth)
         self.projection = Projection(synthetic_lf, self.version)
         if self._worker is not None:
             self._worker.show(self.projection)

@@ -20,7 +20,7 @@ from lftransfer.reports.results_format import surface_solve_text
 __all__ = ["register"]
 
 BenchSettings = setting_options("lighting_model", "reconstruction", "projection", "renderer", "simulator",
-                                "simulator_threads", "simulator_nice", "renderer_threads")
+                                "simulator_threads", "simulator_nice", "simulator_share", "renderer_threads")
 
 
 def bench(scene_file: Annotated[Optional[Path], option("--scene", metavar="SCENE.toml",

@@ -20,7 +20,7 @@ from lftransfer.app.terminal import FAILED, console, fail, warn
 
 __all__ = ["register"]
 
-SIMULATOR_SETTINGS = ("simulator", "simulator_threads", "simulator_nice", "renderer_threads")
+SIMULATOR_SETTINGS = ("simulator", "simulator_threads", "simulator_nice", "simulator_share", "renderer_threads")
 LiveSettings = setting_options("renderer", *SIMULATOR_SETTINGS)
 RenderSettings = setting_options("bounces", "gt_spp", "renderer", "composite", "direct_light", "quiet_reference",
                                  *SIMULATOR_SETTINGS)

@@ -33,7 +33,7 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:
         (warn or (lambda _m: None))(note)
-    live = LiveTransfer(opened.rig, known.model, known.scene, resolved.transfer, loop=loop)
+    live = LiveTransfer(opened.rig, known.model, known.scene, resolved.transfer, loop=loop, turns=opened.turns)
     sim = opened.rig if hasattr(opened.rig, "place_real") else None
     return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle, lights=known.scene.lights,
                        overrides=options.settings)

@@ -79,7 +79,8 @@ class ViewerFrame:
         edits: edits of the synthetic objects applied before this frame was rendered (a page that sent its n-th
             edit sees it from the first frame with ``edits >= n``: edit-to-pixel latency).
         cores_busy: the cores the loop's process and the simulator's keep busy (:class:`CoreMeter`; "simulator"
-            None: no simulator process beside the loop).
+            None: no simulator process beside the loop), and "turns": the simulator's share of the time where it
+            takes turns with the frames (:class:`~lftransfer.transfer.share.TurnTaking`), else None.
     """
 
     index: int
@@ -544,7 +545,8 @@ class LiveSession:
                            capture_ms={k: 1000.0 * v for k, v in frame.capture_timings_s.items()},
                            latency_ms={"view": latency.view and asdict(latency.view),
                                        "light": latency.light and asdict(latency.light)},
-                           recording=self.recorder.recording, edits=self.edits, cores_busy=self._cores.sample())
+                           recording=self.recorder.recording, edits=self.edits,
+                           cores_busy={**self._cores.sample(), "turns": self.live.turns and self.live.turns.share})
 
     def _request_compare(self) -> None:
         """Start the ground truth of the frame on the screen (:class:`GroundTruthCompare`); the page hears when

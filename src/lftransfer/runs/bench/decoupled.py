@@ -28,6 +28,7 @@ import numpy as np
 from lftransfer.settings import SimulatorSettings
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LiveTransfer
+from lftransfer.transfer.share import TurnTaking
 from lftransfer.transfer.timer import CoreMeter
 
 __all__ = ["DecoupledRun", "run_decoupled"]
@@ -51,6 +52,7 @@ class DecoupledRun:
         capture_behind_s: median and largest scene time between a frame and the real scene its capture saw.
         latency: motion-to-composite latency (:class:`~lftransfer.transfer.latency.MotionLatency` as JSON).
         stages_ms: median milliseconds per render-side stage.
+        stages_ms_alone: the same with the captures held (the renderer alone).
         capture_stages_ms: median milliseconds per capture-side stage (encode, capture, decode, capture_view).
         render_fps_alone: frames per second over as many frames with the captures held (the simulator idle).
         rate_with_simulator: ``render_fps / render_fps_alone``: the share of the renderer's own rate the page
@@ -80,9 +82,32 @@ class DecoupledRun:
     cores_busy_alone: float
     simulator: dict
     simulator_cores_busy: float | None = None
+    stages_ms_alone: dict | None = None
 
     def to_json(self) -> dict:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class _Timing:
+    """What the run keeps of a :class:`~lftransfer.transfer.live.LiveFrame`: its times and versions, not its
+    images and light fields (a few hundred frames at the paper's resolution would hold gigabytes, and a process
+    that grows by that much each frame renders slower for it)."""
+
+    time_s: float
+    timings_s: dict
+    capture_index: int
+    capture_age_s: float
+    capture_time_s: float
+    capture_timings_s: dict
+    scene_version: int
+    light_version: int
+    started_s: float
+    ready_s: float
+
+    @classmethod
+    def of(cls, frame) -> "_Timing":
+        return cls(**{name: getattr(frame, name) for name in cls.__dataclass_fields__})
 
 
 def _med_max(values) -> dict:
@@ -91,7 +116,7 @@ def _med_max(values) -> dict:
 
 
 def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int, min_captures: int = 3,
-                  simulator: SimulatorSettings = SimulatorSettings(where="thread"),
+                  simulator: SimulatorSettings = SimulatorSettings(where="thread"), turns: TurnTaking | None = None,
                   progress: Callable[[str], None] | None = None) -> DecoupledRun:
     """Run the decoupled loop over the scene times ``times`` (cycled) for at least ``frames`` counted frames and
     until the counted frames used ``min_captures`` captures and a change's light has reached one of them (or
@@ -103,6 +128,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         scene: the synthetic part of the scene (its animation moves the object).
         settings: the transfer settings.
         simulator: where the rig's simulator runs (reported; the rig was opened with it).
+        turns: the frames' turns with the simulator process (:attr:`lftransfer.runs.rigs.OpenedRig.turns`), or None.
         times: (F,) scene times of the frames, seconds.
         frames: frames to count (>= 2).
         min_captures: distinct captures the counted frames must have used.
@@ -112,14 +138,14 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
                                     "as many with the captures held")
     done = []
     child_cpu = getattr(rig, "cpu_seconds", None)     # the simulator process's CPU seconds, if it has one
-    with LiveTransfer(rig, model, scene, settings, loop="decoupled") as live:
+    with LiveTransfer(rig, model, scene, settings, loop="decoupled", turns=turns) as live:
         start = time.perf_counter()
         i = 0
         while True:
             if i == WARMUP_FRAMES:                      # the counted frames' CPU time, from here to the end
                 cores = CoreMeter(child_cpu, window_s=math.inf)
                 cores.sample()
-            frame = live.step(float(times[i % len(times)]))
+            frame = _Timing.of(live.step(float(times[i % len(times)])))
             i += 1
             if i > WARMUP_FRAMES:
                 done.append(frame)
@@ -134,7 +160,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         busy = cores.sample()
         capture_hz = live.capture_rate_hz or 0.0
         latency = motion_latency(list(live.changes), done, "decoupled")
-        alone, cores_alone = _renderer_alone(live, times, i, len(done))
+        alone, cores_alone, alone_frames = _renderer_alone(live, times, i, len(done))
     seconds = done[-1].ready_s - done[0].started_s
     render = sorted({k for f in done for k in f.timings_s if k != "total"})
     captured = sorted({k for f in done for k in f.capture_timings_s})
@@ -146,7 +172,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         # (a frame of a new cycle of the times is ahead of a capture from the last cycle's end: left out)
         capture_behind_s=_med_max([f.time_s - f.capture_time_s for f in done if f.time_s >= f.capture_time_s] or [0]),
         latency=latency.to_json(),
-        stages_ms={k: round(1000 * statistics.median(f.timings_s.get(k, 0.0) for f in done), 2) for k in render},
+        stages_ms=_stage_medians(done, render), stages_ms_alone=_stage_medians(alone_frames, render),
         capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
                            for k in captured},
         render_fps_alone=round(alone, 3), rate_with_simulator=round(len(done) / seconds / alone, 3),
@@ -154,14 +180,18 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         simulator_cores_busy=busy["simulator"])
 
 
-def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float]:
-    """(frames per second, cores busy) of ``frames`` frames rendered with the captures held, from time index
-    ``first`` on: the capture in progress finishes first, then no new one begins."""
+def _stage_medians(frames, stages) -> dict:
+    """Median milliseconds per stage over ``frames``."""
+    return {k: round(1000 * statistics.median(f.timings_s.get(k, 0.0) for f in frames), 2) for k in stages}
+
+
+def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float, list]:
+    """(frames per second, cores busy, the frames) of ``frames`` frames rendered with the captures held, from time
+    index ``first`` on: the capture in progress finishes first, then no new one begins."""
     with live.holding_rig():                     # waits for the capture in progress; none begins meanwhile
         cores = CoreMeter(window_s=math.inf)
         cores.sample()
         start = time.perf_counter()
-        for i in range(first, first + frames):
-            live.step(float(times[i % len(times)]))
+        done = [_Timing.of(live.step(float(times[i % len(times)]))) for i in range(first, first + frames)]
         wall = time.perf_counter() - start
-        return frames / wall, cores.sample()["loop"]
+        return frames / wall, cores.sample()["loop"], done

@@ -316,7 +316,8 @@ def _beside(scene, options: BenchOptions, simulator, model, live: LiveTransfer, 
         own = open_rig(scene, RunOptions(truth_seed=options.truth_seed), simulator=simulator)
         try:
             decoupled = run_decoupled(own.rig, model, scene.synthetic_part(), settings, np.asarray(times),
-                                      frames=max(options.iterations, 10), simulator=simulator, progress=say)
+                                      frames=max(options.iterations, 10), simulator=simulator, turns=own.turns,
+                                      progress=say)
         finally:
             own.rig.close()
     if options.accuracy:
@@ -349,7 +350,9 @@ def _notes(options: BenchOptions, renderer: str, rig_model: str, sync_moved: boo
                      "capture is in the latency (a physical rig's exposure would be instead)")
     if decoupled is not None:
         sim = decoupled.simulator
-        where = (f"in a process of its own ({sim['threads']} Dr.Jit thread(s), nice {sim['nice']})"
+        turns = (f", in turns with the frames (stopped while one renders, then {100 * sim['share']:.0f} % of the "
+                 "time)" if sim.get("share") else ", side by side")
+        where = (f"in a process of its own ({sim['threads']} Dr.Jit thread(s), nice {sim['nice']}{turns})"
                  if sim["where"] == "process" else "in the render loop's process (one Dr.Jit thread pool)")
         notes.append(f"decoupled: the simulator renders its captures {where}, on the same cores as the render "
                      "loop (what lft live on the simulated rig shows); render_fps_alone is the loop with the "
