@@ -140,6 +140,7 @@ class Overrides:
                 problems.append(f"{name}: expected an integer from {low}" + (f" to {high}" if high else " up")
                                 + f" (or None: the default), got {value!r}")
         if self.simulator_share is not None and not (isinstance(self.simulator_share, (int, float))
+                                                     and not isinstance(self.simulator_share, bool)
                                                      and 0 <= self.simulator_share <= 0.9):
             problems.append(f"simulator_share: expected a fraction from 0 to 0.9 (or None: the default), got "
                             f"{self.simulator_share!r}")
@@ -168,10 +169,6 @@ class Overrides:
     def comparing_all(cls, **overrides) -> "Overrides":
         """Overrides that also measure every other value of every comparable choice (``lft demo``,
         ``lft run --compare-models``)."""
-        if self.simulator_share is not None and not (isinstance(self.simulator_share, (int, float))
-                                                     and 0 <= self.simulator_share <= 0.9):
-            problems.append(f"simulator_share: expected a fraction from 0 to 0.9 (or None: the default), got "
-                            f"{self.simulator_share!r}")
         kinds = {"lighting_model": choices.COMPARED_LIGHTING_MODELS, "reconstruction": choices.RECONSTRUCTIONS,
                  "projection": choices.PROJECTIONS, "window": choices.WINDOWS}
         return cls(**overrides, compare=tuple(kinds.items()))

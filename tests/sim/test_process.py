@@ -103,7 +103,10 @@ def test_05_a_paused_simulator_takes_no_core_and_resumes_where_it_stood(variant,
     import threading
     import time
 
-    with SimulatorProcess(scene, 3, capture_spp=8, threads=1) as child:
+    with SimulatorProcess(scene, None, capture_spp=1) as plain:
+        with pytest.raises(RuntimeError, match="not started pausable"):
+            plain.pause()
+    with SimulatorProcess(scene, 3, capture_spp=8, threads=1, pausable=True) as child:
         child.start_frame(1)
         plain = child.capture_lf().codes
         child.start_frame(1)
@@ -126,3 +129,44 @@ def test_05_a_paused_simulator_takes_no_core_and_resumes_where_it_stood(variant,
         child.pause()
         # a child closed while paused is let go on first, and ends
     assert child._process.poll() is not None
+
+
+@pytest.mark.parametrize("pausable", [True, False])
+def test_06_a_paused_simulator_dies_with_its_parent(tmp_path, pausable):
+    """A parent that dies while its pausable simulator is stopped leaves no stopped orphan holding the scene's memory
+    (the child asked Linux for a signal when its parent goes). The negative control: a child not started pausable,
+    stopped from outside, does outlive its parent (killed here)."""
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import os, signal\n"
+        "from lftransfer.scenes import builtin_scene, load_scene, quick_scene\n"
+        "from lftransfer.sim.process import SimulatorProcess\n"
+        "child = SimulatorProcess(quick_scene(load_scene(builtin_scene('fig5'))), None, capture_spp=1, "
+        f"pausable={pausable})\n"
+        + ("child.pause()\n" if pausable else "os.kill(child.pid, signal.SIGSTOP)\n") +
+        f"open({str(tmp_path / 'pid')!r}, 'w').write(str(child.pid))\n"
+        "os._exit(3)\n")
+    # files, not pipes: an orphan that outlives the parent would hold a pipe open
+    with open(tmp_path / "stderr", "w") as err:
+        done = subprocess.run([sys.executable, str(script)], stdout=subprocess.DEVNULL, stderr=err, timeout=300)
+    assert done.returncode == 3, (tmp_path / "stderr").read_text()[-2000:]
+    pid = int((tmp_path / "pid").read_text())
+
+    def alive() -> bool:
+        try:
+            return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] != "Z"   # a zombie is dead
+        except OSError:
+            return False
+
+    end = time.time() + (10 if pausable else 3)
+    while time.time() < end and alive():
+        time.sleep(0.1)
+    try:
+        assert alive() is not pausable, f"pid {pid}"
+    finally:
+        if alive():
+            os.kill(pid, signal.SIGKILL)

@@ -177,7 +177,7 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
         from lftransfer.sim.process import SimulatorProcess
 
         rig = SimulatorProcess(scene, options.truth_seed, capture_spp=options.capture_spp, threads=simulator.threads,
-                               nice=simulator.nice)
+                               nice=simulator.nice, pausable=simulator.share > 0)
         turns = TurnTaking(rig.pause, rig.resume, lambda: rig.busy, simulator.share) if simulator.share > 0 else None
         opened = OpenedRig(rig=rig, oracle=hidden_oracle(scene, options.truth_seed), turns=turns)
     elif spec.kind == "sim":

@@ -46,16 +46,18 @@ POLL_S = 0.25                # how often a waiting request looks whether the chi
 
 
 def _serve(conn: Connection) -> None:
-    """The child: take ``(scene, truth_seed, capture_spp, threads, nice, variant)``, build the simulated rig, then
+    """The child: take ``(scene, truth_seed, capture_spp, threads, nice, variant, pausable)``, build the simulated
+    rig, then
     answer requests ``(name, args, kwargs)`` until ``close`` or the parent goes away.
 
     Answers are ``("ok", value)`` or ``("error", exception)`` (an exception that does not pickle travels as a
     RuntimeError of its text). The first answer is ``("ready", (info, methods, properties))``.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # Ctrl-C is the parent's to handle: it closes the child
-    _die_with_parent()
     try:
-        scene, truth_seed, capture_spp, threads, nice, variant = conn.recv()
+        scene, truth_seed, capture_spp, threads, nice, variant, pausable = conn.recv()
+        if pausable:
+            _die_with_parent()
         if nice:
             os.nice(int(nice))
         from lftransfer.backend import set_drjit_threads
@@ -89,8 +91,9 @@ def _serve(conn: Connection) -> None:
 
 
 def _die_with_parent() -> None:
-    """Ask Linux to kill this process when its parent ends: a child the parent stopped (:meth:`SimulatorProcess.pause`)
-    could not see its socket close. Elsewhere the socket's end is the only sign."""
+    """Ask Linux to kill this process when the thread that started it ends (``PR_SET_PDEATHSIG``): a child its parent
+    stopped (:meth:`SimulatorProcess.pause`) could not see its socket close. Elsewhere the socket's end is the only
+    sign."""
     try:
         import ctypes
 
@@ -121,6 +124,8 @@ class SimulatorProcess:
         capture_spp: rays per LF camera pixel.
         threads: Dr.Jit threads of the child (>= 1).
         nice: how much lower the child's scheduling priority is than this process's (0 .. 19; 0: the same).
+        pausable: allow :meth:`pause`. The child is then killed by Linux when the thread that made this object ends
+            (a stopped child could not see its parent go), so that thread must outlive the rig.
 
     Raises:
         ValueError: ``threads`` or ``nice`` out of range.
@@ -129,7 +134,8 @@ class SimulatorProcess:
     """
 
     def __init__(self, scene, truth_seed: int | None, *, capture_spp: int,
-                 threads: int = choices.DEFAULT_SIMULATOR_THREADS, nice: int = choices.DEFAULT_SIMULATOR_NICE) -> None:
+                 threads: int = choices.DEFAULT_SIMULATOR_THREADS, nice: int = choices.DEFAULT_SIMULATOR_NICE,
+                 pausable: bool = False) -> None:
         from lftransfer.backend import variant
 
         if not (isinstance(threads, int) and threads >= 1):
@@ -150,7 +156,8 @@ class SimulatorProcess:
         self._dead: str | None = None
         self._closed = False
         self._stopped = False                       # pause(): the child is stopped (SIGSTOP) until resume()
-        self._conn.send((scene, truth_seed, int(capture_spp), threads, nice, variant()))
+        self.pausable = bool(pausable)
+        self._conn.send((scene, truth_seed, int(capture_spp), threads, nice, variant(), self.pausable))
         info, methods, properties = self._answer("start", START_TIMEOUT_S, expect="ready")
         self._info: RigInfo = info
         self._methods, self._properties = frozenset(methods), frozenset(properties)
@@ -182,7 +189,13 @@ class SimulatorProcess:
 
     def pause(self) -> None:
         """Stop the child where it is (``SIGSTOP``): its threads take no core, and a request in progress waits, until
-        :meth:`resume`. Idempotent; nothing to do once the child has ended."""
+        :meth:`resume`. Idempotent; nothing to do once the child has ended.
+
+        Raises:
+            RuntimeError: the child was not started ``pausable``.
+        """
+        if not self.pausable:
+            raise RuntimeError("this simulator process was not started pausable (SimulatorProcess(pausable=True))")
         if not self._stopped and self._dead is None and not self._closed and self._process.poll() is None:
             os.kill(self._process.pid, signal.SIGSTOP)
             self._stopped = True
