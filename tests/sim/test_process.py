@@ -90,7 +90,8 @@ def test_04_settings_resolved_once_with_checked_bounds(scene):
                                                                         renderer_threads=1)
     for bad, field in ((dict(simulator_nice=20), "simulator_nice"), (dict(simulator_threads=0), "simulator_threads"),
                        (dict(simulator="gpu"), "simulator"), (dict(renderer_threads=True), "renderer_threads"),
-                       (dict(simulator_share=0.95), "simulator_share"), (dict(simulator_share=-0.1), "simulator_share")):
+                       (dict(simulator_share=0.95), "simulator_share"),
+                       (dict(simulator_share=-0.1), "simulator_share"), (dict(simulator_share=True), "simulator_share")):
         with pytest.raises(ValueError, match=field):
             Overrides(**bad)
     with pytest.raises(ValueError, match="threads"):

@@ -567,8 +567,8 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "simulator_places": lambda s: simulator_places_tables(s, list(s.data))}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
-          ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live", "simulator_places",
-                                          "bench_live_box",
+          ("The live step: `lft bench`", ("bench_quick", "simulator_places_quick", "bench", "bench_live",
+                                          "simulator_places", "bench_live_box",
                                           "paired_84066a4", "paired_8184fa7",
                                           "paired_beed803")),
           ("The live page: `lft live`", ("live_fps_quick", "live_fps_quick_drag", "live_fps", "soak_live_quick",

@@ -47,8 +47,7 @@ POLL_S = 0.25                # how often a waiting request looks whether the chi
 
 def _serve(conn: Connection) -> None:
     """The child: take ``(scene, truth_seed, capture_spp, threads, nice, variant, pausable)``, build the simulated
-    rig, then
-    answer requests ``(name, args, kwargs)`` until ``close`` or the parent goes away.
+    rig, then answer requests ``(name, args, kwargs)`` until ``close`` or the parent goes away.
 
     Answers are ``("ok", value)`` or ``("error", exception)`` (an exception that does not pickle travels as a
     RuntimeError of its text). The first answer is ``("ready", (info, methods, properties))``.
@@ -197,15 +196,21 @@ class SimulatorProcess:
         if not self.pausable:
             raise RuntimeError("this simulator process was not started pausable (SimulatorProcess(pausable=True))")
         if not self._stopped and self._dead is None and not self._closed and self._process.poll() is None:
-            os.kill(self._process.pid, signal.SIGSTOP)
-            self._stopped = True
+            try:
+                os.kill(self._process.pid, signal.SIGSTOP)
+                self._stopped = True
+            except ProcessLookupError:                # it ended meanwhile: the next request says so
+                pass
 
     def resume(self) -> None:
         """Let a paused child go on (``SIGCONT``). Idempotent."""
         if self._stopped:
             self._stopped = False
-            if self._process.poll() is None:
-                os.kill(self._process.pid, signal.SIGCONT)
+            if self._process.poll() is None:          # not reaped: its pid is still its own
+                try:
+                    os.kill(self._process.pid, signal.SIGCONT)
+                except ProcessLookupError:
+                    pass
 
     @property
     def real_objects(self) -> list:
