@@ -33,6 +33,7 @@ from lftransfer.app.viewer.compare import GT_SPP, GroundTruthCompare
 from lftransfer.app.viewer.recorder import Recorder
 from lftransfer.reports.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
                                    to_display)
+from lftransfer.imageio_utils import to_preview
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.rig.base import RigError
 from lftransfer.scenes import SceneError, with_overrides
@@ -597,26 +598,28 @@ class LiveSession:
         return self._gt[1] if self._gt is not None else None
 
     def _layer(self, frame: LiveFrame, layer: str) -> np.ndarray:
+        """The display image of ``layer`` (sRGB through :func:`~lftransfer.imageio_utils.to_preview`'s table: within
+        one code of the written images' :func:`~lftransfer.imageio_utils.to_display`, five times faster)."""
         rig = self.scene.rig
         if layer == "ground truth":
             gt = self._ground_truth(frame)
-            left = to_display(np.clip(frame.composite, 0, None), self.scale)
-            right = to_display(gt, self.scale) if gt is not None else np.zeros_like(left)
+            left = to_preview(np.clip(frame.composite, 0, None), self.scale)
+            right = to_preview(gt, self.scale) if gt is not None else np.zeros_like(left)
             return np.concatenate([left, right], axis=1)
         if layer == "panel":
             return live_panel(frame, None, self.scale, camera_bits=rig.lf_camera_bits,
                               projector_bits=rig.projector_bits, tile_width=320)
         if layer == "real":
-            return to_display(np.clip(frame.real_view, 0, None), self.scale)
+            return to_preview(np.clip(frame.real_view, 0, None), self.scale)
         if layer == "synthetic":
-            return to_display(np.clip(frame.synthetic_view.rgb, 0, None), self.scale)
+            return to_preview(np.clip(frame.synthetic_view.rgb, 0, None), self.scale)
         if layer == "captured":
             return device_image(frame.captured_raw, rig.lf_camera_bits, stretch=True)
         if layer == "projected":
             return device_image(frame.projected_image, rig.projector_bits)
         if layer == "depth":
             return depth_layer(self.live.view_depth, frame.synthetic_view.depth)
-        return to_display(np.clip(frame.composite, 0, None), self.scale)
+        return to_preview(np.clip(frame.composite, 0, None), self.scale)
 
     def save(self) -> list[Path]:
         """Write the current frame (EXR and PNG) and the current scene (TOML) into the output folder."""
