@@ -11,6 +11,7 @@ the caller's error message instead of the terminal.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -107,23 +108,25 @@ def to_display(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
 
 PREVIEW_LEVELS = 65536
 """Linear levels of :func:`to_preview`'s table over [0, 1]."""
-_PREVIEW_TABLE: np.ndarray | None = None
+
+
+@functools.cache
+def _preview_table() -> np.ndarray:
+    """(:data:`PREVIEW_LEVELS`,) uint8: :func:`to_display` of each level, made once."""
+    return to_display(np.linspace(0.0, 1.0, PREVIEW_LEVELS))
 
 
 def to_preview(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """(H, W, 3) linear radiance times ``scale`` -> (H, W, 3) uint8 sRGB, for a live page's frames: the sRGB curve
-    looked up in a table of :data:`PREVIEW_LEVELS` linear levels instead of computed per pixel (a paper's-resolution
-    view in some 10 ms instead of 50). It approximates :func:`to_display`: within one code, and equal to it for all but
-    values within a table step of a rounding edge. Negative values and NaN show black, as :func:`to_display` shows
-    negative ones. Written images use :func:`to_display`."""
-    global _PREVIEW_TABLE
-    if _PREVIEW_TABLE is None:
-        _PREVIEW_TABLE = to_display(np.linspace(0.0, 1.0, PREVIEW_LEVELS))
+    looked up in a table of :data:`PREVIEW_LEVELS` linear levels instead of computed per pixel (a 1024 x 768 view in
+    6 ms instead of 33 on this project's 2-core machine). It approximates :func:`to_display`: within one code, and
+    equal to it for all but values within a table step of a rounding edge. Negative values and NaN show black, as
+    :func:`to_display` shows negative ones. Written images use :func:`to_display`."""
     v = np.multiply(rgb, np.float32(scale * (PREVIEW_LEVELS - 1)), dtype=np.float32)
     np.fmax(v, 0.0, out=v)                      # NaN -> 0
     np.fmin(v, PREVIEW_LEVELS - 1, out=v)
     v += 0.5
-    return _PREVIEW_TABLE[v.astype(np.uint16)]
+    return _preview_table()[v.astype(np.uint16)]
 
 
 def write_png(path: str | Path, image: np.ndarray) -> Path:

@@ -82,12 +82,12 @@ def _seq(name: str, title: str, scene: str, *, quick: bool, calibrate: tuple[str
                (("report", f"{out}/report.json"), ("effect", f"{out}/effect.json")), quick=quick, needs=needs)
 
 
+_TURNS = ("turns25", ("--simulator-share", "0.25", "--simulator-threads", "2"))
 SIMULATOR_PLACES = (("thread", ("--simulator", "thread")), ("nice0", ("--simulator-nice", "0")),
-                    ("nice3", ("--simulator-nice", "3")), ("nice7", ()), ("nice10", ("--simulator-nice", "10")),
-                    ("turns25", ("--simulator-share", "0.25", "--simulator-threads", "2")))
+                    ("nice3", ("--simulator-nice", "3")), ("nice7", ()), ("nice10", ("--simulator-nice", "10")), _TURNS)
 """The places the simulator is measured at beside the decoupled loop (:func:`simulator_places_tables`): a name and
 the bench's options."""
-SIMULATOR_PLACES_FULL = (("nice7", ()), ("turns25", ("--simulator-share", "0.25", "--simulator-threads", "2")))
+SIMULATOR_PLACES_FULL = (("nice7", ()), _TURNS)
 """The same at the paper's resolution: side by side (the default) and in turns."""
 
 RUNS: tuple[Run, ...] = (

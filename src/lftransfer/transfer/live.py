@@ -54,7 +54,7 @@ from lftransfer.transfer.share import TurnTaking
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["CAPTURE_STAGES", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
+__all__ = ["CAPTURE_STAGES", "FrameTimes", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
 
 CAPTURE_STAGES = ("encode", "capture", "decode", "capture_view")
 RENDER_STAGES = ("pose", "measure_depth", "wait_capture", "incident_light", "render_lightfield", "prefilter",
@@ -118,6 +118,29 @@ class LiveFrame:
     capture_timings_s: dict[str, float] = field(default_factory=dict)
     started_s: float = 0.0
     ready_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class FrameTimes:
+    """What a long run keeps of a :class:`LiveFrame`: its times and versions, not its images and light fields (the
+    rates, the latency and the stage medians need no more; a few hundred whole frames at the paper's resolution hold
+    gigabytes, and a process that grows by that much each frame renders slower for it). The fields are the frame's
+    own."""
+
+    time_s: float
+    timings_s: dict
+    capture_index: int
+    capture_age_s: float
+    capture_time_s: float
+    capture_timings_s: dict
+    scene_version: int
+    light_version: int
+    started_s: float
+    ready_s: float
+
+    @classmethod
+    def of(cls, frame: LiveFrame) -> "FrameTimes":
+        return cls(**{name: getattr(frame, name) for name in cls.__dataclass_fields__})
 
 
 class LiveTransfer:

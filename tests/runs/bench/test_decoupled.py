@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from lftransfer.runs.bench import decoupled
+from lftransfer.transfer.live import FrameTimes
 from lftransfer.runs.pipeline import RunOptions, open_rig
 from lftransfer.scenes import builtin_scene, load_scene, quick_scene
 from lftransfer.transfer.bounce import TransferSettings
@@ -60,9 +61,9 @@ def test_02_the_run_keeps_the_frames_times_not_their_images():
     rendered slower for it: what it keeps of a frame holds no array."""
     from types import SimpleNamespace
 
-    fields = decoupled._Timing.__dataclass_fields__
+    fields = FrameTimes.__dataclass_fields__
     frame = SimpleNamespace(**{name: 1.0 for name in fields}, composite=np.zeros((512, 512, 3)),
                             synthetic_lf=np.zeros((8, 8, 8, 8, 3)))
-    kept = decoupled._Timing.of(frame)
+    kept = FrameTimes.of(frame)
     assert not any(isinstance(getattr(kept, name), np.ndarray) for name in fields)
     assert not hasattr(kept, "composite") and not hasattr(kept, "synthetic_lf")

@@ -40,7 +40,7 @@ from lftransfer.scenes import SceneError, with_overrides
 from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
 from lftransfer.transfer.latency import motion_latency
-from lftransfer.transfer.live import LIVE_STAGES, LiveFrame, LiveTransfer
+from lftransfer.transfer.live import LIVE_STAGES, FrameTimes, LiveFrame, LiveTransfer
 from lftransfer.transfer.timer import CoreMeter, rate_hz
 
 __all__ = ["EditError", "LAYERS", "LiveSession", "ViewerBounces", "ViewerFrame"]
@@ -232,7 +232,7 @@ class LiveSession:
         self._bounces_queued = threading.Event()     # a bounce-layer request waits or runs (one at a time)
         self.last_bounces: ViewerBounces | None = None
         self.edits = 0                                # synthetic object edits applied
-        self._recent: deque = deque(maxlen=LATENCY_FRAMES)    # (started, ready, versions) of the latest frames
+        self._recent: deque = deque(maxlen=LATENCY_FRAMES)    # the latest frames' times and versions
         self.recorder = Recorder()
         self._cores = CoreMeter(getattr(live.rig, "cpu_seconds", None))   # the simulator process's, if it has one
         self.compare = GroundTruthCompare(oracle, lambda image, scale: _jpeg(to_display(image, scale), 92)) \
@@ -452,7 +452,7 @@ class LiveSession:
                     frame = self.live.step(t)
                 self._clock += 1
                 self.last = frame
-                self._recent.append(frame_times(frame))
+                self._recent.append(FrameTimes.of(frame))
                 self._on_frame(self._viewer_frame(frame))
             except RigError as exc:      # the rig is gone (a dead simulator, a device fault): the loop ends here
                 self.error = self.failed = f"the live loop stopped: {exc}"
@@ -633,20 +633,6 @@ class LiveSession:
             files += [write_exr(self.out / f"frame-{stamp}.exr", frame.composite),
                       write_png(self.out / f"frame-{stamp}.png", to_display(frame.composite, self.scale or 1.0))]
         return files
-
-
-@dataclass(frozen=True)
-class _FrameTimes:
-    """What the latency needs of a frame (the frame itself holds images)."""
-
-    started_s: float
-    ready_s: float
-    scene_version: int
-    light_version: int
-
-
-def frame_times(frame: LiveFrame) -> _FrameTimes:
-    return _FrameTimes(frame.started_s, frame.ready_s, frame.scene_version, frame.light_version)
 
 
 def depth_layer(real, synthetic_depth: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ import numpy as np
 
 from lftransfer.settings import SimulatorSettings
 from lftransfer.transfer.latency import motion_latency
-from lftransfer.transfer.live import LiveTransfer
+from lftransfer.transfer.live import FrameTimes, LiveTransfer
 from lftransfer.transfer.share import TurnTaking
 from lftransfer.transfer.timer import CoreMeter
 
@@ -88,28 +88,6 @@ class DecoupledRun:
         return asdict(self)
 
 
-@dataclass(frozen=True)
-class _Timing:
-    """What the run keeps of a :class:`~lftransfer.transfer.live.LiveFrame`: its times and versions, not its
-    images and light fields (a few hundred frames at the paper's resolution would hold gigabytes, and a process
-    that grows by that much each frame renders slower for it)."""
-
-    time_s: float
-    timings_s: dict
-    capture_index: int
-    capture_age_s: float
-    capture_time_s: float
-    capture_timings_s: dict
-    scene_version: int
-    light_version: int
-    started_s: float
-    ready_s: float
-
-    @classmethod
-    def of(cls, frame) -> "_Timing":
-        return cls(**{name: getattr(frame, name) for name in cls.__dataclass_fields__})
-
-
 def _med_max(values) -> dict:
     values = list(values)
     return {"median": round(float(statistics.median(values)), 4), "max": round(float(max(values)), 4)}
@@ -145,7 +123,7 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
             if i == WARMUP_FRAMES:                      # the counted frames' CPU time, from here to the end
                 cores = CoreMeter(child_cpu, window_s=math.inf)
                 cores.sample()
-            frame = _Timing.of(live.step(float(times[i % len(times)])))
+            frame = FrameTimes.of(live.step(float(times[i % len(times)])))
             i += 1
             if i > WARMUP_FRAMES:
                 done.append(frame)
@@ -192,6 +170,6 @@ def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: i
         cores = CoreMeter(window_s=math.inf)
         cores.sample()
         start = time.perf_counter()
-        done = [_Timing.of(live.step(float(times[i % len(times)]))) for i in range(first, first + frames)]
+        done = [FrameTimes.of(live.step(float(times[i % len(times)]))) for i in range(first, first + frames)]
         wall = time.perf_counter() - start
         return frames / wall, cores.sample()["loop"], done
