@@ -230,13 +230,14 @@ class RayRenderer(ABC):
     def render_lightfield(self, array: LensArray, lights: Sequence[Light], U: int, V: int, *,
                           side: Literal["synthetic", "real"] = "synthetic",
                           model: LightingModel = DEFAULT_LIGHTING_MODEL,
-                          spp: int = DEFAULT_SPP, seed: int = 0) -> LightField:
+                          spp: int = DEFAULT_SPP, seed: int = 0, pose: np.ndarray | None = None) -> LightField:
         """The light field this half-space sends through the array.
 
         For ``side="synthetic"`` entry [k, j, i] is the radiance arriving at lenslet k travelling along +d_ij
         (a virtual camera at the lenslet looking along -d); for ``side="real"`` the radiance travelling along
         -d_ij (what the LF camera captures). With ``model="area"`` each entry averages ``spp`` stratified
-        points of the lenslet's aperture; otherwise a pinhole camera at the lenslet centre.
+        points of the lenslet's aperture; otherwise a pinhole camera at the lenslet centre. ``pose``: (4, 4) rigid
+        transform from the array's frame to this renderer's (one interface of several); None: the same frame.
 
         Returns:
             LightField (K, V, U, 3) float32, masked samples zero.
@@ -246,9 +247,15 @@ class RayRenderer(ABC):
         def entry_rays():               # the entries with data, and their values' places in the flat table
             origins, directions, entries = data_entry_rays(array, U, V, side=side, area=model == "area", spp=spp,
                                                            seed=seed)
+            if pose is not None:
+                rot, shift = np.asarray(pose, np.float64)[:3, :3], np.asarray(pose, np.float64)[:3, 3]
+                origins = (origins @ rot.T + shift).astype(np.float32)
+                directions = (directions @ rot.T).astype(np.float32)
             return origins, directions, np.repeat(entries, 3)
 
-        origins, directions, channels = self._rays(("lf", array, U, V, side, model == "area", spp, seed), entry_rays)
+        placed = None if pose is None else np.asarray(pose, np.float64).tobytes()
+        origins, directions, channels = self._rays(("lf", array, U, V, side, model == "area", spp, seed, placed),
+                                                   entry_rays)
         means = self.render_samples(origins, directions, lights, spp, seed=seed)
         lf.data.reshape(-1)[channels] = means.radiance.ravel()
         return lf

@@ -26,7 +26,7 @@ class Light(Protocol):
 
 
 def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
-          max_depth: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          max_depth: int = 3, seed: int = 0, windows=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Radiance arriving at ray origins from along the rays.
 
     Args:
@@ -36,6 +36,8 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
         lights: lights to gather at every path vertex.
         max_depth: surface interactions per path (1 = direct light only).
         seed: random seed (BSDF sampling).
+        windows: several interfaces' arrays (:class:`~lftransfer.render.windows.Windows`): a path is cut where a
+            later ray crosses one; None: nothing cut.
 
     Returns:
         radiance (N, 3) float32 W m^-2 sr^-1, hit (N,) bool (first ray hit a surface), distance (N,) float32
@@ -57,7 +59,7 @@ def trace(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[L
             radiance[miss] += light.background(o[miss], d[miss])
     if len(idx) == 0 or not any(getattr(light, "illuminates", True) for light in lights):
         return radiance, hit, distance      # nothing hit, or nothing lights what was hit (e.g. a render of depths)
-    radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed)
+    radiance[idx] = shade(scene, o[idx], d[idx], lights, max_depth=max_depth, seed=seed, windows=windows)
     return radiance, hit, distance
 
 
@@ -79,10 +81,11 @@ def trace_adjoint(scene, origins: np.ndarray, directions: np.ndarray, light, wei
                       seed=seed)
 
 
-def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: int, seed: int):
+def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: int, seed: int, windows=None):
     """The path vertices of :func:`shade`: yields (depth, si, active, throughput) for depth 0 .. max_depth - 1.
     The paths depend on the scene and the seed only, never on the lights, so :func:`shade` and
-    :func:`shade_adjoint` walk the same ones."""
+    :func:`shade_adjoint` walk the same ones. With ``windows``, a path ends where a ray after the first crosses an
+    array (:mod:`lftransfer.render.windows`)."""
     mi = mitsuba()
     import drjit as dr
 
@@ -96,6 +99,8 @@ def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: 
     for depth in range(max_depth):
         si = scene.ray_intersect(ray, active)
         active &= si.is_valid()
+        if windows is not None and depth > 0:
+            active &= ~windows.crossed_jit(ray, si.t)
         yield depth, si, active, throughput
         if depth + 1 == max_depth:
             break
@@ -110,13 +115,14 @@ def _vertices(scene, origins: np.ndarray, directions: np.ndarray, *, max_depth: 
 
 
 def shade(scene, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
-          max_depth: int = 3, seed: int = 0) -> np.ndarray:
+          max_depth: int = 3, seed: int = 0, windows=None) -> np.ndarray:
     """Path-traced radiance for rays that are known to hit (no compaction). Shapes as in :func:`trace`."""
     mi = mitsuba()
     import drjit as dr
 
     result = mi.Color3f(0.0)
-    for depth, si, active, throughput in _vertices(scene, origins, directions, max_depth=max_depth, seed=seed):
+    for depth, si, active, throughput in _vertices(scene, origins, directions, max_depth=max_depth, seed=seed,
+                                                   windows=windows):
         if depth == 0:     # emitters seen directly; later vertices gather them by next-event estimation
             for light in lights:
                 if hasattr(light, "emitted"):

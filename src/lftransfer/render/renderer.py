@@ -26,6 +26,8 @@ class HalfSpaceRenderer(RayRenderer):
         objects: scene objects (``lftransfer.scenes.ObjectConfig``).
         extra_shapes: additional Mitsuba shape dicts (e.g. the simulated rig's absorbing lens array).
         max_depth: surface interactions per path (1 = direct light only; more adds interreflections).
+        windows: several interfaces' arrays, where paths between objects are cut
+            (:class:`~lftransfer.render.windows.Windows`); None: one interface.
 
     Example:
         >>> r = HalfSpaceRenderer(scene.synthetic)                                        # doctest: +SKIP
@@ -34,10 +36,12 @@ class HalfSpaceRenderer(RayRenderer):
 
     kind = "exact"
 
-    def __init__(self, objects: Sequence, *, extra_shapes: dict | None = None, max_depth: int = 3) -> None:
+    def __init__(self, objects: Sequence, *, extra_shapes: dict | None = None, max_depth: int = 3,
+                 windows=None) -> None:
         mi = mitsuba()
         self.objects = list(objects)
         self.max_depth = int(max_depth)
+        self.windows = windows
         self._extra_shapes = extra_shapes
         self.scene = mi.load_dict(scene_dict(self.objects, extra=extra_shapes), parallel=False, optimize=False)
 
@@ -63,7 +67,8 @@ class HalfSpaceRenderer(RayRenderer):
     def render_rays(self, origins: np.ndarray, directions: np.ndarray, lights: Sequence[Light], *,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Radiance (N, 3), hit mask (N,) and distance (N,) for arbitrary rays (see :func:`trace`)."""
-        return trace(self.scene, origins, directions, lights, max_depth=self.max_depth, seed=seed)
+        return trace(self.scene, origins, directions, lights, max_depth=self.max_depth, seed=seed,
+                     windows=self.windows)
 
     def render_view_adjoint(self, sensor, width: int, height: int, light, weights: np.ndarray, *,
                             spp: int = DEFAULT_SPP, seed: int = 0) -> None:

@@ -67,13 +67,14 @@ def resolve_renderer(scene, kind: str = "auto") -> Resolved:
     return kind
 
 
-def make_renderer(objects: Sequence, renderer: Resolved, max_depth: int) -> RayRenderer:
+def make_renderer(objects: Sequence, renderer: Resolved, max_depth: int, windows=None) -> RayRenderer:
     """The renderer ``renderer`` ("fast" or "exact", as :func:`resolve_renderer` gives it) of ``objects`` with
-    ``max_depth`` surface interactions per path."""
+    ``max_depth`` surface interactions per path; ``windows``: several interfaces' arrays, where paths between objects
+    are cut (:mod:`lftransfer.render.windows`)."""
     if renderer == "fast":
-        return fast.CachedRenderer(objects, max_depth=max_depth)
+        return fast.CachedRenderer(objects, max_depth=max_depth, windows=windows)
     if renderer == "exact":
-        return HalfSpaceRenderer(objects, max_depth=max_depth)
+        return HalfSpaceRenderer(objects, max_depth=max_depth, windows=windows)
     raise ValueError(f"renderer must be 'fast' or 'exact' (resolve 'auto' first: resolve_renderer), got {renderer!r}")
 
 

@@ -288,16 +288,18 @@ def scene_dict(objects: Sequence, *, extra: dict | None = None) -> dict:
     return d
 
 
-def lens_array_absorber(array) -> dict:
+def lens_array_absorber(array, to_world: np.ndarray | None = None) -> dict:
     """Mitsuba shape dict of the lens array seen from the real side: a black rectangle just behind z = 0.
 
     Args:
         array: ``LensArray`` (its extent, in the array's own frame).
+        to_world: (4, 4) the array's frame -> the scene's (another interface's array); None: the same frame.
     """
     mi = mitsuba()
     xmin, xmax, ymin, ymax = array.extent()
+    place = mi.ScalarTransform4f() if to_world is None else mi.ScalarTransform4f(np.asarray(to_world).tolist())
     return {"type": "rectangle",
-            "to_world": mi.ScalarTransform4f().translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
+            "to_world": place.translate([(xmin + xmax) / 2, (ymin + ymax) / 2, -5e-4])
             .scale([(xmax - xmin) / 2, (ymax - ymin) / 2, 1.0]),
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}
 

@@ -57,8 +57,7 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
 
     view = scene.view
     objects = {"real": [move(o) for o in scene.real]} if isinstance(scene, SceneConfig) else {}
-    return with_overrides(
-        scene,
+    changes = dict(
         **objects,
         synthetic=[move(o) for o in scene.synthetic],
         lights=[lt.model_copy(update={"position": point(lt.position)}) for lt in scene.lights],
@@ -66,3 +65,15 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
             update={"ball_centre": point(scene.probe.ball_centre)}),
         view={"origin": point(view.origin), "target": point(view.target), "up": vector(view.up)},
     )
+    if not scene.interfaces:
+        return with_overrides(scene, **changes)
+    # several interfaces: they move with everything else (the first leaves the origin, which a scene file may not
+    # do), so the moved scene is a copy of the valid one, not validated again
+    def place(interface):
+        to_world = m @ interface.to_world()
+        return interface.model_copy(update={
+            "translate": to_world[:3, 3].tolist(),
+            "rotate_deg": Rotation.from_matrix(to_world[:3, :3]).as_euler("xyz", degrees=True).tolist()})
+
+    changes["view"] = view.model_copy(update=changes["view"])
+    return scene.model_copy(update={**changes, "interfaces": [place(i) for i in scene.interfaces]})

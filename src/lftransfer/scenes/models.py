@@ -48,6 +48,8 @@ __all__ = [
     "RGBUnit",
     "Size2",
     "RigConfig",
+    "InterfaceConfig",
+    "MAX_INTERFACES",
     "ViewConfig",
     "MAX_LIGHTS",
     "LightConfig",
@@ -134,6 +136,52 @@ class RigConfig(_Model):
     def focal_length(self) -> float:
         """Lenslet focal length in metres."""
         return self.focal_mm * 1e-3
+
+
+MAX_INTERFACES = 6            # light field interfaces a scene may give (six planes bound a box)
+
+
+class InterfaceConfig(_Model):
+    """One light field interface of several (``[[interface]]``): a lens array with its LF camera and projector, as
+    ``[rig]`` describes them, standing at a pose in the world (docs/architecture.md, "Several interfaces").
+
+    The interface's own frame has its array in the plane z = 0 and its real side at z > 0, as the one interface of
+    a ``[rig]`` scene has in the world. The real objects stand on the real side of every interface; each synthetic
+    object on the synthetic side of at least one.
+
+    Attributes:
+        name: a label (reports, the page).
+        translate: where the interface's frame origin (the middle of its lattice) stands, world metres.
+        rotate_deg: its frame's rotation into the world (about x, then y, then z, degrees): the array's normal,
+            pointing at the real objects, is the rotated +z.
+        rows, cols: this array's lenslets (default: ``[rig]``'s); every other device and optical value is
+            ``[rig]``'s.
+    """
+
+    name: Annotated[str, Field(min_length=1)]
+    translate: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rotate_deg: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rows: PosInt | None = None
+    cols: PosInt | None = None
+
+    def to_world(self) -> np.ndarray:
+        """(4, 4) float64 rigid transform: a point of the interface's frame -> the world."""
+        from lftransfer.optics.geometry import rotation_matrix
+
+        m = np.eye(4)
+        m[:3, :3] = rotation_matrix(self.rotate_deg)
+        m[:3, 3] = self.translate
+        return m
+
+    @property
+    def at_origin(self) -> bool:
+        """Whether the interface's frame is the world's (no translation, no rotation)."""
+        return not any(self.translate) and not any(self.rotate_deg)
+
+    def rig(self, shared: RigConfig) -> RigConfig:
+        """This interface's hardware: ``shared`` (the scene's ``[rig]``) with its own lenslet counts."""
+        update = {k: getattr(self, k) for k in ("rows", "cols") if getattr(self, k) is not None}
+        return shared.model_copy(update=update) if update else shared
 
 
 class ViewConfig(_Model):

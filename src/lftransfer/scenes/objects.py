@@ -18,6 +18,7 @@ from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 from lftransfer.optics.geometry import rotation_matrix
 from lftransfer.scenes.animation import Interpolation, interpolate
 from lftransfer.scenes.assets import _scene_file, read_mesh
+from lftransfer.scenes.interfaces import region_problem
 from lftransfer.scenes.models import (
     DiffuseMaterial,
     Material,
@@ -277,15 +278,13 @@ class ObjectConfig(_Model):
 
 
 def _in_half_space(side: str):
-    def check(obj: ObjectConfig) -> ObjectConfig:
+    def check(obj: ObjectConfig, info: ValidationInfo) -> ObjectConfig:
         if side == "real" and obj.material.type == "emitter":
             raise ValueError(f"{obj.name!r}: an emitter is a synthetic object; the real side's light is [light]")
-        lo, hi = obj.bounds()
-        if side == "real" and lo[2] <= 0:
-            raise ValueError(f"a real object must lie in z > 0; {obj.name!r} spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
-        if side == "synthetic" and hi[2] >= 0:
-            raise ValueError(f"a synthetic object must lie in z < 0; {obj.name!r} spans z in "
-                             f"[{lo[2]:.4g}, {hi[2]:.4g}] m")
+        # where it may stand depends on the scene's interfaces (validated before the objects)
+        problem = region_problem(side, obj, (info.data or {}).get("interfaces") or [])
+        if problem:
+            raise ValueError(problem)
         return obj
 
     return AfterValidator(check)

@@ -13,7 +13,9 @@ from lftransfer.scenes.models import (
     MAX_LIGHTS,
     AnimationConfig,
     EffectConfig,
+    MAX_INTERFACES,
     EnvironmentConfig,
+    InterfaceConfig,
     LightConfig,
     ProbeConfig,
     RenderConfig,
@@ -21,6 +23,7 @@ from lftransfer.scenes.models import (
     ViewConfig,
     _Model,
 )
+from lftransfer.scenes.interfaces import region_problem
 from lftransfer.scenes.objects import ObjectConfig, RealObject, SyntheticObject
 
 __all__ = ["SceneConfig", "SyntheticScene", "check_synthetic"]
@@ -31,7 +34,10 @@ class _SceneBase(_Model):
     settings and the time line; the subclasses add the objects.
 
     Attributes:
-        rig: light field interface hardware (nominal values; defaults: the paper's rig).
+        rig: light field interface hardware (nominal values; defaults: the paper's rig); every interface's.
+        interfaces: several light field interfaces (``[[interface]]``), each ``[rig]``'s hardware at a pose in the
+            world (:class:`~lftransfer.scenes.models.InterfaceConfig`); the first stands at the world's origin,
+            facing +z. Empty: one interface, ``[rig]``'s, in the world's z = 0.
         view: the view camera.
         lights: the real point lights (their positions as measured by hand): ``[light]`` (one) or
             ``[[light]]`` (several) in the file; empty: the scene is lit by its emitting synthetic objects alone
@@ -44,6 +50,9 @@ class _SceneBase(_Model):
     """
 
     rig: RigConfig = Field(default_factory=RigConfig)
+    interfaces: list[InterfaceConfig] = Field(default_factory=list,
+                                              validation_alias=AliasChoices("interface", "interfaces"),
+                                              max_length=MAX_INTERFACES)
     view: ViewConfig = Field(default_factory=ViewConfig)
     lights: list[LightConfig] = Field(default_factory=list, validation_alias=AliasChoices("light", "lights"),
                                       max_length=MAX_LIGHTS)
@@ -109,6 +118,22 @@ class _SceneBase(_Model):
                              "'probe'), or a synthetic object with material type = 'emitter'")
         return self
 
+    @field_validator("interfaces")
+    @classmethod
+    def _interfaces_fit(cls, value: list[InterfaceConfig]) -> list[InterfaceConfig]:
+        if not value:
+            return value
+        if len(value) == 1:
+            raise ValueError("give two or more [[interface]] tables, or none: one interface is the scene's [rig]")
+        if not value[0].at_origin:
+            raise ValueError(f"interface[0] ({value[0].name!r}) defines the world frame: give it no translate or "
+                             "rotate_deg (it stands at the origin, its real side towards +z)")
+        names = [i.name for i in value]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"interface names must differ; {', '.join(map(repr, twice))} is given more than once")
+        return value
+
     @model_validator(mode="after")
     def _animation_fits(self):
         sides = self._sides()
@@ -130,11 +155,9 @@ class _SceneBase(_Model):
                 if np.min(posed.scale3) <= 0:
                     raise ValueError(f"{side}[{i}] ({o.name!r}): its interpolated scale is not positive at "
                                      f"t = {t:.4g} s ({posed.scale3.tolist()})")
-                lo, hi = posed.bounds()
-                if (side == "real" and lo[2] <= 0) or (side == "synthetic" and hi[2] >= 0):
-                    half = "z > 0" if side == "real" else "z < 0"
-                    raise ValueError(f"{side}[{i}] ({o.name!r}) leaves its half-space ({half}) at t = {t:.4g} s: "
-                                     f"it spans z in [{lo[2]:.4g}, {hi[2]:.4g}] m")
+                problem = region_problem(side, posed, self.interfaces, when=f" at t = {t:.4g} s")
+                if problem:
+                    raise ValueError(f"{side}[{i}]: {problem}")
         return self
 
 
@@ -143,7 +166,8 @@ class SyntheticScene(_SceneBase):
     measured by hand, the render settings, the time line and the synthetic objects; never the real objects.
 
     Attributes:
-        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0; with several interfaces, on the
+            synthetic side of at least one).
     """
 
     synthetic: list[SyntheticObject] = Field(default_factory=list)
@@ -153,8 +177,10 @@ class SceneConfig(_SceneBase):
     """A whole scene file, real objects included (for the simulated rig and its ground truth).
 
     Attributes:
-        real: objects of the real half-space (bounding boxes in z > 0).
-        synthetic: objects of the synthetic half-space (bounding boxes in z < 0).
+        real: objects of the real half-space (bounding boxes in z > 0; with several interfaces, on the real side
+            of all).
+        synthetic: objects of the synthetic half-space (bounding boxes in z < 0; with several interfaces, on the
+            synthetic side of at least one).
         effect: the effect measured per verified frame (``[effect]``), or None; verification data, like the
             real objects, so the pipeline's part of the scene does not hold it.
         environment: the light of the room around the real objects (``[environment]``), or None (a dark room);

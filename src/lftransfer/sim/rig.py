@@ -39,6 +39,7 @@ from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, CleanPlate, Col
                                      WhiteField)
 from lftransfer.scenes.frame import scene_in_frame
 
+NOISE_SEED_STEP = 1009   # interface i's sensor noise and renders are seeded with the rig's seed + i * this
 ROOM_SAMPLES = 16      # directions of the room's light per shading point (importance-sampled, shadow rays)
 BALL_SPP = 64          # samples per pixel of the view camera's photograph of the mirror ball
 
@@ -71,6 +72,9 @@ class SimRig:
         seed: seed of the hidden truth's noise.
         operator_seed: seed of the operator's hand errors (default: ``seed``).
         operator: sizes of the operator's hand errors (:class:`OperatorError`; ``OperatorError(0, 0)``: exact).
+        interface: which of the scene's light field interfaces this rig's devices are (``[[interface]]`` index; 0
+            for a ``[rig]`` scene). A scene of several is simulated by one rig per interface, joined
+            (:class:`~lftransfer.sim.interfaces.SimInterfaces`): each sees the others' arrays and projectors.
 
     Example:
         >>> rig = SimRig(load_scene(builtin_scene("fig4")))       # doctest: +SKIP
@@ -79,11 +83,17 @@ class SimRig:
 
     def __init__(self, scene, *, truth: RigModel | None = None, capture_spp: int = DEFAULT_CAPTURE_SPP, view_spp: int = 4,
                  projector_samples: int = 64, aperture_samples: int = 2, seed: int | None = None,
-                 operator_seed: int | None = None, operator: OperatorError = OperatorError()) -> None:
+                 operator_seed: int | None = None, operator: OperatorError = OperatorError(),
+                 interface: int = 0) -> None:
         from lftransfer.backend import mitsuba
 
         mi = mitsuba()
-        self._truth = truth or nominal_rig(scene.rig)
+        faces = scene.interfaces
+        if not 0 <= interface < max(1, len(faces)):
+            raise ValueError(f"SimRig: interface {interface} of a scene with {max(1, len(faces))} interface(s)")
+        self.interface = int(interface)
+        self._truth = truth or (nominal_rig(faces[interface].rig(scene.rig), faces[interface].to_world()) if faces
+                                else nominal_rig(scene.rig))
         self._world_to_array = self._truth.world_to_array()
         # The real world seen from the true lens array's own frame (interface plane z = 0); a moving scene is
         # posed at the time each RealScene request names (scene_in_frame of the posed world scene, exact).
@@ -91,7 +101,7 @@ class SimRig:
         self._time_s = 0.0
         scene = scene_in_frame(scene.at(0.0), self._world_to_array)
         self._scene = scene
-        self._seed = int(scene.rig.seed if seed is None else seed)
+        self._seed = int(scene.rig.seed if seed is None else seed) + NOISE_SEED_STEP * self.interface
         self._operator_seed = self._seed if operator_seed is None else int(operator_seed)
         self._operator = operator
         self._rng = np.random.default_rng(self._seed + 7)
@@ -99,9 +109,9 @@ class SimRig:
         self.view_spp = int(view_spp)
         self.aperture_samples = int(aperture_samples)
         array = self._truth.array
-        self._absorber = lens_array_absorber(array)
-        self._real = HalfSpaceRenderer(scene.real, extra_shapes={"lens_array_absorber": self._absorber},
-                                       max_depth=scene.render.max_depth)
+        self._absorbers = {"lens_array_absorber": lens_array_absorber(array)}   # and the other interfaces' (join)
+        self._siblings: list[SimRig] = []
+        self._real = HalfSpaceRenderer(scene.real, extra_shapes=self._absorbers, max_depth=scene.render.max_depth)
         self._point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
                               for lt in scene.lights]
         # the room's light around the real objects (hidden truth); the array's absorber blocks it behind the array
@@ -224,14 +234,13 @@ class SimRig:
     def _without_real_objects(self) -> HalfSpaceRenderer:
         """The world in front of the array with the real objects taken away: the array's black absorber alone (it
         reflects nothing, so one bounce is all its light)."""
-        return HalfSpaceRenderer([], extra_shapes={"lens_array_absorber": self._absorber}, max_depth=1)
+        return HalfSpaceRenderer([], extra_shapes=self._absorbers, max_depth=1)
 
     def _real_renderer(self, t: float) -> HalfSpaceRenderer:
         """The real objects posed at time ``t`` (seconds), seen from the true array's frame."""
         posed = scene_in_frame(self._world_scene.at(t), self._world_to_array)
         self._time_s = float(t)
-        return HalfSpaceRenderer(posed.real, extra_shapes={"lens_array_absorber": self._absorber},
-                                 max_depth=posed.render.max_depth)
+        return HalfSpaceRenderer(posed.real, extra_shapes=self._absorbers, max_depth=posed.render.max_depth)
 
     def project(self, image: np.ndarray) -> None:
         """Show a projector image ((H, W, 3) unsigned integers of the projector's bit depth)."""
@@ -299,7 +308,8 @@ class SimRig:
         """Nothing to release."""
 
     # -- the simulated physics ----------------------------------------------------------------------------------
-    def _projector_lights(self) -> list:
+    def _own_projector_light(self) -> LightFieldLight | None:
+        """This interface's projector as a light of the real side (its array's frame), or None while it is dark."""
         if self._projector_light_stale:
             self._projector_light_stale = False
             radiance = self._prj_encoder.emitted(self._projected)         # (H, W, 3) radiance per projector pixel
@@ -308,7 +318,63 @@ class SimRig:
             if np.any(lf.data != 0):
                 self._projector_light = LightFieldLight(lf, side="real", model="area",
                                                         aperture_samples=self.aperture_samples, seed=self._seed + 3)
-        return [self._projector_light] if self._projector_light is not None else []
+        return self._projector_light
+
+    def _projector_lights(self) -> list:
+        """Every interface's projector lighting the real side, in this array's frame."""
+        own = self._own_projector_light()
+        return [*([own] if own is not None else []), *(light for _, light in self._sibling_lights())]
+
+    # -- several interfaces ---------------------------------------------------------------------------------
+    def join(self, rigs: list) -> None:
+        """Share the real world with the rigs of the scene's other interfaces (``rigs``, this one among them): their
+        arrays stand in it (black absorbers behind their lenslets), their projectors light it, and this LF camera
+        sees what they project where it looks at their lenslets."""
+        self._siblings = [r for r in rigs if r is not self]
+        for r in self._siblings:
+            self._absorbers[f"lens_array_absorber_{r.interface}"] = lens_array_absorber(
+                r.truth.array, to_world=self._from_sibling(r))
+        self._real = self._real_renderer(self._time_s)
+        if isinstance(self._setup, RealScene):
+            self._world = self._real
+
+    def _from_sibling(self, rig) -> np.ndarray:
+        """(4, 4) another interface's array frame -> this array's frame."""
+        return self._world_to_array @ np.linalg.inv(rig._world_to_array)
+
+    def _sibling_lights(self) -> list:
+        """(rig, its projector seen from this array's frame) for every other interface whose projector is lit; the
+        posed copies are kept while their projection stays."""
+        kept = self.__dict__.setdefault("_posed_siblings", {})
+        out = []
+        for r in self._siblings:
+            light = r._own_projector_light()
+            if light is None:
+                continue
+            if kept.get(r.interface, (None,))[0] is not light:
+                kept[r.interface] = (light, light.seen_from(self._from_sibling(r)))
+            out.append((r, kept[r.interface][1]))
+        return out
+
+    def _siblings_seen(self, origins: np.ndarray, directions: np.ndarray, distance: np.ndarray) -> np.ndarray:
+        """(N, 3) float64 the light of the other interfaces' projectors along rays of this array's frame that meet
+        their lenslets before anything else (``distance``: where each ray hits, inf where none)."""
+        from lftransfer.backend import mitsuba
+        from lftransfer.render.lights import jit_array, to_numpy
+        from lftransfer.render.windows import Windows
+
+        mi = mitsuba()
+        out = np.zeros((len(origins), 3), np.float64)
+        for r, light in self._sibling_lights():
+            crossing = Windows.of([r.truth.array], [light.pose]).crossed(origins, directions, distance)
+            idx = np.flatnonzero(crossing)
+            if not len(idx):
+                continue
+            o, d = origins[idx].astype(np.float32), directions[idx].astype(np.float32)
+            seen = light.incident(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
+                                  mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))), mi.Bool(True))
+            out[idx] += to_numpy(seen.radiance)
+        return out
 
     def _scene_lights(self) -> list:
         """The real scene's own lights: the point lights and the room (where the scene has one)."""
@@ -337,7 +403,7 @@ class SimRig:
             "ball": {"type": "sphere", "center": centre.tolist(), "radius": ball.radius,
                      "bsdf": {"type": "conductor", "material": "none",
                               "specular_reflectance": {"type": "rgb", "value": list(self._ball_reflectance)}}},
-            "lens_array_absorber": self._absorber})
+            **self._absorbers})
         return np.array(mi.render(scene, spp=spp, seed=self._seed + 11), np.float32)[..., :3]
 
     def _setup_lights(self) -> list:
@@ -376,8 +442,10 @@ class SimRig:
         origins = np.zeros((len(self._pix), 3), np.float32)
         for s in range(self.capture_spp):
             origins[:, :2] = centres + offsets[:, s]
-            radiance, _, _ = renderer.render_rays(origins, self._pix_dir, lights, seed=self._seed + s)
+            radiance, _, distance = renderer.render_rays(origins, self._pix_dir, lights, seed=self._seed + s)
             acc += radiance
+            if self._siblings:          # several interfaces: the others' lenslets, where this camera sees them
+                acc += self._siblings_seen(origins, self._pix_dir, distance)
         image = np.zeros((self._cam_shape[0] * self._cam_shape[1], 3), np.float32)
         image[self._pix] = acc / self.capture_spp
         return image.reshape(*self._cam_shape, 3)
@@ -476,7 +544,7 @@ class SimRig:
         held = self._held(request)
         self.boards_held.append(held)                            # rig frame (verification only)
         to_world = self._world_to_array @ held
-        shapes = {"lens_array_absorber": self._absorber, **board_shapes(
+        shapes = {**self._absorbers, **board_shapes(
             to_world, request.albedo, request.chart, SCREEN_TRANSMISSION if request.translucent else 0.0)}
         return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)
 

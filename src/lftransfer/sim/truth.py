@@ -17,7 +17,7 @@ import numpy as np
 from lftransfer.lightfield import CameraModel, ProjectorModel, ResponseCurve
 from lftransfer.optics import LensArray, LensletDevice
 from lftransfer.optics.geometry import rotation_xy
-from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.rig.model import RigModel, nominal_rig, placed
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,22 @@ def perturbed_rig(rig, seed: int, size: Perturbation = Perturbation()) -> RigMod
     max_radiance = prj.max_radiance * (1.0 + rad.uniform(-size.brightness_rel, size.brightness_rel))
     camera = replace(camera, exposure=exposure)
     projector = replace(projector, max_radiance=max_radiance, cross_talk=cross_talk, black_level=black_level)
-    return RigModel(array=array, camera=camera, projector=projector, tilt=tilt)
+    return RigModel(array=array, camera=camera, projector=projector, tilt=tilt, placement=nominal.placement)
+
+
+INTERFACE_SEED_STEP = 7919      # interface i's deviations are drawn from seed + i * this
+
+
+def true_interfaces(scene, seed: int | None) -> list[RigModel] | None:
+    """The true rig model of every interface of a scene for a hidden-truth seed (interface i's deviations drawn
+    from ``seed + i * INTERFACE_SEED_STEP``; the first is :func:`perturbed_rig`'s); None for ``seed`` None (the
+    rig file is exact)."""
+    if seed is None:
+        return None
+    if not scene.interfaces:
+        return [perturbed_rig(scene.rig, seed)]
+    return [replace(perturbed_rig(face.rig(scene.rig), seed + i * INTERFACE_SEED_STEP), placement=placed(face.to_world()))
+            for i, face in enumerate(scene.interfaces)]
 
 
 def hidden_world(scene, seed: int | None):

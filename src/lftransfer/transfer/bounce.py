@@ -170,6 +170,9 @@ class TransferResult:
             real objects' measured outline, for a view camera on the real side; structured light's where
             measured), for the report; empty with the over composite.
         probe: the light probe's measurement on a scene lit by one (photographed here or given), else None.
+        interfaces: with several interfaces (:func:`lftransfer.transfer.interfaces.run_interfaces`), each one's
+            bounces (its R_n and Ls_n; None for an interface switched off), in the scene's order; :attr:`bounces` is
+            the first exchanging one's. Empty for one interface.
     """
 
     bounces: list[Bounce]
@@ -186,6 +189,7 @@ class TransferResult:
     view_depth: ViewDepth | None = None
     depth_sources: tuple[ViewDepth, ...] = ()
     probe: ProbeMeasurement | None = None
+    interfaces: tuple = ()
 
     def composite(self) -> np.ndarray:
         """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over

@@ -37,6 +37,10 @@ class SyntheticSide:
         scene: the synthetic part of the scene (:class:`~lftransfer.scenes.SyntheticScene`).
         settings: a ``TransferSettings`` (angular samples, lighting model, reconstruction, samples, renderer).
         time_s: the moment of an animated scene the objects start at.
+        primary: for one interface of several (docs/architecture.md, "Several interfaces"), the first interface's
+            side, whose renderer, frame, lights and view camera this one shares: it decodes, lights and encodes
+            through its own array, which stands in that frame at :attr:`pose`. None: a side of its own
+            (:meth:`through` makes the sides of several interfaces).
 
     Attributes:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
@@ -52,13 +56,18 @@ class SyntheticSide:
         surface_solve: the projection's solve against the measured real surface (:meth:`set_depth`,
             ``projection = "solve"``), or None. With neither, the box light field is projected.
         depth: the real scene's depth the projection uses, (K, V, U) metres, or None.
+        pose: (4, 4) this side's array frame -> the renderer's frame, or None where they are the same (one
+            interface, or the first of several).
     """
 
-    def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0) -> None:
+    def __init__(self, model: RigModel, scene: SyntheticScene, settings, *, time_s: float = 0.0,
+                 primary: "SyntheticSide | None" = None, windows=None) -> None:
         from lftransfer.backend import mitsuba
 
         mi = mitsuba()
         self.model = model
+        self._frame = model.world_to_array() if primary is None else primary._frame     # world -> renderer
+        self.pose = None if primary is None else self._frame @ np.linalg.inv(model.world_to_array())
         self.settings = settings
         self.scene = check_synthetic(scene)
         U = V = settings.angular_samples
@@ -68,16 +77,40 @@ class SyntheticSide:
         self.time_s = float(time_s)
         self.probe: np.ndarray | None = None
         posed = self._posed(self.time_s)
-        self.renderer = self._renderer(posed, settings)
-        self._set_lights(posed)
-        view = posed.view
-        self.width, self.height = view.resolution
-        self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
-                                               self.height))
+        if primary is None:
+            self.renderer = self._renderer(posed, settings, windows)
+            self._set_lights(posed)
+            view = posed.view
+            self.width, self.height = view.resolution
+            self.sensor = mi.load_dict(sensor_dict(view.origin, view.target, view.up, view.fov_deg, self.width,
+                                                   self.height))
+        else:
+            self.renderer, self.sensor = primary.renderer, primary.sensor
+            self.width, self.height = primary.width, primary.height
+            self.point_lights, self.direct_lights = primary.point_lights, primary.direct_lights
         self.prefilter: DepthPrefilter | None = None
         self.depth: np.ndarray | None = None
         self._steep: tuple[np.ndarray | None, SteepRays] | None = None        # (the depth, its steep rays)
         self._gain: tuple | None = None   # (the probe's map, the depth, the solve, (the entries' factor, the points'))
+
+    @classmethod
+    def through(cls, models: Sequence[RigModel], scene: SyntheticScene, settings, *,
+                time_s: float = 0.0) -> list["SyntheticSide"]:
+        """The synthetic side of each of several interfaces (``models``, in the scene's order): one renderer in the
+        first one's frame, in which paths between synthetic objects are cut where they cross an array
+        (:mod:`~lftransfer.render.windows`); one light field lit, and one sent, through each array. One model: a
+        list of one ordinary side."""
+        from lftransfer.render.windows import Windows
+
+        if len(models) == 1:
+            return [cls(models[0], scene, settings, time_s=time_s)]
+        if scene.probe is not None:
+            raise ValueError("a light probe scene has one interface: the probe's window is one array's "
+                             f"(the scene gives {len(models)} [[interface]] tables)")
+        frame = models[0].world_to_array()
+        windows = Windows.of([m.array for m in models], [frame @ np.linalg.inv(m.world_to_array()) for m in models])
+        first = cls(models[0], scene, settings, time_s=time_s, windows=windows)
+        return [first, *(cls(m, scene, settings, time_s=time_s, primary=first) for m in models[1:])]
 
     @property
     def surface_solve(self) -> SurfaceSolve | None:
@@ -103,13 +136,14 @@ class SyntheticSide:
                                 width=p.map_width)
 
     @staticmethod
-    def _renderer(posed: SyntheticScene, settings):
+    def _renderer(posed: SyntheticScene, settings, windows=None):
         """The renderer the settings name (``settings.renderer`` as resolved; "auto" in settings made by hand is
         resolved here by the same rule, :func:`~lftransfer.render.selection.resolve_renderer`)."""
-        return make_renderer(posed.synthetic, resolve_renderer(posed, settings.renderer), settings.max_depth)
+        return make_renderer(posed.synthetic, resolve_renderer(posed, settings.renderer), settings.max_depth,
+                             windows)
 
     def _posed(self, t: float) -> SyntheticScene:
-        return scene_in_frame(self.scene.at(t), self.model.world_to_array())
+        return scene_in_frame(self.scene.at(t), self._frame)
 
     def pose(self, t: float) -> bool:
         """Move the synthetic objects to their pose at time ``t`` (seconds); returns whether any moved."""
@@ -132,7 +166,7 @@ class SyntheticSide:
                                                                len(self.renderer.objects)):
             self.renderer.update(posed.synthetic)
         else:
-            self.renderer = make_renderer(posed.synthetic, kind, settings.max_depth)
+            self.renderer = make_renderer(posed.synthetic, kind, settings.max_depth, self.renderer.windows)
         self._set_lights(posed)
         if self.depth is not None:
             self.set_depth(self.depth)
@@ -199,7 +233,7 @@ class SyntheticSide:
         samples = s.aperture_samples if aperture_samples is None or s.lighting_model != "area" else aperture_samples
         return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=int(samples),
                                seed=seed, reconstruction=s.reconstruction, window=s.window,
-                               steep=self.steep_rays(real_lf))
+                               steep=self.steep_rays(real_lf), pose=self.pose)
 
     def steep_rays(self, real_lf: LightField) -> SteepRays | None:
         """Which samples beyond the lenslets' window the synthetic side reads from their edge
@@ -244,6 +278,13 @@ class SyntheticSide:
         return ls, view
 
 
+    def lightfield(self, lights: Sequence, seed: int, timer: Callable | None = None) -> LightField:
+        """Ls alone (:meth:`render` without the view): another interface's outgoing light field, whose view the
+        first interface's side renders."""
+        from contextlib import nullcontext
+
+        return self._lightfield(lights, seed, timer or (lambda _stage: nullcontext()))
+
     def _lightfield(self, lights: Sequence, seed: int, time_it) -> LightField:
         """The light field the synthetic scene sends through the array under ``lights``: prefiltered where
         :attr:`prefilter` is set; the box light field carrying the measured surface's target where
@@ -254,21 +295,37 @@ class SyntheticSide:
         if pf is not None:
             with time_it("render_lightfield"):
                 # one "sample" per ray: every primary ray still goes through render_samples
-                radiance = self.renderer.render_samples(pf.origins, pf.directions, lights, 1, seed=seed).radiance
+                radiance = self.renderer.render_samples(*self._placed(pf.origins, pf.directions), lights, 1,
+                                                        seed=seed).radiance
             with time_it("prefilter"):
                 return pf.apply(radiance)
         with time_it("render_lightfield"):
             lf = self.renderer.render_lightfield(self.model.array, lights, U, V,
                                                  model="area" if s.lighting_model == "area" else "point",
-                                                 spp=s.lf_spp, seed=seed)
+                                                 spp=s.lf_spp, seed=seed, pose=self.pose)
         if solve is None:
             return lf
         with time_it("surface_target"):
             # the synthetic objects' irradiance at the measured surface, through the lenslets' apertures
             if not solve.rays:                   # nothing measured that a lenslet lights: no rays to trace
                 return TargetedLightField(lf.data, lf.array, np.zeros((solve.points, 3), np.float32))
-            radiance = self.renderer.render_samples(solve.origins, solve.directions, lights, 1, seed=seed).radiance
+            radiance = self.renderer.render_samples(*self._placed(solve.origins, solve.directions), lights, 1,
+                                                    seed=seed).radiance
             return TargetedLightField(lf.data, lf.array, solve.target(radiance))
+
+    def _placed(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) rays of this side's array frame in the renderer's frame (themselves where they are the same),
+        kept for the arrays last given (the prefilter's and the solve's rays stay while the depth does)."""
+        if self.pose is None:
+            return origins, directions
+        kept = getattr(self, "_placed_rays", None)
+        if kept is None or kept[0] is not origins or kept[1] is not directions:
+            rot, shift = self.pose[:3, :3], self.pose[:3, 3]
+            moved = ((origins @ rot.T + shift).astype(np.float32), (directions @ rot.T).astype(np.float32))
+            for a in moved:
+                a.flags.writeable = False        # constant rays: the renderer keeps their Dr.Jit copies
+            self._placed_rays = kept = (origins, directions, moved)
+        return kept[2]
 
     def _room_gain(self, ls: LightField) -> tuple[np.ndarray, np.ndarray | None]:
         """The steep room light's factors for the light probe's map and the measured depth

@@ -76,9 +76,11 @@ class Interreflection:
         return np.asarray(self.matrices[channel] @ irradiance, np.float32)[shared]
 
 
-def cast_gather(mesh: CacheMesh, gather_rays: int) -> Interreflection:
+def cast_gather(mesh: CacheMesh, gather_rays: int, windows=None) -> Interreflection:
     """The gather of :class:`Interreflection` over the cache ``mesh``: ``gather_rays`` cosine-weighted directions
-    per distinct cache point (stratified), cast once per arrangement of the objects (:class:`Arrangement`)."""
+    per distinct cache point (stratified), cast once per arrangement of the objects (:class:`Arrangement`); a
+    direction that crosses one of several interfaces' arrays (``windows``, :mod:`lftransfer.render.windows`) before
+    its hit meets nothing."""
     mi = mitsuba()
     import drjit as dr
     from scipy import sparse
@@ -103,7 +105,10 @@ def cast_gather(mesh: CacheMesh, gather_rays: int) -> Interreflection:
     rays = jit_rays(origins, dirs)
     pi = mesh.scene.ray_intersect_preliminary(rays)
     dr.eval(pi)
-    hit = np.flatnonzero(np.isfinite(np.array(pi.t, np.float32)))
+    reach = np.array(pi.t, np.float32)
+    if windows is not None:
+        reach[windows.crossed(origins, dirs, reach)] = np.inf
+    hit = np.flatnonzero(np.isfinite(reach))
     matrices = [sparse.csr_matrix((count, m), dtype=np.float32) for _ in range(3)]
     sees = np.zeros(count, np.float32)
     meets = np.zeros(count, np.float32)
@@ -154,9 +159,10 @@ class Arrangement:
         sees: the gather's ``sees`` as mi.Float (M,), once the gather is cast.
     """
 
-    def __init__(self, mesh: CacheMesh, gather_rays: int) -> None:
+    def __init__(self, mesh: CacheMesh, gather_rays: int, windows=None) -> None:
         self.mesh = mesh
         self.gather_rays = int(gather_rays)
+        self.windows = windows
         self.sees = None
         self._gather: Interreflection | None = None
         self._burial: tuple = ()        # (the Burial, or None where nothing is buried,) once found
@@ -169,7 +175,7 @@ class Arrangement:
 
         if self._gather is not None:
             return self._gather
-        self._gather = cast_gather(self.mesh, self.gather_rays)
+        self._gather = cast_gather(self.mesh, self.gather_rays, self.windows)
         self.sees = jit_array(mi.Float, self._gather.sees)
         return self._gather
 

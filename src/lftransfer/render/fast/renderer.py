@@ -53,7 +53,7 @@ class CachedRenderer(RayRenderer):
 
     def __init__(self, objects: Sequence, *, max_edge: float = DEFAULT_MAX_EDGE,
                  lobe_samples: int = DEFAULT_LOBE_SAMPLES, view_lobe_samples: int = DEFAULT_VIEW_LOBE_SAMPLES,
-                 glossy: bool = True, max_depth: int = 1, gather_rays: int = GATHER_RAYS) -> None:
+                 glossy: bool = True, max_depth: int = 1, gather_rays: int = GATHER_RAYS, windows=None) -> None:
         if not supports(objects):
             raise ValueError(f"the fast path renders the materials {MATERIALS} only; use the exact path")
         if lobe_samples < 1 or view_lobe_samples < 1:
@@ -68,13 +68,14 @@ class CachedRenderer(RayRenderer):
         self.max_depth = int(max_depth)
         self.gathers = self.max_depth - 1
         self.gather_rays = int(gather_rays)
+        self.windows = windows
         self._ray_sets = RaySets()
         self._build(list(objects))
 
     def _build(self, objects: list) -> None:
         """Build the cache for ``objects``: its geometry, and an empty irradiance cache, gather and lobes over it."""
         self.mesh = CacheMesh(objects, self.max_edge, pinhole_objects(objects))
-        self.arrangement = Arrangement(self.mesh, self.gather_rays)
+        self.arrangement = Arrangement(self.mesh, self.gather_rays, self.windows)
         self.irradiance = IrradianceCache(self.mesh, self.arrangement, self.gathers)
         self.lobes = GlossyLobes(self.mesh, self.arrangement, self.irradiance, self.gathers, self.lobe_samples)
         self._any_glossy = self.glossy and bool(self.mesh.glossy_objects.any())

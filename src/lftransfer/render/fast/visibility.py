@@ -54,7 +54,7 @@ class LensletVisibility:
         import drjit as dr
 
         array = light.lightfield.array
-        key = (array, light.side)
+        key = (array, light.side, None if light.pose is None else light.pose.tobytes())
         if key in self.tables:
             return self.tables[key]
         mesh = self.mesh
@@ -79,7 +79,7 @@ class LensletVisibility:
             for offset in offsets:
                 target = np.zeros((K, 3))
                 target[:, :2] = array.centres + offset
-                front += (n @ target.T > height).astype(np.float32)
+                front += (n @ light.to_lit_frame(target).T > height).astype(np.float32)
             seen[open_] = front / len(offsets)
         shadowed = wanted & ~free
         idx = one[shadowed]
@@ -92,8 +92,8 @@ class LensletVisibility:
             centres = np.tile(array.centres, (len(idx), 1))
             total = mi.Float(0.0)
             for offset in offsets:
-                target = centres + offset
-                p = mi.Point3f(jit_array(mi.Float, target[:, 0]), jit_array(mi.Float, target[:, 1]), 0.0)
+                target = light.to_lit_frame(np.column_stack([centres + offset, np.zeros(len(centres))]))
+                p = mi.Point3f(*(jit_array(mi.Float, target[:, i]) for i in range(3)))
                 total += dr.select(mesh.scene.ray_test(si.spawn_ray_to(p)), 0.0, 1.0)
                 dr.eval(total)
             seen[shadowed] = (np.array(total, np.float32) / len(offsets)).reshape(len(idx), K)

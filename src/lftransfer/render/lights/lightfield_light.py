@@ -55,6 +55,9 @@ class LightFieldLight:
         steep: with ``window="edge"``, which steep samples to read from the window's edge
             (:func:`lftransfer.lightfield.window.steep_rays` at :data:`EDGE_REACH`, with the real scene's depth:
             those whose rays meet a surface); None: all of them.
+        pose: (4, 4) rigid transform from the array's own frame (the plane z = 0) to the frame of the points it
+            lights (one interface of several, lighting a scene posed in another's frame); None: the same frame.
+            Points and directions are carried into the array's frame, the aperture points and shadow rays back.
 
     Example:
         >>> light = LightFieldLight(captured, side="synthetic", model="area")  # doctest: +SKIP
@@ -72,6 +75,7 @@ class LightFieldLight:
         reconstruction: Reconstruction = choices.LENSLET_RECONSTRUCTION,
         window: Window = choices.LENSLET_WINDOW,
         steep: SteepRays | None = None,
+        pose: np.ndarray | None = None,
     ) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
@@ -89,6 +93,7 @@ class LightFieldLight:
         mi = mitsuba()
         self.lightfield = lightfield
         self.side = side
+        self.pose = None if pose is None else self.seen_from(pose).pose
         self.model = model
         array = lightfield.array
         data = np.ascontiguousarray(lightfield.data, dtype=np.float32)
@@ -152,6 +157,9 @@ class LightFieldLight:
         """
         xmin, xmax, ymin, ymax = self.lightfield.array.extent()
         corners = np.array([[xmin, ymin, 0.0], [xmin, ymax, 0.0], [xmax, ymin, 0.0], [xmax, ymax, 0.0]])
+        if self.pose is not None:           # into the array's frame
+            rot, shift = self.pose[:3, :3], self.pose[:3, 3]
+            points, normals = (np.asarray(points) - shift) @ rot, np.asarray(normals) @ rot
         side = points[:, 2] > 0 if self.side == "real" else points[:, 2] < 0
         facing = (np.einsum("nd,cnd->cn", normals, corners[:, None, :] - points[None]) > 0).any(axis=0)
         return side & facing
@@ -163,7 +171,7 @@ class LightFieldLight:
 
         look = plane_lookup(self.lightfield.array, self.reconstruction)
         sign = -1.0 if self.side == "real" else 1.0
-        p, w = points, directions
+        p, w = self._point_in(points), self._vector_in(directions)
         ok = mi.Bool(active) & (p.z * w.z < 0.0)
         t = -p.z / dr.select(ok, w.z, 1.0)
         fx = (p.x + t * w.x - look.x0) / look.cell
@@ -213,7 +221,7 @@ class LightFieldLight:
             radiance += weight * self._bilinear(k, u, v, ok & (weight > 0.0))
         own = dr.select(ok, dr.gather(mi.UInt32, look.own, cell, ok), self.K)
         sends = ok & (dr.gather(mi.UInt32, self._sends, own, ok) != 0)
-        density = self.M * dr.square(t) / (self.area * dr.maximum(dr.abs(directions.z), 1e-8))
+        density = self.M * dr.square(t) / (self.area * dr.maximum(dr.abs(self._vector_in(directions).z), 1e-8))
         return Incident(dr.select(ok, radiance, 0.0), own, dr.select(sends, density, 0.0))
 
     def reflect(self, si, active, ctx, visibility, lobe_samples: int = 0, seed: int = 0):
@@ -246,8 +254,7 @@ class LightFieldLight:
         n_active = len(self.active_lenslets)
         if n_active == 0:
             return result
-        side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
-        active = mi.Bool(active) & side_ok
+        active = mi.Bool(active) & self._on_side(si.p)
         M = self.M
         start = self._start(si, seed + 7)
         n_total = dr.opaque(mi.UInt32, n_active * M)
@@ -259,12 +266,12 @@ class LightFieldLight:
 
         def body(i, acc):
             k, m = self._step(i, start)
-            p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
+            p, wn, r2, cos_p, radiance = self._aperture_light(k, m, si.p, active)
             seen = visibility(k)
             lit = active & dr.any(radiance != 0.0) & (seen > 0.0)
             wo = si.to_local(wn)
             f = bsdf.eval(ctx, si, wo, lit)
-            g = dr.abs(wn.z) * (self.area / M) / r2       # 1 / density of this aperture point, sr
+            g = cos_p * (self.area / M) / r2       # 1 / density of this aperture point, sr
             if mis:
                 p_b = bsdf.pdf(ctx, si, wo, lit)
                 g = g / (1.0 + lobe_samples * p_b * g)    # times the balance heuristic's weight
@@ -276,14 +283,15 @@ class LightFieldLight:
 
     def _aperture_light(self, k, m, x, active):
         """Aperture point m (of the pool; the centre for the point and prefiltered models) of lenslet k and the
-        light it sends to points x: (p mi.Point3f, unit direction x -> p, squared distance, radiance)."""
+        light it sends to points x: (p mi.Point3f, unit direction x -> p, squared distance, cosine at the aperture,
+        radiance)."""
         mi = mitsuba()
         import drjit as dr
 
-        p, wn, r2, u, v = self._aperture_point(k, m, x)
+        p, wn, r2, u, v, cos_p, height = self._aperture_point(k, m, x)
         if self.model == "prefiltered":
             # u = (x - p)_x / x_z, so an aperture of width sqrt(A) spans sqrt(A) / |x_z| in u (and v).
-            half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(x.z), 1e-6)
+            half = 0.5 * float(np.sqrt(self.area)) / dr.maximum(dr.abs(height), 1e-6)
             radiance = self._box(k, u, v, half, active)
         elif self.reconstruction == "linear":
             base = (k * self.pool + m) * 3
@@ -293,15 +301,17 @@ class LightFieldLight:
                 radiance += dr.gather(mi.Float, self._blend_w, base + t) * self._bilinear(j, u, v, active)
         else:
             radiance = self._bilinear(k, u, v, active)
-        return p, wn, r2, radiance
+        return p, wn, r2, cos_p, radiance
 
     def _aperture_point(self, k, m, x):
-        """Aperture point m of lenslet k seen from points x: (p mi.Point3f, unit direction x -> p, squared
-        distance, and the (u, v) of the lenslet's direction d = -w (real side) or w (synthetic side) there)."""
+        """Aperture point m of lenslet k seen from points x (the lit frame): (p mi.Point3f and the unit direction
+        x -> p in the lit frame, squared distance, the (u, v) of the lenslet's direction d = -w (real side) or w
+        (synthetic side) there, the cosine at the aperture |d_z|, and x's height over the array plane)."""
         mi = mitsuba()
         import drjit as dr
 
         sign = -1.0 if self.side == "real" else 1.0  # d = sign * w, w = direction from x to the lenslet
+        x = self._point_in(x)
         p = mi.Point3f(dr.gather(mi.Float, self._cx, k) + dr.gather(mi.Float, self._ox, m),
                        dr.gather(mi.Float, self._cy, k) + dr.gather(mi.Float, self._oy, m), 0.0)
         w = p - x
@@ -310,7 +320,60 @@ class LightFieldLight:
         d = sign * wn
         u = d.x / d.z
         v = d.y / d.z
-        return p, wn, r2, u, v
+        return self._point_out(p), self._vector_out(wn), r2, u, v, dr.abs(wn.z), x.z
+
+    # -- the array's frame and the lit frame -----------------------------------------------------------------
+    def _point_in(self, p):
+        """mi.Point3f in the lit frame -> the array's frame (itself without a pose)."""
+        if self.pose is None:
+            return p
+        t = self.pose[:3, 3]
+        return self._vector_in(type(p)(p.x - float(t[0]), p.y - float(t[1]), p.z - float(t[2])))
+
+    def _vector_in(self, w):
+        """mi.Vector3f (or Point3f) in the lit frame -> the array's frame: R^T w."""
+        if self.pose is None:
+            return w
+        r = self.pose[:3, :3]
+        return type(w)(*(float(r[0, i]) * w.x + float(r[1, i]) * w.y + float(r[2, i]) * w.z for i in range(3)))
+
+    def _vector_out(self, w):
+        """The array's frame -> the lit frame: R w."""
+        if self.pose is None:
+            return w
+        r = self.pose[:3, :3]
+        return type(w)(*(float(r[i, 0]) * w.x + float(r[i, 1]) * w.y + float(r[i, 2]) * w.z for i in range(3)))
+
+    def _point_out(self, p):
+        """The array's frame -> the lit frame: R p + t."""
+        if self.pose is None:
+            return p
+        q, t = self._vector_out(p), self.pose[:3, 3]
+        return type(p)(q.x + float(t[0]), q.y + float(t[1]), q.z + float(t[2]))
+
+    def seen_from(self, pose: np.ndarray) -> "LightFieldLight":
+        """The same light (its tables shared) lighting points of another frame: ``pose`` (4, 4) takes its array's
+        frame there (one interface's projector seen from another interface's frame)."""
+        import copy
+
+        other = copy.copy(self)
+        other.pose = None
+        if not np.allclose(pose, np.eye(4), rtol=0, atol=1e-15):
+            m = np.asarray(pose, np.float64)
+            if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
+                raise ValueError(f"pose must be a (4, 4) rigid transform, got shape {m.shape}")
+            other.pose = m
+        return other
+
+    def to_lit_frame(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) points of the array's frame -> the lit frame (float64; themselves without a pose)."""
+        points = np.asarray(points, np.float64)
+        return points if self.pose is None else points @ self.pose[:3, :3].T + self.pose[:3, 3]
+
+    def _on_side(self, p):
+        """mi.Bool: points of the lit frame on this light's side of the array plane."""
+        z = self._point_in(p).z
+        return (z > 0) if self.side == "real" else (z < 0)
 
     def _start(self, si, seed: int):
         """Each shading point's random start in the stratified pool of aperture points (0 where the pool is the M
@@ -430,8 +493,7 @@ class LightFieldLight:
         if n_active == 0:
             return result
         # Points on the wrong side of the interface cannot receive light through it.
-        side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
-        active = mi.Bool(active) & side_ok
+        active = mi.Bool(active) & self._on_side(si.p)
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
         weight = self.area / self.M
         start = self._start(si, seed)
@@ -441,8 +503,7 @@ class LightFieldLight:
 
         def body(i, acc):
             k, m = self._step(i, start)
-            p, wn, r2, radiance = self._aperture_light(k, m, si.p, active)
-            cos_p = dr.abs(wn.z)
+            p, wn, r2, cos_p, radiance = self._aperture_light(k, m, si.p, active)
             lit = active & dr.any(radiance != 0.0)
             if irradiance is not False:   # no shadow ray towards lenslets behind the surface
                 lit &= dr.dot(si.n, wn) > 0.0
@@ -509,8 +570,7 @@ class LightFieldLight:
         n_active = len(self.active_lenslets)
         if n_active == 0:
             return
-        side_ok = (si.p.z > 0) if self.side == "real" else (si.p.z < 0)
-        active = mi.Bool(active) & side_ok
+        active = mi.Bool(active) & self._on_side(si.p)
         n_total = dr.opaque(mi.UInt32, n_active * self.M)
         area_weight = self.area / self.M
         start = self._start(si, seed)                  # the same points as illuminate
@@ -522,11 +582,11 @@ class LightFieldLight:
 
         def body(i):
             k, m = self._step(i, start)
-            p, wn, r2, u, v = self._aperture_point(k, m, si.p)
+            p, wn, r2, u, v, cos_p, _ = self._aperture_point(k, m, si.p)
             inside, taps = self._bilinear_taps(k, u, v, active)
             visible = inside & ~scene.ray_test(si.spawn_ray_to(p), inside)
             f = direction_weight(si, wn, visible, False, None)
-            g = f * weight * (dr.abs(wn.z) * area_weight / r2)
+            g = f * weight * (cos_p * area_weight / r2)
             for idx, wt in taps:            # _bilinear's read, transposed: each texel gets its weight times g
                 for c in range(3):
                     dr.scatter_add(grad, wt * g[c], idx * 3 + c, visible)
