@@ -162,6 +162,7 @@ class RayRenderer(ABC):
     objects: list
     scene: object
     max_depth: int
+    windows = None          # several interfaces' arrays, where paths between objects are cut (render/windows.py)
 
     @abstractmethod
     def update(self, objects: Sequence) -> bool:

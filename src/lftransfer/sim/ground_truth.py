@@ -248,8 +248,9 @@ def _cropped(image: np.ndarray, crop: tuple[int, int, int, int] | None) -> np.nd
 def views_overlap(scene) -> bool:
     """Whether the view camera can see a real object in front of a synthetic one, or the reverse: only from off the
     array's plane (a ray from a camera in the plane stays on one side of it; the built-in paper scenes' cameras
-    stand there)."""
-    return bool(scene.real) and bool(scene.synthetic) and abs(float(scene.view.origin[2])) > 1e-9
+    stand there), or wherever it stands with several interfaces (it cannot stand in all their planes)."""
+    return bool(scene.real) and bool(scene.synthetic) and (bool(scene.interfaces)
+                                                           or abs(float(scene.view.origin[2])) > 1e-9)
 
 
 def view_distances(objects, view, spp: int = DEPTH_SPP) -> np.ndarray:

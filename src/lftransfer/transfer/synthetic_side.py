@@ -222,7 +222,7 @@ class SyntheticSide:
         elif self.probe is not None:
             probe = [probe_point_light(self.probe, posed)]
         self.direct_lights = [*self.point_lights, *probe] \
-            + ([EmitterLight(seed=self.settings.seed)] if posed.emitters else [])
+            + ([EmitterLight(seed=self.settings.seed, windows=self.renderer.windows)] if posed.emitters else [])
 
     def incident_light(self, real_lf: LightField, seed: int, aperture_samples: int | None = None) -> LightFieldLight:
         """The captured real light field as a light of the synthetic half-space (the settings' lighting model

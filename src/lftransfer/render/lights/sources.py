@@ -65,13 +65,16 @@ class EmitterLight:
     Args:
         samples: emitter samples per shading point.
         seed: seeds the samples (each shading point and call draws its own).
+        windows: several interfaces' arrays (:class:`~lftransfer.render.windows.Windows`): an emitter's light that
+            crosses one on its way is left to the rig, which carries it through the real side; None: one interface.
     """
 
-    def __init__(self, samples: int = 16, seed: int = 0) -> None:
+    def __init__(self, samples: int = 16, seed: int = 0, windows=None) -> None:
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         self.samples = int(samples)
         self.seed = int(seed)
+        self.windows = windows
 
     def emitted(self, scene, si, active):
         """Radiance the hit emitters send back along the rays (mi.Color3f, (N,)); zero where no emitter."""
@@ -101,6 +104,8 @@ class EmitterLight:
             sample = mi.Point2f((x + rng.next_float32()) / strata, (y + rng.next_float32()) / strata)
             ds, value = scene.sample_emitter_direction(si, sample, True, active)
             ok = active & (ds.pdf > 0.0)
+            if self.windows is not None:
+                ok &= ~self.windows.crossed_jit(mi.Ray3f(si.p, ds.d), ds.dist)
             f = direction_weight(si, ds.d, ok, irradiance, ctx)
             result += dr.select(ok, f * value, 0.0)
         return result / self.samples
