@@ -45,8 +45,7 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         return (rot @ np.asarray(v, float)).tolist()
 
     def turn(rotate_deg):
-        return Rotation.from_matrix(rot @ Rotation.from_euler("xyz", rotate_deg, degrees=True).as_matrix()) \
-            .as_euler("xyz", degrees=True).tolist()
+        return _euler_deg(rot @ Rotation.from_euler("xyz", rotate_deg, degrees=True).as_matrix())
 
     def move(obj):
         keys = [k.model_copy(update={"translate": None if k.translate is None else point(k.translate),
@@ -73,7 +72,18 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         to_world = m @ interface.to_world()
         return interface.model_copy(update={
             "translate": to_world[:3, 3].tolist(),
-            "rotate_deg": Rotation.from_matrix(to_world[:3, :3]).as_euler("xyz", degrees=True).tolist()})
+            "rotate_deg": _euler_deg(to_world[:3, :3])})
 
     changes["view"] = view.model_copy(update=changes["view"])
     return scene.model_copy(update={**changes, "interfaces": [place(i) for i in scene.interfaces]})
+
+
+def _euler_deg(rotation: np.ndarray) -> list[float]:
+    """The scene format's ``rotate_deg`` of a (3, 3) rotation. At 90 degrees about y (an interface standing
+    sideways) the angles about x and z are not unique: SciPy warns and sets the last to zero, which is the same
+    rotation."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        return Rotation.from_matrix(rotation).as_euler("xyz", degrees=True).tolist()
