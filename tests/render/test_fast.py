@@ -327,9 +327,9 @@ def test_12_lenslet_visibility_is_cached_until_objects_move(variant):
     lights = [LightFieldLight(_incident(), "synthetic", model="area")]
     fast = CachedRenderer([plate, blocker])
     blocked = fast.render_view(sensor, 64, 48, lights, spp=4)
-    table = fast.lobes.visibility.tables[(ARRAY, "synthetic")]
+    table = fast.lobes.visibility.tables[(ARRAY, "synthetic", None)]
     fast.render_view(sensor, 64, 48, [LightFieldLight(_incident(), "synthetic", model="area")], spp=4)
-    assert fast.lobes.visibility.tables[(ARRAY, "synthetic")] is table
+    assert fast.lobes.visibility.tables[(ARRAY, "synthetic", None)] is table
     exact = HalfSpaceRenderer([plate, blocker], max_depth=1).render_view(sensor, 64, 48, lights, spp=4)
     free = CachedRenderer([plate]).render_view(sensor, 64, 48, lights, spp=4)
     mask = (exact.alpha >= 1.0) & (exact.depth > 0.25)          # the plate, not the blocker
