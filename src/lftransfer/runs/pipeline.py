@@ -191,6 +191,13 @@ def count_run_steps(scene, options: RunOptions) -> int:
     reruns = sum(count_steps(settings.rerun(name, value)) for name, value in settings.comparisons)
     control = count_steps(replace(settings.transfer, bounce_views=False)) if _runs_control(options, settings) else 0
     floor = FLOOR_STEPS if floor_skipped(options) is None else 0
+    if scene.interfaces:           # several interfaces: their loop, and the first one alone as the control
+        from lftransfer.transfer.interfaces import count_interface_steps
+
+        n = len(scene.interfaces)
+        control = count_interface_steps(replace(settings.transfer, bounce_views=False), 1) if _verifies(options) else 0
+        return (1 + count_interface_steps(settings.transfer, n) + (gt_steps(settings) if _verifies(options) else 0)
+                + control + 1)
     # each ablation: the transfer without its bounce views, given a depth (no step to measure it)
     ablations = 2 * (count_steps(replace(settings.transfer, bounce_views=False)) - 1) \
         if _runs_ablations(options, settings) else 0
@@ -260,6 +267,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     return report
 
 
+FIRST_INTERFACE_ONLY = "through the first interface alone"   # several interfaces' negative control
 SATURATION_WARNING = 0.01       # warn when more of the direct capture's LF camera codes than this are at full scale
 BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model and reconstruction
 METRIC_KEYS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
@@ -318,6 +326,7 @@ class _Run:
     timings: dict = field(default_factory=dict)
     undefined: dict = field(default_factory=dict)
     reference: object = None          # what a quiet reference reached (sim.reference.Reference)
+    known: object = None              # what the run knows of its rig (runs.rigs.Knowledge), once known
 
     def step(self, msg: str) -> None:
         self.done += 1
@@ -337,6 +346,7 @@ class _Run:
         self.settings = self.options.resolve(self.scene)
         self.timings["setup"] = time.perf_counter() - t0
         known, label, errors = self.know_rig()
+        self.known = known
         result = self.transfer(known)
         gt, metrics, tables, gt_spp_needed = self.verify(result)
         floor = self.floor(result, gt)
@@ -375,7 +385,14 @@ class _Run:
         """Stage 2: the transfer with the run's settings."""
         for note in visible_steps(known.scene, self.settings.transfer.renderer):
             self.warning(note)
-        result = run_transfer(self.opened.rig, known.model, known.scene, self.settings.transfer, progress=self.step)
+        if self.opened.rigs:            # several interfaces: the exchange through all of them
+            from lftransfer.transfer.interfaces import run_interfaces
+
+            result = run_interfaces(self.opened.rigs, known.models, known.scene, self.settings.transfer,
+                                    progress=self.step)
+        else:
+            result = run_transfer(self.opened.rig, known.model, known.scene, self.settings.transfer,
+                                  progress=self.step)
         for k, v in result.timings_s.items():
             self.timings[k] = self.timings.get(k, 0.0) + v
         if result.saturated_fraction > SATURATION_WARNING:
@@ -454,6 +471,8 @@ class _Run:
         why = floor_skipped(self.options)
         if why is None and gt is None:
             why = "the run is not verified against ground truth"
+        if why is None and self.opened.rigs:
+            why = "the fidelity floor of several interfaces is not built yet"
         if why is not None:
             self.undefined["fidelity_floor"] = why
             return None
@@ -468,6 +487,10 @@ class _Run:
         the run's own measurement of the real scene's depth for the depth composite, which takes 24 photographs of
         structured light: the same rig, model and scene)."""
         reuse = {"depth": result.depth, "view_depth": result.view_depth} if result.view_depth is not None else {}
+        if self.opened.rigs and self.settings.comparisons:
+            self.warning("the comparisons of settings run through one interface: not run on this scene's "
+                         f"{len(self.opened.rigs)}")
+            return
         for name, value in self.settings.comparisons:
             t = time.perf_counter()
             alt = run_transfer(self.opened.rig, known.model, known.scene, self.settings.rerun(name, value),
@@ -485,7 +508,7 @@ class _Run:
         (what the solve reaches with a perfect measurement: the rest is the method's) and given the measured depth
         moved :data:`SURFACE_SHIFT_M` farther (a negative control: it must do worse). Each: the cross-transfer error
         and the real side scored as the fidelity floor scores it."""
-        if not _runs_ablations(self.options, self.settings) or gt is None or result.depth is None:
+        if not _runs_ablations(self.options, self.settings) or gt is None or result.depth is None or self.opened.rigs:
             return None
         import numpy as np
 
@@ -522,7 +545,11 @@ class _Run:
 
     def negative_control(self, result, gt) -> ControlRun | None:
         """Stage 5: the run again with the rig file's nominal values on the same rig, set against the run's result
-        on the same ground truth (:func:`lftransfer.sim.metrics.negative_control`), where it can tell anything."""
+        on the same ground truth (:func:`lftransfer.sim.metrics.negative_control`), where it can tell anything. With
+        several interfaces, always (where verified): the run through the first interface alone, which must be
+        measurably worse (what the others carry)."""
+        if self.opened.rigs and self.verified:
+            return self._first_interface_only(result, gt)
         if not self.options.negative_control:
             self.undefined["negative_control"] = ("not asked for: lft demo runs it (the rig file's nominal values on "
                                                   "the same rig, against the same ground truth)")
@@ -540,6 +567,22 @@ class _Run:
                            progress=lambda msg: self.step(f"negative control: {msg}"))
         control = ControlRun(result=negative_control(result, alt, gt, NOMINAL), seconds=time.perf_counter() - t)
         self.timings["negative_control"] = control.seconds
+        if not control.result.measurably_worse:
+            self.warning(control.result.message())
+        return control
+
+    def _first_interface_only(self, result, gt) -> ControlRun:
+        from lftransfer.sim.metrics import negative_control
+        from lftransfer.transfer.interfaces import run_interfaces
+
+        t = time.perf_counter()
+        known = self.known
+        alt = run_interfaces(self.opened.rigs, known.models, known.scene,
+                             replace(self.settings.transfer, bounce_views=False), through=[0],
+                             progress=lambda msg: self.step(f"through the first interface alone: {msg}"))
+        control = ControlRun(result=negative_control(result, alt, gt, FIRST_INTERFACE_ONLY),
+                             seconds=time.perf_counter() - t)
+        self.timings["first_interface_only"] = control.seconds
         if not control.result.measurably_worse:
             self.warning(control.result.message())
         return control

@@ -134,11 +134,14 @@ class OpenedRig:
         turns: how a decoupled live loop's frames take turns with the simulator process
             (:class:`~lftransfer.transfer.share.TurnTaking`, for :class:`~lftransfer.transfer.live.LiveTransfer`);
             None: no simulator process, or one that runs side by side.
+        rigs: with several light field interfaces, one rig per interface in the scene's order (``rig`` is the
+            first's); empty for one.
     """
 
     rig: Rig
     oracle: Oracle | None = None
     turns: TurnTaking | None = None
+    rigs: tuple = ()
 
     @property
     def truth_seed(self) -> int | None:
@@ -168,6 +171,8 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
             simulated rig in this process, the threads as they are.
     """
     spec = options.rig
+    if scene.interfaces:
+        return _open_interfaces(scene, options, simulator)
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads
 
@@ -208,6 +213,20 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
     return opened
 
 
+def _open_interfaces(scene, options, simulator) -> OpenedRig:
+    """The rigs of a scene with several interfaces: the simulated rig in this process only, so far."""
+    from lftransfer.sim.oracle import open_simulated_interfaces
+
+    names = ", ".join(i.name for i in scene.interfaces)
+    if options.rig.kind != "sim" or (simulator is not None and simulator.where == "process") \
+            or options.record is not None:
+        raise ValueError(f"the scene has {len(scene.interfaces)} light field interfaces ({names}): they run on the "
+                         "simulated rig in this process (--rig sim, the bounce loop, no recording); a physical "
+                         "rig, a recording and the simulator's own process have one interface")
+    rigs, oracle = open_simulated_interfaces(scene, options.truth_seed, capture_spp=options.capture_spp)
+    return OpenedRig(rig=rigs[0], oracle=oracle, rigs=tuple(rigs))
+
+
 @dataclass(frozen=True)
 class Knowledge:
     """What the pipeline knows of a rig before a transfer.
@@ -221,6 +240,8 @@ class Knowledge:
         warnings: lines to show and report (a calibration that did not measure the scene's point lights).
         lights_from: where the synthetic side's point lights stand, for reports: "measured by the calibration",
             "the oracle (where they really stand)" or "the scene file".
+        models: with several interfaces, each one's model in the scene's order (``model`` is the first's); empty
+            for one.
     """
 
     model: RigModel
@@ -229,6 +250,7 @@ class Knowledge:
     rig_model: str
     warnings: tuple[str, ...] = ()
     lights_from: str = "the scene file"
+    models: tuple = ()
 
 
 def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, source=None,
@@ -250,6 +272,8 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
     """
     ps = scene.synthetic_part()
     label = "calibrated"
+    if scene.interfaces:
+        return _interfaces_knowledge(opened, scene, rig_model, calibration)
     if calibration is None and rig_model == "calibrated":
         calibration = calibrate(opened.rig, ps, progress=progress)
     if calibration is not None:
@@ -273,6 +297,33 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
                                         for lt, at in zip(ps.lights, lights_at)])
     return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label,
                      warnings=(note,) if note else (), lights_from=lights_from)
+
+
+def _interfaces_knowledge(opened: OpenedRig, scene, rig_model: str, calibration) -> Knowledge:
+    """:func:`knowledge` for a scene with several interfaces: each interface's true model (``oracle``) or its nominal
+    one. Calibrating each interface into one world frame is not built yet: a clear error says so."""
+    from lftransfer.rig.model import nominal_interfaces
+
+    names = ", ".join(i.name for i in scene.interfaces)
+    if calibration is not None or rig_model == "calibrated":
+        raise ValueError(f"the scene has {len(scene.interfaces)} light field interfaces ({names}): calibrating each "
+                         "into one world frame is not built yet; run with --rig-model oracle (each interface as "
+                         "built, not what users run) or --rig-model nominal (the rig file's values)")
+    ps = scene.synthetic_part()
+    if rig_model == "oracle":
+        if opened.oracle is None:
+            raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
+        from lftransfer.scenes import with_overrides
+
+        models = tuple(opened.oracle.models)
+        if ps.lights:
+            ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
+                                            for lt, at in zip(ps.lights, opened.oracle.true_lights())])
+        return Knowledge(model=models[0], scene=ps, calibration=None, rig_model="true (oracle)",
+                         lights_from="the oracle (where they really stand)" if ps.lights else "the scene file",
+                         models=models)
+    models = tuple(nominal_interfaces(scene))
+    return Knowledge(model=models[0], scene=ps, calibration=None, rig_model=NOMINAL, models=models)
 
 
 def calibration_key(scene, options) -> str | None:

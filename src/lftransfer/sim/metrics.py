@@ -382,7 +382,8 @@ class NegativeControl:
         def fmt(values) -> str:
             return ", ".join("undefined" if v is None else f"{v:.3g}" for v in values)
 
-        return (f"the negative control ({self.rig_model} rig model) is not measurably worse than the run: "
+        what = self.rig_model if self.rig_model.startswith("through") else f"{self.rig_model} rig model"
+        return (f"the negative control ({what}) is not measurably worse than the run: "
                 f"psnr_objects_db margin {fmt([self.psnr_objects_margin_db])} dB "
                 f"({fmt(self.psnr_objects_margin_db_per_gt)} against each ground-truth seed), cross-error margin {fmt([self.cross_error_margin])} "
                 f"({fmt(self.cross_error_margin_per_gt)}); the metrics cannot tell this rig model from the run's")

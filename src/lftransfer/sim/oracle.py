@@ -15,7 +15,7 @@ from typing import Callable
 from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.rig.model import RigModel, nominal_rig
 
-__all__ = ["Oracle", "hidden_oracle", "open_simulated_rig", "oracle_of_recording"]
+__all__ = ["Oracle", "hidden_oracle", "open_simulated_interfaces", "open_simulated_rig", "oracle_of_recording"]
 
 
 @dataclass(frozen=True)
@@ -26,11 +26,14 @@ class Oracle:
         world: the scene as it really is (real and synthetic objects, lights where they stand, animation).
         model: the rig model as the rig was built (the rig file's own values where the truth is exact).
         truth_seed: the seed the truth was drawn from, or None (built exactly as the files say).
+        models: with several interfaces, each one's model as built, in the scene's order (``model`` is the
+            first's); empty for one.
     """
 
     world: object
     model: RigModel
     truth_seed: int | None
+    models: tuple = ()
 
     def true_lights(self) -> list:
         """(3,) per point light of the scene, where it really stands (world frame, m)."""
@@ -133,6 +136,23 @@ def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = DEFA
     world, truth = hidden_world(scene, truth_seed)
     rig = SimRig(world, truth=truth, capture_spp=capture_spp, operator_seed=truth_seed)
     return rig, Oracle(world=world, model=rig.truth, truth_seed=truth_seed)
+
+
+def open_simulated_interfaces(scene, truth_seed: int | None, *, capture_spp: int = DEFAULT_CAPTURE_SPP):
+    """The simulated rigs of a scene with several interfaces, one per interface in one world
+    (:class:`~lftransfer.sim.interfaces.SimInterfaces`), and their oracle.
+
+    Returns:
+        (list of ``SimRig``, :class:`Oracle` with every interface's true model in ``models``).
+    """
+    from lftransfer.sim.interfaces import SimInterfaces
+    from lftransfer.sim.truth import hidden_world, true_interfaces
+
+    world, _ = hidden_world(scene, truth_seed)
+    joined = SimInterfaces(world, truths=true_interfaces(scene, truth_seed), capture_spp=capture_spp,
+                           operator_seed=truth_seed)
+    return joined.rigs, Oracle(world=world, model=joined.truths[0], truth_seed=truth_seed,
+                               models=tuple(joined.truths))
 
 
 def hidden_oracle(scene, truth_seed: int | None) -> Oracle:

@@ -34,7 +34,12 @@ from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.synthetic_side import SyntheticSide
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["run_interfaces"]
+__all__ = ["count_interface_steps", "run_interfaces"]
+
+
+def count_interface_steps(settings: TransferSettings, interfaces: int) -> int:
+    """Number of progress callbacks :func:`run_interfaces` makes through ``interfaces`` interfaces."""
+    return 3 + (interfaces if settings.prefilters else 0) + 2 * settings.bounces
 
 
 def run_interfaces(rigs: Sequence[Rig], models: Sequence[RigModel], scene: SyntheticScene,

@@ -39,7 +39,7 @@ class SyntheticSide:
         time_s: the moment of an animated scene the objects start at.
         primary: for one interface of several (docs/architecture.md, "Several interfaces"), the first interface's
             side, whose renderer, frame, lights and view camera this one shares: it decodes, lights and encodes
-            through its own array, which stands in that frame at :attr:`pose`. None: a side of its own
+            through its own array, which stands in that frame at :attr:`array_pose`. None: a side of its own
             (:meth:`through` makes the sides of several interfaces).
 
     Attributes:
@@ -56,7 +56,7 @@ class SyntheticSide:
         surface_solve: the projection's solve against the measured real surface (:meth:`set_depth`,
             ``projection = "solve"``), or None. With neither, the box light field is projected.
         depth: the real scene's depth the projection uses, (K, V, U) metres, or None.
-        pose: (4, 4) this side's array frame -> the renderer's frame, or None where they are the same (one
+        array_pose: (4, 4) this side's array frame -> the renderer's frame, or None where they are the same (one
             interface, or the first of several).
     """
 
@@ -67,7 +67,7 @@ class SyntheticSide:
         mi = mitsuba()
         self.model = model
         self._frame = model.world_to_array() if primary is None else primary._frame     # world -> renderer
-        self.pose = None if primary is None else self._frame @ np.linalg.inv(model.world_to_array())
+        self.array_pose = None if primary is None else self._frame @ np.linalg.inv(model.world_to_array())
         self.settings = settings
         self.scene = check_synthetic(scene)
         U = V = settings.angular_samples
@@ -233,7 +233,7 @@ class SyntheticSide:
         samples = s.aperture_samples if aperture_samples is None or s.lighting_model != "area" else aperture_samples
         return LightFieldLight(real_lf, side="synthetic", model=s.lighting_model, aperture_samples=int(samples),
                                seed=seed, reconstruction=s.reconstruction, window=s.window,
-                               steep=self.steep_rays(real_lf), pose=self.pose)
+                               steep=self.steep_rays(real_lf), pose=self.array_pose)
 
     def steep_rays(self, real_lf: LightField) -> SteepRays | None:
         """Which samples beyond the lenslets' window the synthetic side reads from their edge
@@ -302,7 +302,7 @@ class SyntheticSide:
         with time_it("render_lightfield"):
             lf = self.renderer.render_lightfield(self.model.array, lights, U, V,
                                                  model="area" if s.lighting_model == "area" else "point",
-                                                 spp=s.lf_spp, seed=seed, pose=self.pose)
+                                                 spp=s.lf_spp, seed=seed, pose=self.array_pose)
         if solve is None:
             return lf
         with time_it("surface_target"):
@@ -316,11 +316,11 @@ class SyntheticSide:
     def _placed(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) rays of this side's array frame in the renderer's frame (themselves where they are the same),
         kept for the arrays last given (the prefilter's and the solve's rays stay while the depth does)."""
-        if self.pose is None:
+        if self.array_pose is None:
             return origins, directions
         kept = getattr(self, "_placed_rays", None)
         if kept is None or kept[0] is not origins or kept[1] is not directions:
-            rot, shift = self.pose[:3, :3], self.pose[:3, 3]
+            rot, shift = self.array_pose[:3, :3], self.array_pose[:3, 3]
             moved = ((origins @ rot.T + shift).astype(np.float32), (directions @ rot.T).astype(np.float32))
             for a in moved:
                 a.flags.writeable = False        # constant rays: the renderer keeps their Dr.Jit copies
