@@ -90,5 +90,5 @@ def test_04_the_built_in_corner():
     scene = load_scene(builtin_scene("corner"))
     assert interface_names(scene.interfaces) == ["front", "side"]
     faces = {o.name: facing_interfaces(o.bounds(), scene.interfaces) for o in scene.synthetic}
-    assert faces == {"green cube": [0], "blue lamp": [1], "grey beam": [0, 1]}
-    assert scene.effect.by == "blue lamp" and faces[scene.effect.by] == [1]
+    assert faces == {"green cube": [0], "lamp": [1], "grey beam": [0, 1]}
+    assert scene.effect.by == "lamp" and faces[scene.effect.by] == [1]
