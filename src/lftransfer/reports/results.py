@@ -33,6 +33,7 @@ from lftransfer.reports.results_format import (db, fixed, median_p95, num, resol
                                                 table)
 from lftransfer.reports.results_live import (live_fps_tables, paired_tables, profile_tables,
                                              simulator_places_tables, soak_tables)
+from lftransfer.reports.results_interfaces import interfaces_tables
 from lftransfer.reports.results_occlusion import occlusion_tables
 from lftransfer.reports.results_probe import probe_tables
 from lftransfer.reports.results_study import study_tables
@@ -124,6 +125,14 @@ RUNS: tuple[Run, ...] = (
          ("lft", "run", "probe", "--quick", "--direct-light", "point", "--calibration",
           "out/runs/probe_quick/calibration.json", "--out", "out/runs/probe_point_quick")),
         (("probe", "out/runs/probe_quick/report.json"), ("point", "out/runs/probe_point_quick/report.json")),
+        quick=True),
+    Run("interfaces_quick", "interfaces", "Two interfaces at 90 degrees (`lft run corner`), against Fig. 4, both "
+        "with the true rig models and a quiet reference, quarter resolution",
+        (("lft", "run", "fig4", "--quick", "--rig-model", "oracle", "--quiet-reference", "--out",
+          "out/runs/interfaces_fig4_quick"),
+         ("lft", "run", "corner", "--quick", "--rig-model", "oracle", "--quiet-reference", "--out",
+          "out/runs/interfaces_corner_quick")),
+        (("fig4", "out/runs/interfaces_fig4_quick/report.json"), ("corner", "out/runs/interfaces_corner_quick/report.json")),
         quick=True),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
@@ -563,7 +572,7 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "live_fps": live_fps_tables, "soak": soak_tables, "profile": profile_tables,
           "study": lambda s: study_tables(s.data),
           "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
-          "probe": probe_tables, "paired": paired_tables,
+          "probe": probe_tables, "paired": paired_tables, "interfaces": interfaces_tables,
           "simulator_places": lambda s: simulator_places_tables(s, list(s.data))}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
@@ -579,6 +588,7 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracl
            ("occlusion_quick", "occlusion_rod_quick", "occlusion_crossing_quick", "occlusion_passing_quick",
             "occlusion_reverse_quick")),
           ("A light probe: the room's light as direct light", ("probe_quick",)),
+          ("Several light field interfaces around the real objects", ("interfaces_quick",)),
           ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))

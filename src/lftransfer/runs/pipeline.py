@@ -327,6 +327,7 @@ class _Run:
     undefined: dict = field(default_factory=dict)
     reference: object = None          # what a quiet reference reached (sim.reference.Reference)
     known: object = None              # what the run knows of its rig (runs.rigs.Knowledge), once known
+    interfaces_effect: dict | None = None   # several interfaces: the light added to the [effect]'s object
 
     def step(self, msg: str) -> None:
         self.done += 1
@@ -357,6 +358,12 @@ class _Run:
         report = self.report(known, label, errors, result, metrics, tables, control, gt_spp_needed, floor, gt)
         report["occlusion"] = self.occlusion(result, gt)
         report["surface_ablations"] = ablations
+        if self.opened.rigs:
+            report["interfaces"] = {"names": [i.name for i in self.scene.interfaces],
+                                    "real_energy": [[b.real_energy if b is not None else None for b in bounces]
+                                                    if bounces is not None else None
+                                                    for bounces in result.interfaces],
+                                    "added_light": getattr(self, "interfaces_effect", None)}
         report = {"verdict": verdict(report), **report}           # first: what a reader looks for first
         self.step("write outputs")
         comp = result.composite()
@@ -583,9 +590,27 @@ class _Run:
         control = ControlRun(result=negative_control(result, alt, gt, FIRST_INTERFACE_ONLY),
                              seconds=time.perf_counter() - t)
         self.timings["first_interface_only"] = control.seconds
+        self.interfaces_effect = self._added_light(result, alt, gt)
         if not control.result.measurably_worse:
             self.warning(control.result.message())
         return control
+
+    def _added_light(self, result, alt, gt) -> dict | None:
+        """The scene's ``[effect]`` object ``on`` (a real one): the mean radiance the exchange adds to it, through
+        every interface, through the first alone and in the ground truth (:func:`lftransfer.sim.effects
+        .measure_effect`'s reflection measure of each composite against the same without the exchange)."""
+        effect = getattr(self.scene, "effect", None)
+        if effect is None:
+            return None
+        from lftransfer.sim.effects import measure_effect, object_pixels
+
+        pixels = object_pixels(self.opened.oracle.world, effect.on)
+        alone = 0.5 * (gt.composite_alone(0) + gt.composite_alone(1))
+        added = {name: measure_effect("reflection", *images, pixels).added_radiance
+                 for name, images in (("run", (result.composite(), result.composite_direct())),
+                                      ("first_interface_only", (alt.composite(), alt.composite_direct())),
+                                      ("ground_truth", (gt.image, alone)))}
+        return {"on": effect.on, "by": effect.by, "added_radiance": added, "pixels": int(pixels.mask.sum())}
 
     def occlusion(self, result, gt) -> dict | None:
         """Where a real object hides a synthetic one: the over and the depth-aware composites of this run scored
