@@ -270,7 +270,7 @@ class StoredRun:
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
 KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
-         "occlusion", "probe", "paired", "simulator_places")
+         "occlusion", "probe", "paired", "simulator_places", "interfaces")
 
 
 def load_run(path: str | Path) -> StoredRun:

@@ -115,6 +115,8 @@ def _inputs_hash(scene, spp: int, seeds: tuple[int, ...], crop: tuple[int, int, 
     }
     if crop is not None:                     # whole frames hash as they did before crops existed
         payload["crop"] = list(crop)
+    if len(_light_groups(scene)) > 1:          # one light source hashes as before the sources were rendered apart
+        payload["light_groups"] = 1
     env = getattr(scene, "environment", None)
     if env is not None:                      # scenes in a dark room hash as they did before rooms had light
         payload["environment"] = {**env.model_dump(mode="json"), "v": 2}
@@ -127,6 +129,27 @@ def _lights_key(lights) -> dict | list | None:
     # a point light's ``kind`` is left out: entries cached before lights had one stay valid
     dumps = [lt.model_dump(mode="json", exclude={"kind"}) for lt in lights]
     return None if not dumps else dumps[0] if len(dumps) == 1 else dumps
+
+
+def _light_groups(scene) -> list[tuple[list, bool]]:
+    """The light sources the ground truth renders one at a time, whose images it adds: (the point lights, whether
+    the emitting objects emit) per render. Path tracing picks one source per light sample, so a scene lit by point
+    lights and emitting objects together gets the noise of that choice on every lit surface, which the renders of
+    each side alone, lit by fewer sources, do not share: on the cross term it is many times the noise of one source.
+    Transport is linear in the sources, so the sum is the same image. One render where there is one source."""
+    lights = list(scene.lights)
+    emitters = any(o.material.type == "emitter" for o in scene.synthetic)
+    if not (lights and emitters) and len(lights) <= 1:
+        return [(lights, True)]
+    return [([lt], False) for lt in lights] + ([([], True)] if emitters else [])
+
+
+def _dark(objects) -> list:
+    """``objects`` with every emitting one's light switched off (its shape stays, black: an emitter's surface)."""
+    from lftransfer.scenes.models import DiffuseMaterial
+
+    black = DiffuseMaterial(albedo=[0.0, 0.0, 0.0])
+    return [o.model_copy(update={"material": black}) if o.material.type == "emitter" else o for o in objects]
 
 
 STACK_CHANNELS = 20     # union, real, synthetic x 2 seeds x RGB, then the real and synthetic alphas
@@ -166,10 +189,6 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
             warn(cached.message())
     mi = mitsuba()
     view = scene.view
-    light = {("point_light" if i == 0 else f"point_light_{i}"):
-             {"type": "point", "position": list(map(float, lt.position)),
-              "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
-             for i, lt in enumerate(scene.lights)}
     sensor = sensor_dict(view.origin, view.target, view.up, view.fov_deg, w, h, spp=spp)
     if crop is not None:
         x, y, cw, ch = map(int, crop)
@@ -177,20 +196,25 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
             raise ValueError(f"crop {crop} is not inside the {w} x {h} view")
         sensor["film"].update(crop_offset_x=x, crop_offset_y=y, crop_width=cw, crop_height=ch)
     extra = {"sensor": sensor,
-             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False},
-             **light}
+             "integrator": {"type": "path", "max_depth": GT_MAX_DEPTH, "hide_emitters": False}}
     room = _room(scene)
+    groups = _light_groups(scene)
     images: dict[str, list[np.ndarray]] = {}
     for name, objs in (("union", scene.real + scene.synthetic), ("real", scene.real), ("synthetic", scene.synthetic)):
         shapes = dict(extra)
         if room is not None:
             shapes.update(room[name])
-        mscene = mi.load_dict(scene_dict(objs, extra=shapes), parallel=False, optimize=False)
+        mscenes = [mi.load_dict(scene_dict(objs if emit else _dark(objs), extra={**shapes, **_point_lights(lights)}),
+                                parallel=False, optimize=False) for lights, emit in groups]
         images[name] = []
         for seed in seeds:
             if progress:
                 progress(f"ground truth: {name}, seed {seed}")
-            images[name].append(np.array(mi.render(mscene, spp=spp, seed=seed), dtype=np.float32))
+            rendered = [np.array(mi.render(m, spp=spp, seed=seed), dtype=np.float32) for m in mscenes]
+            image = rendered[0]
+            for more in rendered[1:]:                 # the sources' light adds; the coverage is the same
+                image[..., :3] += more[..., :3]
+            images[name].append(image)
     alpha_real = images["real"][0][..., 3:4]
     if room is not None:        # the room seen behind the real objects counts as covered in Mitsuba's alpha
         alpha_real = _cropped(np.asarray(_objects_view(scene.real, view).alpha, np.float32), crop)[..., None]
@@ -202,6 +226,14 @@ def render_ground_truth(scene, *, spp: int = 256, seeds: tuple[int, int] = (1, 2
 
 
 DEPTH_SPP = 16     # rays per pixel of the true depths
+
+
+def _point_lights(lights) -> dict[str, dict]:
+    """Mitsuba dicts of point lights, named as the ground truth names them."""
+    return {("point_light" if i == 0 else f"point_light_{i}"):
+            {"type": "point", "position": list(map(float, lt.position)),
+             "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
+            for i, lt in enumerate(lights)}
 
 
 def _room(scene) -> dict[str, dict] | None:
