@@ -92,3 +92,14 @@ def test_04_the_built_in_corner():
     faces = {o.name: facing_interfaces(o.bounds(), scene.interfaces) for o in scene.synthetic}
     assert faces == {"green cube": [0], "lamp": [1], "grey beam": [0, 1]}
     assert scene.effect.by == "lamp" and faces[scene.effect.by] == [1]
+
+
+def test_05_the_built_in_enclosure():
+    scene = load_scene(builtin_scene("enclosure"))
+    assert interface_names(scene.interfaces) == ["front", "side", "top"]
+    faces = {o.name: facing_interfaces(o.bounds(), scene.interfaces) for o in scene.synthetic}
+    assert faces == {"green cube": [0], "lamp": [1], "white panel": [2]}
+    assert scene.effect.by == "lamp" and faces[scene.effect.by] == [1]
+    # the top array's real side is -y, its lattice over z in [0, 0.24] m
+    top = nominal_interfaces(scene)[2]
+    np.testing.assert_allclose(top.world_to_array()[:3, :3] @ [0.0, -1.0, 0.0], [0, 0, 1], atol=1e-12)

@@ -126,13 +126,11 @@ RUNS: tuple[Run, ...] = (
           "out/runs/probe_quick/calibration.json", "--out", "out/runs/probe_point_quick")),
         (("probe", "out/runs/probe_quick/report.json"), ("point", "out/runs/probe_point_quick/report.json")),
         quick=True),
-    Run("interfaces_quick", "interfaces", "Two interfaces at 90 degrees (`lft run corner`), against Fig. 4, both "
-        "with the true rig models and a quiet reference, quarter resolution",
-        (("lft", "run", "fig4", "--quick", "--rig-model", "oracle", "--quiet-reference", "--out",
-          "out/runs/interfaces_fig4_quick"),
-         ("lft", "run", "corner", "--quick", "--rig-model", "oracle", "--quiet-reference", "--out",
-          "out/runs/interfaces_corner_quick")),
-        (("fig4", "out/runs/interfaces_fig4_quick/report.json"), ("corner", "out/runs/interfaces_corner_quick/report.json")),
+    Run("interfaces_quick", "interfaces", "Two and three interfaces around the real block (`lft run corner`, "
+        "`lft run enclosure`), against Fig. 4, all with the true rig models and a quiet reference, quarter resolution",
+        tuple(("lft", "run", name, "--quick", "--rig-model", "oracle", "--quiet-reference", "--out",
+               f"out/runs/interfaces_{name}_quick") for name in ("fig4", "corner", "enclosure")),
+        tuple((name, f"out/runs/interfaces_{name}_quick/report.json") for name in ("fig4", "corner", "enclosure")),
         quick=True),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
