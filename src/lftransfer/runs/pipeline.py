@@ -21,7 +21,7 @@ from lftransfer.runs.cluster import ClusterSpec
 from lftransfer.reports.report import emitter_ceiling, write_outputs
 from lftransfer.runs.rigs import (NOMINAL, CalibrationFailedError, Knowledge, OpenedRig, RigSpec, calibrate,
                                  know_rig, knowledge, open_rig, will_calibrate, write_calibration)
-from lftransfer.runs.run_folder import clear_run_folder, tracked_run, write_status
+from lftransfer.runs.run_folder import VIEWS_FILE, clear_run_folder, tracked_run, write_status, write_views
 from lftransfer.calibration.rig import count_calibration_steps
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
@@ -267,7 +267,6 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     return report
 
 
-FIRST_INTERFACE_ONLY = "through the first interface alone"   # several interfaces' negative control
 SATURATION_WARNING = 0.01       # warn when more of the direct capture's LF camera codes than this are at full scale
 BY_MODEL_KEYS = ("cross_transfer_rel_error", "psnr_db", "psnr_objects_db")   # per lighting model and reconstruction
 METRIC_KEYS = ("psnr_db", "psnr_db_direct_only", "psnr_objects_db", "psnr_objects_db_direct_only",
@@ -287,24 +286,6 @@ class ControlRun:
 
     result: NegativeControl
     seconds: float
-
-
-VIEWS_FILE = "views.npz"
-
-
-def write_views(path: Path, result) -> Path:
-    """The view images a run's metrics are computed from, for scoring it later against a truth the run did not
-    know (``lft twin score``): ``real_view``, ``real_view_direct``, ``synthetic_rgb``, ``synthetic_alpha`` and
-    ``synthetic_direct_rgb`` ((H, W, 3) / (H, W) float32 radiance and coverage), and the run's own frames after
-    and without the exchange, ``composite`` and ``composite_direct`` (by the run's composite)."""
-    from lftransfer.imageio_utils import write_npz
-
-    return write_npz(path, real_view=result.real_view, real_view_direct=result.real_view_direct,
-                     synthetic_rgb=result.synthetic_view.rgb, synthetic_alpha=result.synthetic_view.alpha,
-                     synthetic_direct_rgb=result.bounces[0].synthetic_view.rgb, composite=result.composite(),
-                     composite_direct=result.composite_direct())
-
-
 
 
 @dataclass
@@ -359,11 +340,9 @@ class _Run:
         report["occlusion"] = self.occlusion(result, gt)
         report["surface_ablations"] = ablations
         if self.opened.rigs:
-            report["interfaces"] = {"names": [i.name for i in self.scene.interfaces],
-                                    "real_energy": [[b.real_energy if b is not None else None for b in bounces]
-                                                    if bounces is not None else None
-                                                    for bounces in result.interfaces],
-                                    "added_light": getattr(self, "interfaces_effect", None)}
+            from lftransfer.runs.interfaces import interfaces_report
+
+            report["interfaces"] = interfaces_report(self.scene, result, self.interfaces_effect)
         report = {"verdict": verdict(report), **report}           # first: what a reader looks for first
         self.step("write outputs")
         comp = result.composite()
@@ -579,38 +558,16 @@ class _Run:
         return control
 
     def _first_interface_only(self, result, gt) -> ControlRun:
-        from lftransfer.sim.metrics import negative_control
-        from lftransfer.transfer.interfaces import run_interfaces
+        from lftransfer.runs.interfaces import through_first_alone
 
         t = time.perf_counter()
-        known = self.known
-        alt = run_interfaces(self.opened.rigs, known.models, known.scene,
-                             replace(self.settings.transfer, bounce_views=False), through=[0],
-                             progress=lambda msg: self.step(f"through the first interface alone: {msg}"))
-        control = ControlRun(result=negative_control(result, alt, gt, FIRST_INTERFACE_ONLY),
-                             seconds=time.perf_counter() - t)
+        control, self.interfaces_effect = through_first_alone(self.opened, self.known, self.scene, self.settings,
+                                                              result, gt, self.step)
+        control = ControlRun(result=control, seconds=time.perf_counter() - t)
         self.timings["first_interface_only"] = control.seconds
-        self.interfaces_effect = self._added_light(result, alt, gt)
         if not control.result.measurably_worse:
             self.warning(control.result.message())
         return control
-
-    def _added_light(self, result, alt, gt) -> dict | None:
-        """The scene's ``[effect]`` object ``on`` (a real one): the mean radiance the exchange adds to it, through
-        every interface, through the first alone and in the ground truth (:func:`lftransfer.sim.effects
-        .measure_effect`'s reflection measure of each composite against the same without the exchange)."""
-        effect = getattr(self.scene, "effect", None)
-        if effect is None:
-            return None
-        from lftransfer.sim.effects import measure_effect, object_pixels
-
-        pixels = object_pixels(self.opened.oracle.world, effect.on)
-        alone = 0.5 * (gt.composite_alone(0) + gt.composite_alone(1))
-        added = {name: measure_effect("reflection", *images, pixels).added_radiance
-                 for name, images in (("run", (result.composite(), result.composite_direct())),
-                                      ("first_interface_only", (alt.composite(), alt.composite_direct())),
-                                      ("ground_truth", (gt.image, alone)))}
-        return {"on": effect.on, "by": effect.by, "added_radiance": added, "pixels": int(pixels.mask.sum())}
 
     def occlusion(self, result, gt) -> dict | None:
         """Where a real object hides a synthetic one: the over and the depth-aware composites of this run scored

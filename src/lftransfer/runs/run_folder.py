@@ -17,7 +17,8 @@ from typing import Iterable
 
 from lftransfer.reports.report import write_json
 
-__all__ = ["OUTPUT_FILES", "STATUS_FILE", "clear_run_folder", "remove_temporaries", "tracked_run", "write_status"]
+__all__ = ["OUTPUT_FILES", "STATUS_FILE", "VIEWS_FILE", "clear_run_folder", "remove_temporaries", "tracked_run",
+           "write_status", "write_views"]
 
 STATUS_FILE = "status.json"
 OUTPUT_FILES = ("report.json", "composite.png", "composite.exr", "ground_truth.png", "ground_truth.exr",
@@ -93,3 +94,19 @@ def tracked_run(out: str | Path, rig: str, *, interrupted: str = "interrupted (C
 def write_status(out: str | Path, state: str, **extra) -> Path:
     """Write ``status.json`` (atomically): ``state`` is "running", "complete", "failed" or "interrupted"."""
     return write_json(Path(out) / STATUS_FILE, {"state": state, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **extra})
+
+
+VIEWS_FILE = "views.npz"
+
+
+def write_views(path: Path, result) -> Path:
+    """The view images a run's metrics are computed from, for scoring it later against a truth the run did not
+    know (``lft twin score``): ``real_view``, ``real_view_direct``, ``synthetic_rgb``, ``synthetic_alpha`` and
+    ``synthetic_direct_rgb`` ((H, W, 3) / (H, W) float32 radiance and coverage), and the run's own frames after
+    and without the exchange, ``composite`` and ``composite_direct`` (by the run's composite)."""
+    from lftransfer.imageio_utils import write_npz
+
+    return write_npz(path, real_view=result.real_view, real_view_direct=result.real_view_direct,
+                     synthetic_rgb=result.synthetic_view.rgb, synthetic_alpha=result.synthetic_view.alpha,
+                     synthetic_direct_rgb=result.bounces[0].synthetic_view.rgb, composite=result.composite(),
+                     composite_direct=result.composite_direct())

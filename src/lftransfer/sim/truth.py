@@ -139,8 +139,8 @@ def true_interfaces(scene, seed: int | None) -> list[RigModel] | None:
         return None
     if not scene.interfaces:
         return [perturbed_rig(scene.rig, seed)]
-    return [replace(perturbed_rig(face.rig(scene.rig), seed + i * INTERFACE_SEED_STEP), placement=placed(face.to_world()))
-            for i, face in enumerate(scene.interfaces)]
+    return [replace(perturbed_rig(face.rig(scene.rig), seed + i * INTERFACE_SEED_STEP),
+                    placement=placed(face.to_world())) for i, face in enumerate(scene.interfaces)]
 
 
 def hidden_world(scene, seed: int | None):

@@ -19,6 +19,7 @@ there, as the same rig with that interface idle would.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -71,71 +72,17 @@ def run_interfaces(rigs: Sequence[Rig], models: Sequence[RigModel], scene: Synth
         raise ValueError("several interfaces composite with the over operator (composite = 'over'); the depth "
                          "composite measures one interface's depth")
     bound_blas()
-    timer = StageTimer()
-    sides = SyntheticSide.through(models, scene, settings, time_s=time_s)
-    first = sides[0]
-
-    step("capture direct (every projector black)")
-    for rig in rigs:
-        rig.setup(RealScene(time_s=time_s))
-        rig.project(rig.info.black())
-    with timer("capture"):
-        raw0 = {i: rigs[i].capture_lf().codes for i in used}
-    with timer("capture_view"):
-        real_view_direct = rigs[0].capture_view().radiance
-    with timer("decode"):
-        r0 = {i: sides[i].decoder(raw0[i]) for i in used}
-    if settings.prefilters:
-        for i in used:
-            step(f"interface {i}: measure the real scene's depth (its projector white)")
-            with timer("measure_depth"):
-                swept = measure_depth(rigs[i], sides[i].decoder, sides[i].encoder, models[i].projector.max_radiance,
-                                      settings.angular_samples, settings.angular_samples, r0[i])
-            sides[i].set_depth(swept.depth)
-            rigs[i].project(rigs[i].info.black())
-    step("render synthetic direct")
-    ls, s0 = _render(sides, used, first.direct_lights, settings.seed, timer)
-    bounces = {i: [Bounce(0, r0[i], ls[i], s0 if i == used[0] else None, real_view=real_view_direct)] for i in used}
-    views = [s0]
-
+    loop = _Exchange(list(rigs), list(models), SyntheticSide.through(models, scene, settings, time_s=time_s), used,
+                     settings, step, StageTimer())
+    bounces, views, raw0, real_view_direct = loop.direct(time_s)
     for n in range(1, settings.bounces + 1):
-        prev = {i: bounces[i][n - 1] for i in used}
-        gain = min(projector_gain(prev[i].synthetic_lf, models[i].projector.max_radiance, settings.projector_fill)
-                   for i in used)
-        step(f"bounce {n}: every projector shows its Ls_{n - 1} (gain {gain:.3g}); capture every response")
-        for i in used:
-            with timer("encode"):
-                rigs[i].project(sides[i].encoder(prev[i].synthetic_lf * gain))
-        with timer("capture"):
-            raws = {i: rigs[i].capture_lf().codes for i in used}
-        with timer("decode"):
-            rn = {i: (sides[i].decoder(raws[i]) - r0[i]) / gain for i in used}
-        real_view_n = None
-        if settings.bounce_views:
-            with timer("capture_view"):
-                real_view_n = (rigs[0].capture_view().radiance - real_view_direct) / gain
-        step(f"bounce {n}: render synthetic lit by every R_{n - 1}")
-        with timer("incident_light"):
-            lights = [sides[i].incident_light(prev[i].real_lf, settings.seed + n + 7 * i) for i in used]
-        ls, sn = _render(sides, used, lights, settings.seed + 1000 * n, timer)
-        views.append(sn)
-        for i in used:
-            bounces[i].append(Bounce(n, rn[i], ls[i], sn if i == used[0] else None, real_view=real_view_n,
-                                     projector_gain=gain))
-
+        views.append(loop.bounce(n, bounces, real_view_direct))
     step("final frame: every projector shows its sum of the synthetic light fields")
     projected = {i: final_projection(bounces[i]) for i in used}
-    patterns = {}
-    for i in used:
-        with timer("encode"):
-            patterns[i] = sides[i].encoder(projected[i]) if settings.bounces else rigs[i].info.black()
-        rigs[i].project(patterns[i])
-    with timer("capture_view"):
-        real_view = rigs[0].capture_view().radiance if settings.bounces else real_view_direct
-    for i in used:
-        rigs[i].project(rigs[i].info.black())
+    patterns, real_view = loop.final(projected, real_view_direct)
     lit = np.concatenate([projected[i].data[projected[i].data > 0] for i in used])
     clipped = float(np.mean(lit > min(models[i].projector.max_radiance for i in used))) if lit.size else 0.0
+    s0 = views[0]
     synthetic_view = ViewImage(rgb=sum(v.rgb for v in views).astype(np.float32), alpha=s0.alpha, depth=s0.depth)
     main = used[0]
     return TransferResult(
@@ -143,8 +90,94 @@ def run_interfaces(rigs: Sequence[Rig], models: Sequence[RigModel], scene: Synth
         projected_image=patterns[main], projected_lf=projected[main], clipped_fraction=clipped,
         captured_raw=raw0[main],
         saturated_fraction=float(np.mean(raw0[main] >= 2 ** rigs[main].info.lf_camera_bits - 1)),
-        timings_s=timer.totals,
+        timings_s=loop.timer.totals,
         interfaces=tuple(bounces.get(i) for i in range(len(rigs))))
+
+
+@dataclass
+class _Exchange:
+    """The steps of :func:`run_interfaces` over the exchanging interfaces ``used``."""
+
+    rigs: list
+    models: list
+    sides: list[SyntheticSide]
+    used: list[int]
+    settings: TransferSettings
+    step: Callable[[str], None]
+    timer: StageTimer
+    r0: dict = field(default_factory=dict)      # each exchanging interface's R_0, once captured
+
+    def direct(self, time_s: float):
+        """Every projector black: each R_0^i (and depth), Ls_0^i and S_0. Returns (each interface's bounces so
+        far, the synthetic views so far, each direct capture's codes, the direct real view)."""
+        rigs, sides, used, s, timer = self.rigs, self.sides, self.used, self.settings, self.timer
+        self.step("capture direct (every projector black)")
+        for rig in rigs:
+            rig.setup(RealScene(time_s=time_s))
+            rig.project(rig.info.black())
+        with timer("capture"):
+            raw0 = {i: rigs[i].capture_lf().codes for i in used}
+        with timer("capture_view"):
+            real_view_direct = rigs[0].capture_view().radiance
+        with timer("decode"):
+            self.r0 = {i: sides[i].decoder(raw0[i]) for i in used}
+        if s.prefilters:
+            for i in used:
+                self.step(f"interface {i}: measure the real scene's depth (its projector white)")
+                with timer("measure_depth"):
+                    swept = measure_depth(rigs[i], sides[i].decoder, sides[i].encoder,
+                                          self.models[i].projector.max_radiance, s.angular_samples,
+                                          s.angular_samples, self.r0[i])
+                sides[i].set_depth(swept.depth)
+                rigs[i].project(rigs[i].info.black())
+        self.step("render synthetic direct")
+        ls, s0 = _render(sides, used, sides[0].direct_lights, s.seed, timer)
+        bounces = {i: [Bounce(0, self.r0[i], ls[i], s0 if i == used[0] else None, real_view=real_view_direct)]
+                   for i in used}
+        return bounces, [s0], raw0, real_view_direct
+
+    def bounce(self, n: int, bounces: dict, real_view_direct: np.ndarray) -> ViewImage:
+        """Bounce n: every projector shows its Ls_{n-1}^i at one gain, every response captured; the synthetic side
+        lit by every R_{n-1}^i. Appends to ``bounces``; returns S_n."""
+        rigs, sides, used, s, timer = self.rigs, self.sides, self.used, self.settings, self.timer
+        prev = {i: bounces[i][n - 1] for i in used}
+        gain = min(projector_gain(prev[i].synthetic_lf, self.models[i].projector.max_radiance, s.projector_fill)
+                   for i in used)
+        self.step(f"bounce {n}: every projector shows its Ls_{n - 1} (gain {gain:.3g}); capture every response")
+        for i in used:
+            with timer("encode"):
+                rigs[i].project(sides[i].encoder(prev[i].synthetic_lf * gain))
+        with timer("capture"):
+            raws = {i: rigs[i].capture_lf().codes for i in used}
+        with timer("decode"):
+            rn = {i: (sides[i].decoder(raws[i]) - self.r0[i]) / gain for i in used}
+        real_view_n = None
+        if s.bounce_views:
+            with timer("capture_view"):
+                real_view_n = (rigs[0].capture_view().radiance - real_view_direct) / gain
+        self.step(f"bounce {n}: render synthetic lit by every R_{n - 1}")
+        with timer("incident_light"):
+            lights = [sides[i].incident_light(prev[i].real_lf, s.seed + n + 7 * i) for i in used]
+        ls, sn = _render(sides, used, lights, s.seed + 1000 * n, timer)
+        for i in used:
+            bounces[i].append(Bounce(n, rn[i], ls[i], sn if i == used[0] else None, real_view=real_view_n,
+                                     projector_gain=gain))
+        return sn
+
+    def final(self, projected: dict, real_view_direct: np.ndarray) -> tuple[dict, np.ndarray]:
+        """Every projector shows its sum while the view camera captures (none with no bounce): (each projector
+        image, the real view)."""
+        rigs, timer = self.rigs, self.timer
+        patterns = {}
+        for i in self.used:
+            with timer("encode"):
+                patterns[i] = self.sides[i].encoder(projected[i]) if self.settings.bounces else rigs[i].info.black()
+            rigs[i].project(patterns[i])
+        with timer("capture_view"):
+            real_view = rigs[0].capture_view().radiance if self.settings.bounces else real_view_direct
+        for i in self.used:
+            rigs[i].project(rigs[i].info.black())
+        return patterns, real_view
 
 
 def _render(sides: list[SyntheticSide], used: list[int], lights: list, seed: int,

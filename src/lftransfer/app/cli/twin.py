@@ -132,7 +132,7 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
               asked: ScoreSettings = None) -> None:
     """Render the ground truth of the twin's hidden world and write the run's metrics into its report.json, the
     same metrics lft run writes on the in-process rig (and the calibration's errors against the true rig)."""
-    from lftransfer.runs.pipeline import VIEWS_FILE
+    from lftransfer.runs.run_folder import VIEWS_FILE
     from lftransfer.reports.report import display_scale
     from lftransfer.imageio_utils import to_display, write_exr, write_json, write_png
     from lftransfer.sim.twin import manifest_path

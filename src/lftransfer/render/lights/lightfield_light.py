@@ -64,19 +64,12 @@ class LightFieldLight:
         >>> radiance = light.illuminate(scene, si, si.is_valid())               # doctest: +SKIP
     """
 
-    def __init__(
-        self,
-        lightfield: LightField,
-        side: Literal["synthetic", "real"],
-        model: LightingModel = choices.DEFAULT_LIGHTING_MODEL,
-        aperture_samples: int = choices.DEFAULT_APERTURE_SAMPLES,
-        seed: int = 0,
-        jitter: bool = True,
-        reconstruction: Reconstruction = choices.LENSLET_RECONSTRUCTION,
-        window: Window = choices.LENSLET_WINDOW,
-        steep: SteepRays | None = None,
-        pose: np.ndarray | None = None,
-    ) -> None:
+    def __init__(self, lightfield: LightField, side: Literal["synthetic", "real"],
+                 model: LightingModel = choices.DEFAULT_LIGHTING_MODEL,
+                 aperture_samples: int = choices.DEFAULT_APERTURE_SAMPLES, seed: int = 0, jitter: bool = True,
+                 reconstruction: Reconstruction = choices.LENSLET_RECONSTRUCTION,
+                 window: Window = choices.LENSLET_WINDOW, steep: SteepRays | None = None,
+                 pose: np.ndarray | None = None) -> None:
         if side not in ("synthetic", "real"):
             raise ValueError(f"side must be 'synthetic' or 'real', got {side!r}")
         if model not in LIGHTING_MODELS:

@@ -1,7 +1,7 @@
 """Scoring a run made through the device twin against the ground truth of the twin's hidden world.
 
 A run through ``--rig hardware:twin.toml`` does not know the real scene (the hardware path never does); it keeps
-the view images its metrics need (``views.npz``, :func:`lftransfer.runs.pipeline.write_views`). The twin's manifest
+the view images its metrics need (``views.npz``, :func:`lftransfer.runs.run_folder.write_views`). The twin's manifest
 names the scene and the truth seed, so the same world can be built again here and path traced from the view camera,
 and the run scored with the very metrics ``lft run`` computes on the in-process rig
 (:func:`lftransfer.sim.metrics.evaluate`), and its calibration against the true rig
