@@ -44,6 +44,15 @@ def interfaces_tables(stored) -> list[str]:
                    f"{fixed(_side(r, 'real'), 3)} | {fixed(_side(r, 'synthetic'), 3)} | {fixed(control, 3)} | "
                    f"{fixed(added.get('run'), 4)} / {fixed(added.get('first_interface_only'), 4)} / "
                    f"{fixed(added.get('ground_truth'), 4)} | {fixed((r.get('reference') or {}).get('noise'), 3)} |")
+    out += ["", "The fidelity floor of each scene, scored as the floor scores (real side against the held-out seed):", "",
+            "| scene | real floor (transfer) | synthetic floor (transfer) | floor | transfer / floor |",
+            "|---|---|---|---|---|"]
+    for name in stored.data:
+        floor = stored.need(name).get("fidelity_floor") or {}
+        real, syn = floor.get("real") or {}, floor.get("synthetic") or {}
+        out.append(f"| {name} | {fixed(real.get('floor'), 3)} ({fixed(real.get('transfer'), 3)}) | "
+                   f"{fixed(syn.get('floor'), 3)} ({fixed(syn.get('transfer'), 3)}) | {fixed(floor.get('floor'), 3)} | "
+                   f"{fixed(floor.get('transfer_over_floor'), 2)} |")
     out += ["", "The rig model is each interface's true one (the oracle): calibrating several interfaces into one "
-            "world frame is not built yet. Neither is their fidelity floor.", ""]
+            "world frame is not built yet.", ""]
     return out

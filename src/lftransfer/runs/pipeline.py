@@ -197,7 +197,7 @@ def count_run_steps(scene, options: RunOptions) -> int:
         n = len(scene.interfaces)
         control = count_interface_steps(replace(settings.transfer, bounce_views=False), 1) if _verifies(options) else 0
         return (1 + count_interface_steps(settings.transfer, n) + (gt_steps(settings) if _verifies(options) else 0)
-                + control + 1)
+                + floor + control + 1)
     # each ablation: the transfer without its bounce views, given a depth (no step to measure it)
     ablations = 2 * (count_steps(replace(settings.transfer, bounce_views=False)) - 1) \
         if _runs_ablations(options, settings) else 0
@@ -457,14 +457,12 @@ class _Run:
         why = floor_skipped(self.options)
         if why is None and gt is None:
             why = "the run is not verified against ground truth"
-        if why is None and self.opened.rigs:
-            why = "the fidelity floor of several interfaces is not built yet"
         if why is not None:
             self.undefined["fidelity_floor"] = why
             return None
         t = time.perf_counter()
-        floor = self.opened.oracle.fidelity_floor(getattr(self.opened.rig, "inner", self.opened.rig), result, gt,
-                                                  self.settings.transfer, progress=self.step)
+        rig = list(self.opened.rigs) or getattr(self.opened.rig, "inner", self.opened.rig)
+        floor = self.opened.oracle.fidelity_floor(rig, result, gt, self.settings.transfer, progress=self.step)
         self.timings["fidelity_floor"] = time.perf_counter() - t
         return floor
 

@@ -136,6 +136,43 @@ class ProjectorOperator:
         return self.light.grad()
 
 
+class JointProjectors:
+    """Several interfaces' projectors as one linear map (docs/interfaces.md): the view camera's radiance added by
+    every projector, :class:`ProjectorOperator`'s methods over them all. A drive or a set of codes is (I, H, W, 3),
+    one projector's on each first index (every interface has ``[rig]``'s projector); a light field is a list of
+    each projector's.
+
+    Args:
+        rigs: the :class:`~lftransfer.sim.rig.SimRig` of each interface, joined in one world.
+    """
+
+    def __init__(self, rigs) -> None:
+        self.ops = [ProjectorOperator(r) for r in rigs]
+        self.drive_shape = (len(self.ops), *self.ops[0].drive_shape)
+
+    def of_codes(self, codes: np.ndarray) -> list:
+        return [op.of_codes(c) for op, c in zip(self.ops, codes)]
+
+    def drive_of(self, codes: np.ndarray) -> np.ndarray:
+        return np.stack([op.drive_of(c) for op, c in zip(self.ops, codes)])
+
+    def codes_of_drive(self, drive: np.ndarray) -> np.ndarray:
+        return np.stack([op.codes_of_drive(d) for op, d in zip(self.ops, drive)])
+
+    def lf_of_drive(self, drive: np.ndarray) -> list:
+        return [op.lf_of_drive(d) for op, d in zip(self.ops, drive)]
+
+    def drive_adjoint(self, grads: list) -> np.ndarray:
+        return np.stack([op.drive_adjoint(g) for op, g in zip(self.ops, grads)])
+
+    def forward(self, xs: list) -> np.ndarray:
+        """(H, W, 3) the view radiance every projector adds (each rig renders its own in its array's frame)."""
+        return sum(op.forward(x) for op, x in zip(self.ops, xs))
+
+    def adjoint(self, weights: np.ndarray) -> list:
+        return [op.adjoint(weights) for op in self.ops]
+
+
 @dataclass(frozen=True)
 class SideFloor:
     """One side's floor, in the cross-transfer error's units: ||e|| over that side's pixels / ||C_gt|| over all
@@ -264,7 +301,9 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     """The real side's floor (module docstring): the best projector image for the real objects' cross term.
 
     Args:
-        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through (its real scene in place).
+        rig: the :class:`~lftransfer.sim.rig.SimRig` the run transferred through (its real scene in place); with
+            several interfaces, the list of their rigs (every projector's drive is searched at once,
+            :class:`JointProjectors`).
         result: the run's :class:`~lftransfer.transfer.TransferResult`.
         gt: the ground truth at the view's resolution.
         target_width: the metrics' width.
@@ -284,7 +323,9 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     d_syn = alpha * (result.synthetic_view.rgb - result.bounces[0].synthetic_view.rgb)
     base = downsample(d_syn, m.factor)                        # the synthetic part on these pixels, held
     target = np.where(where[..., None], m.pair[0] - base, 0.0)    # fitted to the first seed (module docstring)
-    op = ProjectorOperator(rig)
+    several = isinstance(rig, (list, tuple))
+    op = JointProjectors(rig) if several else ProjectorOperator(rig)
+    projected = np.stack(result.projected_images) if several else result.projected_image
     weight = 1.0 - alpha                                      # what of the real view the composite shows
 
     def apply(x: np.ndarray) -> np.ndarray:
@@ -299,13 +340,13 @@ def real_floor(rig, result, gt, *, target_width: int = 256, iterations: int = FL
     ones = np.ones(op.drive_shape, np.float32)
     stops = tuple(k for k in FLOOR_STOPS if k < iterations) + (iterations,)
     fit = box_least_squares(lambda d: apply(op.lf_of_drive(d)), lambda r: op.drive_adjoint(transpose(r)), target,
-                            op.drive_of(result.projected_image), ones, iterations=iterations, keep=stops,
+                            op.drive_of(projected), ones, iterations=iterations, keep=stops,
                             progress=(lambda msg: progress(f"real floor: {msg}")) if progress else None)
     # early stopping: run long, the fit follows the first seed's noise, and the held-out score rises again
     scored = {k: error(op.of_codes(op.codes_of_drive(x))) for k, x in fit.snapshots.items()}
     steps = min(scored, key=scored.get)
     relaxed = error(op.lf_of_drive(fit.snapshots[steps]))
-    transfer = error(op.of_codes(result.projected_image))
+    transfer = error(op.of_codes(projected))
     return SideFloor(floor=min(scored[steps], transfer), transfer=transfer, relaxed=relaxed, noise=m.noise(where),
                      pixels=int(where.sum()), iterations=steps, seconds=time.perf_counter() - t0)
 
@@ -337,7 +378,8 @@ def synthetic_floor(rig, world, result, gt, settings, *, target_width: int = 256
     the LF camera samples it, rendered by the run's renderer with its settings on the true rig model.
 
     Args:
-        rig: the :class:`~lftransfer.sim.rig.SimRig` (its truth).
+        rig: the :class:`~lftransfer.sim.rig.SimRig` (its truth); with several interfaces, the list of their rigs
+            (each one's true light field lights the synthetic objects, as the run's sides are lit).
         world: the hidden world (``Oracle.world``: real and synthetic objects, the true lights).
         result: the run's :class:`~lftransfer.transfer.TransferResult`.
         gt: the ground truth at the view's resolution.
@@ -358,11 +400,14 @@ def synthetic_floor(rig, world, result, gt, settings, *, target_width: int = 256
     where = m.synthetic_pixels
     if not where.any() or not m.norm > 0:
         return None
-    true_lf = true_incident_lightfield(rig, world, settings.angular_samples, spp=spp, time_s=time_s,
-                                       seed=settings.seed)
-    side = SyntheticSide(rig.truth, world.synthetic_part(), settings, time_s=time_s)
-    incident = side.incident_light(true_lf, settings.seed + 1)
-    lit = side.renderer.render_view(side.sensor, side.width, side.height, [incident], spp=settings.view_spp,
+    rigs = list(rig) if isinstance(rig, (list, tuple)) else [rig]
+    sides = SyntheticSide.through([r.truth for r in rigs], world.synthetic_part(), settings, time_s=time_s)
+    incident = [side.incident_light(true_incident_lightfield(r, world, settings.angular_samples, spp=spp,
+                                                             time_s=time_s, seed=settings.seed),
+                                    settings.seed + 1 + (7 * i if i else 0))
+                for i, (r, side) in enumerate(zip(rigs, sides))]
+    side = sides[0]
+    lit = side.renderer.render_view(side.sensor, side.width, side.height, incident, spp=settings.view_spp,
                                     seed=settings.seed + 1000)
     alpha = result.synthetic_view.alpha.astype(np.float32)[..., None]
     d_real = (1.0 - alpha) * (result.real_view - result.real_view_direct)     # the real part there, held

@@ -63,7 +63,8 @@ class Oracle:
 
     def fidelity_floor(self, rig, result, gt, settings, *, time_s: float = 0.0, cross=None,
                        progress: Callable[[str], None] | None = None):
-        """The fidelity floor of a run on the simulated rig ``rig`` (:func:`lftransfer.sim.floor.fidelity_floor`:
+        """The fidelity floor of a run on the simulated rig ``rig`` (a list of one per interface where there are
+        several; :func:`lftransfer.sim.floor.fidelity_floor`:
         both sides' floors and the run's error scored as they are), at ``time_s`` of an animated world; ``cross``:
         the frame's own cross term to score, where it is not ``result``'s.
 
@@ -73,8 +74,9 @@ class Oracle:
         from lftransfer.sim.floor import fidelity_floor
         from lftransfer.sim.rig import SimRig
 
-        if not isinstance(rig, SimRig):
-            raise ValueError(f"the fidelity floor needs the simulated rig, got {type(rig).__name__}")
+        rigs = list(rig) if isinstance(rig, (list, tuple)) else [rig]
+        if not all(isinstance(r, SimRig) for r in rigs):
+            raise ValueError(f"the fidelity floor needs the simulated rig, got {type(rigs[0]).__name__}")
         return fidelity_floor(rig, self.world, result, gt, settings, time_s=time_s, cross=cross,
                               progress=progress)
 

@@ -173,6 +173,8 @@ class TransferResult:
         interfaces: with several interfaces (:func:`lftransfer.transfer.interfaces.run_interfaces`), each one's
             bounces (its R_n and Ls_n; None for an interface switched off), in the scene's order; :attr:`bounces` is
             the first exchanging one's. Empty for one interface.
+        projected_images: with several interfaces, each exchanging one's final projector image, in the scene's
+            order (:attr:`projected_image` is the first's). Empty for one interface.
     """
 
     bounces: list[Bounce]
@@ -190,6 +192,7 @@ class TransferResult:
     depth_sources: tuple[ViewDepth, ...] = ()
     probe: ProbeMeasurement | None = None
     interfaces: tuple = ()
+    projected_images: tuple = ()
 
     def composite(self) -> np.ndarray:
         """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over
