@@ -20,7 +20,9 @@ from lftransfer.optics.geometry import project, rectangle_to_world
 from lftransfer.rig.requests import ViewCapture
 from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene, with_overrides
 
-LIT = [name for name in builtin_scenes() if load_scene(builtin_scene(name)).lights]
+# the calibrated scenes lit by a point light (a scene of several interfaces is not calibrated yet: docs/interfaces.md)
+LIT = [name for name in builtin_scenes()
+       if load_scene(builtin_scene(name)).lights and not load_scene(builtin_scene(name)).interfaces]
 
 
 def _scene(name: str, quick: bool):
