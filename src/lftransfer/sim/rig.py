@@ -95,6 +95,9 @@ class SimRig:
         self._truth = truth or (nominal_rig(faces[interface].rig(scene.rig), faces[interface].to_world()) if faces
                                 else nominal_rig(scene.rig))
         self._world_to_array = self._truth.world_to_array()
+        # set-ups are placed in the rig's own frame: its interface's, as the scene places it (the world's for one)
+        placement = np.asarray(self._truth.placement, np.float64) if self._truth.placement else np.eye(4)
+        self._rig_to_array = self._world_to_array @ placement
         # The real world seen from the true lens array's own frame (interface plane z = 0); a moving scene is
         # posed at the time each RealScene request names (scene_in_frame of the posed world scene, exact).
         self._world_scene = scene
@@ -111,6 +114,7 @@ class SimRig:
         array = self._truth.array
         self._absorbers = {"lens_array_absorber": lens_array_absorber(array)}   # and the other interfaces' (join)
         self._siblings: list[SimRig] = []
+        self._posed_siblings: dict = {}          # interface -> (its projector light, that light in this frame)
         self._real = HalfSpaceRenderer(scene.real, extra_shapes=self._absorbers, max_depth=scene.render.max_depth)
         self._point_lights = [PointLight(np.asarray(lt.position, float), np.asarray(lt.intensity, float))
                               for lt in scene.lights]
@@ -345,7 +349,7 @@ class SimRig:
     def _sibling_lights(self) -> list:
         """(rig, its projector seen from this array's frame) for every other interface whose projector is lit; the
         posed copies are kept while their projection stays."""
-        kept = self.__dict__.setdefault("_posed_siblings", {})
+        kept = self._posed_siblings
         out = []
         for r in self._siblings:
             light = r._own_projector_light()
@@ -543,7 +547,7 @@ class SimRig:
     def _board_renderer(self, request: Board) -> HalfSpaceRenderer:
         held = self._held(request)
         self.boards_held.append(held)                            # rig frame (verification only)
-        to_world = self._world_to_array @ held
+        to_world = self._rig_to_array @ held
         shapes = {**self._absorbers, **board_shapes(
             to_world, request.albedo, request.chart, SCREEN_TRANSMISSION if request.translucent else 0.0)}
         return HalfSpaceRenderer([], extra_shapes=shapes, max_depth=1)

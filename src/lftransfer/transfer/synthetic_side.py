@@ -39,8 +39,8 @@ class SyntheticSide:
         time_s: the moment of an animated scene the objects start at.
         primary: for one interface of several (docs/architecture.md, "Several interfaces"), the first interface's
             side, whose renderer, frame, lights and view camera this one shares: it decodes, lights and encodes
-            through its own array, which stands in that frame at :attr:`array_pose`. None: a side of its own
-            (:meth:`through` makes the sides of several interfaces).
+            through its own array, which stands in that frame at :attr:`array_pose`; the first poses and edits the
+            shared scene. None: a side of its own (:meth:`through` makes the sides of several interfaces).
 
     Attributes:
         decoder: raw LF camera image -> LightField (K, V, U, 3).
@@ -276,7 +276,6 @@ class SyntheticSide:
             seen = [light.hidden() if isinstance(light, EnvironmentLight) else light for light in lights]
             view = self.renderer.render_view(self.sensor, self.width, self.height, seen, spp=s.view_spp, seed=seed)
         return ls, view
-
 
     def lightfield(self, lights: Sequence, seed: int, timer: Callable | None = None) -> LightField:
         """Ls alone (:meth:`render` without the view): another interface's outgoing light field, whose view the
