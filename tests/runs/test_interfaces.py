@@ -16,6 +16,7 @@ from lftransfer.settings import Overrides
 from tests.transfer.test_interfaces import _corner
 
 
+@pytest.mark.slow
 def test_01_a_run_through_two_interfaces_and_its_negative_control(variant, tmp_path):
     """The built-in corner at quarter resolution, a small view: the lamp behind "side" lights the block through it
     alone, so the run through "front" alone misses that light and is measurably worse."""
