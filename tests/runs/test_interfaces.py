@@ -10,7 +10,7 @@ import pytest
 
 from lftransfer.runs.pipeline import RunOptions, count_run_steps, run_scene
 from lftransfer.runs.rigs import RigSpec
-from lftransfer.scenes import builtin_scene, load_scene, with_overrides
+from lftransfer.scenes import SceneError, builtin_scene, load_scene, with_overrides
 from lftransfer.scenes.resolution import quick_scene
 from lftransfer.settings import Overrides
 from tests.transfer.test_interfaces import _corner
@@ -47,6 +47,6 @@ def test_01_a_run_through_two_interfaces_and_its_negative_control(variant, tmp_p
     (RunOptions(rig_model="oracle", rig=RigSpec("replay", None)), "they run on the simulated rig in this process"),
 ])
 def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path, options, what):
-    with pytest.raises(ValueError, match=what):
+    with pytest.raises(SceneError, match=what):
         run_scene(_corner(), tmp_path / "run", options)
     assert json.loads((tmp_path / "run" / "status.json").read_text())["state"] == "failed"

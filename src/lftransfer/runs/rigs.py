@@ -217,12 +217,13 @@ def _open_interfaces(scene, options, simulator) -> OpenedRig:
     """The rigs of a scene with several interfaces: the simulated rig in this process only, so far."""
     from lftransfer.sim.oracle import open_simulated_interfaces
 
-    names = ", ".join(i.name for i in scene.interfaces)
+    from lftransfer.scenes import SceneError
+
     if options.rig.kind != "sim" or (simulator is not None and simulator.where == "process") \
             or options.record is not None:
-        raise ValueError(f"the scene has {len(scene.interfaces)} light field interfaces ({names}): they run on the "
-                         "simulated rig in this process (--rig sim, the bounce loop, no recording); a physical "
-                         "rig, a recording and the simulator's own process have one interface")
+        raise SceneError(f"{_interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, the "
+                         "bounce loop, no recording); a physical rig, a recording and the simulator's own process have "
+                         "one interface")
     rigs, oracle = open_simulated_interfaces(scene, options.truth_seed, capture_spp=options.capture_spp)
     return OpenedRig(rig=rigs[0], oracle=oracle, rigs=tuple(rigs))
 
@@ -299,16 +300,24 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
                      warnings=(note,) if note else (), lights_from=lights_from)
 
 
+def _interfaces_named(scene) -> str:
+    """The start of a several-interfaces error: the scene file, its field and the interfaces."""
+    names = ", ".join(i.name for i in scene.interfaces)
+    count = len(scene.interfaces)
+    return f"{scene.source or '<scene>'}: interface: the scene has {count} light field interfaces ({names})"
+
+
 def _interfaces_knowledge(opened: OpenedRig, scene, rig_model: str, calibration) -> Knowledge:
     """:func:`knowledge` for a scene with several interfaces: each interface's true model (``oracle``) or its nominal
     one. Calibrating each interface into one world frame is not built yet: a clear error says so."""
     from lftransfer.rig.model import nominal_interfaces
 
-    names = ", ".join(i.name for i in scene.interfaces)
+    from lftransfer.scenes import SceneError
+
     if calibration is not None or rig_model == "calibrated":
-        raise ValueError(f"the scene has {len(scene.interfaces)} light field interfaces ({names}): calibrating each "
-                         "into one world frame is not built yet; run with --rig-model oracle (each interface as "
-                         "built, not what users run) or --rig-model nominal (the rig file's values)")
+        raise SceneError(f"{_interfaces_named(scene)}: calibrating each into one world frame is not built yet; run "
+                         "with --rig-model oracle (each interface as built, not what users run) or --rig-model "
+                         "nominal (the rig file's values)")
     ps = scene.synthetic_part()
     if rig_model == "oracle":
         if opened.oracle is None:
