@@ -36,6 +36,17 @@ class Incident(NamedTuple):
     density: object
 
 
+def _rigid(pose) -> np.ndarray | None:
+    """A light's pose as it keeps it: (4, 4) float64, or None for none or the identity (ValueError where not a rigid
+    transform)."""
+    if pose is None:
+        return None
+    m = np.asarray(pose, np.float64)
+    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
+        raise ValueError(f"pose must be a (4, 4) rigid transform, got shape {m.shape}")
+    return None if np.allclose(m, np.eye(4), rtol=0, atol=1e-15) else m
+
+
 class LightFieldLight:
     """A light field entering one half-space through the lens array.
 
@@ -86,7 +97,7 @@ class LightFieldLight:
         mi = mitsuba()
         self.lightfield = lightfield
         self.side = side
-        self.pose = None if pose is None else self.seen_from(pose).pose
+        self.pose = _rigid(pose)
         self.model = model
         array = lightfield.array
         data = np.ascontiguousarray(lightfield.data, dtype=np.float32)
@@ -350,12 +361,7 @@ class LightFieldLight:
         import copy
 
         other = copy.copy(self)
-        other.pose = None
-        if not np.allclose(pose, np.eye(4), rtol=0, atol=1e-15):
-            m = np.asarray(pose, np.float64)
-            if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
-                raise ValueError(f"pose must be a (4, 4) rigid transform, got shape {m.shape}")
-            other.pose = m
+        other.pose = _rigid(pose)
         return other
 
     def to_lit_frame(self, points: np.ndarray) -> np.ndarray:
