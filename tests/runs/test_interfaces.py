@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import imageio.v3 as iio
 import pytest
 
 from lftransfer.runs.pipeline import RunOptions, count_run_steps, run_scene
@@ -27,6 +28,8 @@ def test_01_a_run_through_two_interfaces_and_its_negative_control(variant, tmp_p
     report = run_scene(scene, tmp_path / "run", options, progress=lambda _msg, done: steps.append(done))
     assert steps[-1] == count_run_steps(scene, options)
     assert json.loads((tmp_path / "run" / "report.json").read_text()) == json.loads(json.dumps(report))
+    panel = iio.imread(tmp_path / "run" / "interfaces.png")          # each projector's final image, one above the other
+    assert panel.shape[0] == 2 * scene.rig.projector[1] and panel.shape[1] == scene.rig.projector[0]
     faces = report["interfaces"]
     assert faces["names"] == ["front", "side"]
     assert all(len(energies) == 2 and energies[1] > 0 for energies in faces["real_energy"])

@@ -247,10 +247,11 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
                                       cross_truth)
     files += [
         write_png(out / "bounces.png", bounce_panel(result, ground_truth, composite_rgb, ceiling=ceiling)),
-        write_png(out / "projected_lf.png", result.projected_image[..., :3].astype(np.uint8)
-                  if result.projected_image.dtype == np.uint8 else
-                  (result.projected_image >> 8).astype(np.uint8)),
+        write_png(out / "projected_lf.png", _eight_bits(result.projected_image)),
     ]
+    names = (report.get("interfaces") or {}).get("names")
+    if names and len(getattr(result, "projected_images", ())) == len(names):
+        files.append(write_png(out / "interfaces.png", interfaces_panel(result.projected_images, names)))
     if captured_raw is not None:
         files.append(write_png(out / "captured_lf.png", device_image(captured_raw, camera_bits, stretch=True)))
     if getattr(result, "probe", None) is not None:
@@ -258,6 +259,20 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
                   write_exr(out / "probe.exr", result.probe.radiance)]
     files.append(write_json(out / "report.json", report))
     return files
+
+
+def _eight_bits(image: np.ndarray) -> np.ndarray:
+    """A projector image (uint8, or uint16 of a deeper projector) as 8-bit RGB."""
+    return image[..., :3].astype(np.uint8) if image.dtype == np.uint8 else (image >> 8).astype(np.uint8)
+
+
+def interfaces_panel(images, names) -> np.ndarray:
+    """(H', W, 3) uint8: each interface's projector image in the final frame, one above the other, named (the light
+    field each array sends its real objects; docs/interfaces.md)."""
+    tiles = [_label(_eight_bits(np.asarray(image)), f"{name}: its projector, final frame")
+             for image, name in zip(images, names)]
+    width = tiles[0].shape[1]
+    return np.concatenate([t if t.shape[1] == width else _resize(t, width) for t in tiles], axis=0)
 
 
 def probe_panel(probe) -> np.ndarray:

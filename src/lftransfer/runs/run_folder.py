@@ -22,7 +22,8 @@ __all__ = ["OUTPUT_FILES", "STATUS_FILE", "VIEWS_FILE", "clear_run_folder", "rem
 
 STATUS_FILE = "status.json"
 OUTPUT_FILES = ("report.json", "composite.png", "composite.exr", "ground_truth.png", "ground_truth.exr",
-                "bounces.png", "captured_lf.png", "projected_lf.png", "probe.png", "probe.exr", "calibration.json",
+                "bounces.png", "captured_lf.png", "projected_lf.png", "interfaces.png", "probe.png", "probe.exr",
+                "calibration.json",
                 "calibration_report.html", "calibration_errors.json")
 
 
