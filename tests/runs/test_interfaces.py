@@ -53,3 +53,16 @@ def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path,
     with pytest.raises(SceneError, match=what):
         run_scene(_corner(), tmp_path / "run", options)
     assert json.loads((tmp_path / "run" / "status.json").read_text())["state"] == "failed"
+
+
+def test_03_the_use_cases_of_one_interface_refuse_several(variant, tmp_path):
+    """A sequence, the live page, a benchmark, a study or a calibration would run the first interface alone:
+    they refuse such a scene in one line instead."""
+    from lftransfer.runs.rigs import open_rig
+
+    from lftransfer.sim.oracle import open_simulated_rig
+
+    with pytest.raises(SceneError, match="lft run takes them"):
+        open_rig(_corner(), RunOptions(rig_model="oracle"))
+    with pytest.raises(SceneError, match="this command simulates one"):      # lft depth, the device twin, ...
+        open_simulated_rig(_corner(), 0)

@@ -256,7 +256,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
     with tracked_run(out, str(options.rig)):
         opened = None
         try:
-            opened = open_rig(scene, options, operator=operator)
+            opened = open_rig(scene, options, operator=operator, interfaces=True)
             run = _Run(scene, out, options, opened, progress, warn)
             if moment is not None:
                 run.warning(moment)

@@ -157,7 +157,8 @@ class OpenedRig:
             start(index)
 
 
-def open_rig(scene, options, *, operator: Operator | None = None, simulator=None) -> OpenedRig:
+def open_rig(scene, options, *, operator: Operator | None = None, simulator=None,
+             interfaces: bool = False) -> OpenedRig:
     """Open the rig a run asks for (:class:`RigSpec`), wrapped in a recorder when ``options.record`` is set.
 
     Args:
@@ -169,9 +170,17 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
             (:class:`lftransfer.sim.process.SimulatorProcess`), in turns with the frames where its ``share`` is
             above 0 (``OpenedRig.turns``); its ``renderer_threads`` set this process's Dr.Jit threads. None: the
             simulated rig in this process, the threads as they are.
+        interfaces: the caller runs scenes of several light field interfaces (``OpenedRig.rigs``, ``lft run``);
+            other callers get a :class:`~lftransfer.scenes.SceneError` for such a scene, not its first interface.
     """
     spec = options.rig
     if scene.interfaces:
+        if not interfaces:
+            from lftransfer.scenes import SceneError
+
+            raise SceneError(f"{_interfaces_named(scene)}: lft run takes them (--rig-model oracle or nominal); live "
+                             "loops, sequences, benchmarks, studies and calibration run one interface so far "
+                             "(docs/interfaces.md)")
         return _open_interfaces(scene, options, simulator)
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads

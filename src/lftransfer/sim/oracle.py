@@ -15,7 +15,8 @@ from typing import Callable
 from lftransfer.choices import DEFAULT_CAPTURE_SPP
 from lftransfer.rig.model import RigModel, nominal_rig
 
-__all__ = ["Oracle", "hidden_oracle", "open_simulated_interfaces", "open_simulated_rig", "oracle_of_recording"]
+__all__ = ["Oracle", "hidden_oracle", "one_interface", "open_simulated_interfaces", "open_simulated_rig",
+           "oracle_of_recording"]
 
 
 @dataclass(frozen=True)
@@ -135,9 +136,21 @@ def open_simulated_rig(scene, truth_seed: int | None, *, capture_spp: int = DEFA
     from lftransfer.sim.rig import SimRig
     from lftransfer.sim.truth import hidden_world
 
+    one_interface(scene)
     world, truth = hidden_world(scene, truth_seed)
     rig = SimRig(world, truth=truth, capture_spp=capture_spp, operator_seed=truth_seed)
     return rig, Oracle(world=world, model=rig.truth, truth_seed=truth_seed)
+
+
+def one_interface(scene) -> None:
+    """A :class:`~lftransfer.scenes.SceneError` for a scene of several light field interfaces, where one simulated
+    rig is wanted (it would simulate the first interface alone); :func:`open_simulated_interfaces` opens them."""
+    if scene.interfaces:
+        from lftransfer.scenes import SceneError
+
+        names = ", ".join(i.name for i in scene.interfaces)
+        raise SceneError(f"{scene.source or '<scene>'}: interface: the scene has {len(scene.interfaces)} light field "
+                         f"interfaces ({names}): lft run takes them; this command simulates one (docs/interfaces.md)")
 
 
 def open_simulated_interfaces(scene, truth_seed: int | None, *, capture_spp: int = DEFAULT_CAPTURE_SPP):

@@ -59,6 +59,10 @@ class TwinWorld:
         self._shown: str | None = None
         self._moving = bool(getattr(world, "moving", False))
 
+        from lftransfer.sim.oracle import one_interface
+
+        one_interface(world)                       # the twin serves one interface's devices so far
+
         def build():
             from lftransfer.sim import SimRig
 
