@@ -4,6 +4,7 @@ a rigid motion of everything changes nothing, and the windows cut exactly the ra
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
@@ -137,3 +138,34 @@ def test_04_windows_in_drjit_agree(variant):
                                reach.astype(np.float32).astype(np.float64))
     assert expected.sum() > 150
     assert (got != expected).sum() <= 2          # float32 against float64 at a rectangle's edge
+
+
+@pytest.mark.parametrize("kind", ["exact", "fast"])
+@pytest.mark.parametrize("lamp_faces", [1.0, -1.0], ids=["reflected", "emitted"])
+def test_05_light_between_synthetic_objects_that_crosses_an_array_is_cut(variant, kind, lamp_faces):
+    """A lamp above an array and a plate below it, which sees the lamp (emitted: the lamp faces it) or a plate above
+    the lamp lit by it (reflected: the lamp faces away) only through the array: without windows the plate below
+    receives that light, with the array as a window nothing (the rig carries it), in both renderers."""
+    from lftransfer.render.lights import EmitterLight
+    from lftransfer.render.selection import make_renderer
+
+    def plate(name, z, faces, material, size=(0.08, 0.06)):
+        return ObjectConfig.model_validate({"name": name, "shape": "rectangle", "size": list(size),
+                                            "translate": [0.0, 0.0, z], "rotate_deg": [0.0 if faces > 0 else 180.0, 0, 0],
+                                            "material": material})
+
+    diffuse = {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}
+    objects = [plate("above", 0.06, -1.0, diffuse),
+               plate("lamp", 0.02, lamp_faces, {"type": "emitter", "radiance": [30.0, 30.0, 30.0]}, (0.02, 0.02)),
+               plate("below", -0.06, 1.0, diffuse)]                       # sees the others through the array only
+    windows = Windows.of([ARRAY], [np.eye(4)])
+    origins = np.column_stack([np.linspace(-0.03, 0.03, 50), np.zeros(50), np.full(50, -0.03)])
+    directions = np.tile([0.0, 0.0, -1.0], (50, 1))                       # at the plate below, from the array's side
+    seen = {}
+    for cut in (None, windows):
+        renderer = make_renderer(objects, kind, 2, cut)
+        radiance, hit, _ = renderer.render_rays(origins, directions, [EmitterLight(seed=1, windows=cut)], seed=3)
+        assert hit.all()
+        seen[cut is not None] = radiance
+    assert seen[False].mean() > 0.01
+    assert np.abs(seen[True]).max() == 0.0
