@@ -150,9 +150,9 @@ def test_05_light_between_synthetic_objects_that_crosses_an_array_is_cut(variant
     from lftransfer.render.selection import make_renderer
 
     def plate(name, z, faces, material, size=(0.08, 0.06)):
+        turn = [0.0 if faces > 0 else 180.0, 0.0, 0.0]              # a rectangle's front faces +z
         return ObjectConfig.model_validate({"name": name, "shape": "rectangle", "size": list(size),
-                                            "translate": [0.0, 0.0, z], "rotate_deg": [0.0 if faces > 0 else 180.0, 0, 0],
-                                            "material": material})
+                                            "translate": [0.0, 0.0, z], "rotate_deg": turn, "material": material})
 
     diffuse = {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}
     objects = [plate("above", 0.06, -1.0, diffuse),
