@@ -382,11 +382,13 @@ class NegativeControl:
         def fmt(values) -> str:
             return ", ".join("undefined" if v is None else f"{v:.3g}" for v in values)
 
-        what = self.rig_model if self.rig_model.startswith("through") else f"{self.rig_model} rig model"
+        interfaces = self.rig_model.startswith("through")      # several interfaces' control: not a rig model
+        what = self.rig_model if interfaces else f"{self.rig_model} rig model"
+        tell = "the run through fewer interfaces from the run" if interfaces else "this rig model from the run's"
         return (f"the negative control ({what}) is not measurably worse than the run: "
                 f"psnr_objects_db margin {fmt([self.psnr_objects_margin_db])} dB "
                 f"({fmt(self.psnr_objects_margin_db_per_gt)} against each ground-truth seed), cross-error margin {fmt([self.cross_error_margin])} "
-                f"({fmt(self.cross_error_margin_per_gt)}); the metrics cannot tell this rig model from the run's")
+                f"({fmt(self.cross_error_margin_per_gt)}); the metrics cannot tell {tell}")
 
 
 def _margins(run: Evaluation, control: Evaluation) -> tuple[float | None, float | None]:
