@@ -132,18 +132,15 @@ class Overrides:
             problems.append(f"reference_budget_s: expected a number of seconds >= 1, got {self.reference_budget_s!r}")
         if self.gt_spp is not None and not (isinstance(self.gt_spp, int) and self.gt_spp >= 1):
             problems.append(f"gt_spp: expected an integer >= 1 (or None: the scene's), got {self.gt_spp!r}")
-        for name, low, high in (("simulator_threads", 1, None), ("simulator_nice", 0, 19),
-                                ("renderer_threads", 1, None)):
-            value = getattr(self, name)
-            if value is not None and not (isinstance(value, int) and not isinstance(value, bool) and value >= low
-                                          and (high is None or value <= high)):
-                problems.append(f"{name}: expected an integer from {low}" + (f" to {high}" if high else " up")
+        for name, kind in (("simulator_threads", int), ("simulator_nice", int), ("renderer_threads", int),
+                           ("simulator_share", float)):
+            value, bounds = getattr(self, name), self.__dataclass_fields__[name].metadata["bounds"]
+            low, high = bounds["min"], bounds.get("max")            # the option's bounds: defined once, above
+            if value is not None and not (isinstance(value, (int, kind)) and not isinstance(value, bool)
+                                          and value >= low and (high is None or value <= high)):
+                what = "an integer" if kind is int else "a fraction"
+                problems.append(f"{name}: expected {what} from {low:g}" + (f" to {high:g}" if high else " up")
                                 + f" (or None: the default), got {value!r}")
-        if self.simulator_share is not None and not (isinstance(self.simulator_share, (int, float))
-                                                     and not isinstance(self.simulator_share, bool)
-                                                     and 0 <= self.simulator_share <= 0.9):
-            problems.append(f"simulator_share: expected a fraction from 0 to 0.9 (or None: the default), got "
-                            f"{self.simulator_share!r}")
         kinds = {"lighting_model": choices.LightingModel, "reconstruction": choices.Reconstruction,
                  "projection": choices.Projection, "window": choices.Window, "renderer": choices.Renderer,
                  "composite": choices.Composite, "direct_light": choices.DirectLight, "simulator": choices.Simulator}
