@@ -151,16 +151,16 @@ def run_decoupled(rig, model, scene, settings, times: np.ndarray, *, frames: int
         capture_behind_s=_med_max([f.time_s - f.capture_time_s for f in done if f.time_s >= f.capture_time_s] or [0]),
         latency=latency.to_json(),
         stages_ms=_stage_medians(done, render), stages_ms_alone=_stage_medians(alone_frames, render),
-        capture_stages_ms={k: round(1000 * statistics.median(f.capture_timings_s.get(k, 0.0) for f in done), 2)
-                           for k in captured},
+        capture_stages_ms=_stage_medians(done, captured, "capture_timings_s"),
         render_fps_alone=round(alone, 3), rate_with_simulator=round(len(done) / seconds / alone, 3),
         cores_busy=busy["loop"], cores_busy_alone=cores_alone, simulator=simulator.to_json(),
         simulator_cores_busy=busy["simulator"])
 
 
-def _stage_medians(frames, stages) -> dict:
-    """Median milliseconds per stage over ``frames``."""
-    return {k: round(1000 * statistics.median(f.timings_s.get(k, 0.0) for f in frames), 2) for k in stages}
+def _stage_medians(frames, stages, times: str = "timings_s") -> dict:
+    """Median milliseconds per stage over ``frames``, of their render stages (or of the field ``times`` names: their
+    capture's, ``"capture_timings_s"``)."""
+    return {k: round(1000 * statistics.median(getattr(f, times).get(k, 0.0) for f in frames), 2) for k in stages}
 
 
 def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float, list]:
