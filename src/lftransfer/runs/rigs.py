@@ -20,7 +20,8 @@ from lftransfer.calibration.rig import calibrate_rig, load_calibration
 from lftransfer.runs.calibration_cache import CachedCalibration, inputs_sha256, read_entry, write_entry
 from lftransfer.sim.gt_cache import CacheProblem
 from lftransfer.rig.base import Rig
-from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.rig.model import RigModel, nominal_interfaces, nominal_rig
+from lftransfer.scenes.interfaces import interfaces_named
 from lftransfer.transfer.share import TurnTaking
 
 if TYPE_CHECKING:
@@ -178,7 +179,7 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
         if not interfaces:
             from lftransfer.scenes import SceneError
 
-            raise SceneError(f"{_interfaces_named(scene)}: lft run takes them (--rig-model oracle or nominal); live "
+            raise SceneError(f"{interfaces_named(scene)}: lft run takes them (--rig-model oracle or nominal); live "
                              "loops, sequences, benchmarks, studies and calibration run one interface so far "
                              "(docs/interfaces.md)")
         return _open_interfaces(scene, options, simulator)
@@ -224,13 +225,12 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
 
 def _open_interfaces(scene, options, simulator) -> OpenedRig:
     """The rigs of a scene with several interfaces: the simulated rig in this process only, so far."""
-    from lftransfer.sim.oracle import open_simulated_interfaces
-
     from lftransfer.scenes import SceneError
+    from lftransfer.sim.oracle import open_simulated_interfaces
 
     if options.rig.kind != "sim" or (simulator is not None and simulator.where == "process") \
             or options.record is not None:
-        raise SceneError(f"{_interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, the "
+        raise SceneError(f"{interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, the "
                          "bounce loop, no recording); a physical rig, a recording and the simulator's own process have "
                          "one interface")
     rigs, oracle = open_simulated_interfaces(scene, options.truth_seed, capture_spp=options.capture_spp)
@@ -282,8 +282,13 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
     """
     ps = scene.synthetic_part()
     label = "calibrated"
-    if scene.interfaces:
-        return _interfaces_knowledge(opened, scene, rig_model, calibration)
+    if scene.interfaces and (calibration is not None or rig_model == "calibrated"):
+        from lftransfer.scenes import SceneError
+
+        raise SceneError(f"{interfaces_named(scene)}: calibrating each into one world frame is not built yet; run "
+                         "with --rig-model oracle (each interface as built, not what users run) or --rig-model "
+                         "nominal (the rig file's values)")
+    models: tuple = ()                # with several interfaces, each one's (model is the first's)
     if calibration is None and rig_model == "calibrated":
         calibration = calibrate(opened.rig, ps, progress=progress)
     if calibration is not None:
@@ -291,9 +296,10 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
     elif rig_model == "oracle":
         if opened.oracle is None:
             raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
-        model, label = opened.oracle.model, "true (oracle)"
+        model, label, models = opened.oracle.model, "true (oracle)", tuple(opened.oracle.models)
     else:
-        model, label = nominal_rig(scene.rig), NOMINAL
+        models = tuple(nominal_interfaces(scene)) if scene.interfaces else ()
+        model, label = models[0] if models else nominal_rig(scene.rig), NOMINAL
     lights_at = calibration.light_positions(ps) if calibration is not None else \
         opened.oracle.true_lights() if rig_model == "oracle" else None
     note = None if calibration is None else calibration.unmeasured_light_note(ps, source or "the calibration")
@@ -306,42 +312,7 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
         ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
                                         for lt, at in zip(ps.lights, lights_at)])
     return Knowledge(model=model, scene=ps, calibration=calibration, rig_model=label,
-                     warnings=(note,) if note else (), lights_from=lights_from)
-
-
-def _interfaces_named(scene) -> str:
-    """The start of a several-interfaces error: the scene file, its field and the interfaces."""
-    names = ", ".join(i.name for i in scene.interfaces)
-    count = len(scene.interfaces)
-    return f"{scene.source or '<scene>'}: interface: the scene has {count} light field interfaces ({names})"
-
-
-def _interfaces_knowledge(opened: OpenedRig, scene, rig_model: str, calibration) -> Knowledge:
-    """:func:`knowledge` for a scene with several interfaces: each interface's true model (``oracle``) or its nominal
-    one. Calibrating each interface into one world frame is not built yet: a clear error says so."""
-    from lftransfer.rig.model import nominal_interfaces
-
-    from lftransfer.scenes import SceneError
-
-    if calibration is not None or rig_model == "calibrated":
-        raise SceneError(f"{_interfaces_named(scene)}: calibrating each into one world frame is not built yet; run "
-                         "with --rig-model oracle (each interface as built, not what users run) or --rig-model "
-                         "nominal (the rig file's values)")
-    ps = scene.synthetic_part()
-    if rig_model == "oracle":
-        if opened.oracle is None:
-            raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
-        from lftransfer.scenes import with_overrides
-
-        models = tuple(opened.oracle.models)
-        if ps.lights:
-            ps = with_overrides(ps, lights=[lt.model_copy(update={"position": [float(v) for v in at]})
-                                            for lt, at in zip(ps.lights, opened.oracle.true_lights())])
-        return Knowledge(model=models[0], scene=ps, calibration=None, rig_model="true (oracle)",
-                         lights_from="the oracle (where they really stand)" if ps.lights else "the scene file",
-                         models=models)
-    models = tuple(nominal_interfaces(scene))
-    return Knowledge(model=models[0], scene=ps, calibration=None, rig_model=NOMINAL, models=models)
+                     warnings=(note,) if note else (), lights_from=lights_from, models=models)
 
 
 def calibration_key(scene, options) -> str | None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["box_corners", "facing_interfaces", "interface_names", "placements", "region_problem"]
+__all__ = ["box_corners", "facing_interfaces", "interface_names", "interfaces_named", "placements", "region_problem"]
 
 
 def placements(interfaces) -> list[np.ndarray]:
@@ -22,6 +22,13 @@ def placements(interfaces) -> list[np.ndarray]:
 def interface_names(interfaces) -> list[str]:
     """The names of a scene's ``interfaces``, in order; ``["rig"]`` for a ``[rig]`` scene."""
     return [i.name for i in interfaces] or ["rig"]
+
+
+def interfaces_named(scene) -> str:
+    """The start of a one-line error about a scene of several interfaces: its file, the field and the interfaces
+    (``"scene.toml: interface: the scene has 2 light field interfaces (front, side)"``)."""
+    names, count = ", ".join(interface_names(scene.interfaces)), len(scene.interfaces)
+    return f"{scene.source or '<scene>'}: interface: the scene has {count} light field interfaces ({names})"
 
 
 def box_corners(bounds: np.ndarray) -> np.ndarray:

@@ -147,10 +147,10 @@ def one_interface(scene) -> None:
     rig is wanted (it would simulate the first interface alone); :func:`open_simulated_interfaces` opens them."""
     if scene.interfaces:
         from lftransfer.scenes import SceneError
+        from lftransfer.scenes.interfaces import interfaces_named
 
-        names = ", ".join(i.name for i in scene.interfaces)
-        raise SceneError(f"{scene.source or '<scene>'}: interface: the scene has {len(scene.interfaces)} light field "
-                         f"interfaces ({names}): lft run takes them; this command simulates one (docs/interfaces.md)")
+        raise SceneError(f"{interfaces_named(scene)}: lft run takes them; this command simulates one "
+                         "(docs/interfaces.md)")
 
 
 def open_simulated_interfaces(scene, truth_seed: int | None, *, capture_spp: int = DEFAULT_CAPTURE_SPP):
