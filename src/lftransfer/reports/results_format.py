@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["db", "fixed", "median_p95", "num", "table"]
+__all__ = ["by_side", "db", "fixed", "median_p95", "num", "table"]
+
+
+def by_side(report: dict, table: str, side: str, key: str | None = None):
+    """A report's per-side entry (``report[table][side]``, e.g. ``cross_by_side``'s ``"real"``), or its ``key``;
+    None where the report has none."""
+    entry = (report.get(table) or {}).get(side)
+    return entry if key is None or entry is None else entry.get(key)
 
 
 def num(v, digits: int = 3) -> str:

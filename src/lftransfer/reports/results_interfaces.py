@@ -4,7 +4,7 @@ and quiet reference), whose cross-transfer error the target is measured against.
 
 from __future__ import annotations
 
-from lftransfer.reports.results_format import fixed
+from lftransfer.reports.results_format import by_side, fixed
 
 __all__ = ["TARGET_OVER_FIG4", "interfaces_tables"]
 
@@ -12,7 +12,7 @@ TARGET_OVER_FIG4 = 1.5          # issue 43: several interfaces within 1.5x of Fi
 
 
 def _side(report: dict, side: str):
-    return ((report.get("cross_by_side") or {}).get(side) or {}).get("rel_error")
+    return by_side(report, "cross_by_side", side, "rel_error")
 
 
 def interfaces_tables(stored) -> list[str]:

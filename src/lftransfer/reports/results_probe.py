@@ -4,14 +4,9 @@ rig and calibration), and the recovered map against the twin's room."""
 
 from __future__ import annotations
 
-from lftransfer.reports.results_format import fixed
+from lftransfer.reports.results_format import by_side, fixed
 
 __all__ = ["probe_tables"]
-
-
-def _side(report: dict, table: str, side: str, key: str | None = None):
-    entry = (report.get(table) or {}).get(side)
-    return entry if key is None or entry is None else entry.get(key)
 
 
 def probe_tables(stored) -> list[str]:
@@ -27,10 +22,10 @@ def probe_tables(stored) -> list[str]:
     labels = {"probe": "the light probe's map", "point": "one point light at the probe's brightest direction"}
     for name, r in runs:
         out.append(f"| {labels[name]} | {fixed(r.get('psnr_objects_db'), 2)} dB | "
-                   f"{fixed(_side(r, 'psnr_by_side', 'synthetic'), 2)} dB | "
-                   f"{fixed(_side(r, 'psnr_by_side', 'real'), 2)} dB | {fixed(r.get('cross_transfer_rel_error'), 3)} | "
-                   f"{fixed(_side(r, 'cross_by_side', 'synthetic', 'rel_error'), 3)} | "
-                   f"{fixed(_side(r, 'cross_by_side', 'real', 'rel_error'), 3)} | "
+                   f"{fixed(by_side(r, 'psnr_by_side', 'synthetic'), 2)} dB | "
+                   f"{fixed(by_side(r, 'psnr_by_side', 'real'), 2)} dB | {fixed(r.get('cross_transfer_rel_error'), 3)} | "
+                   f"{fixed(by_side(r, 'cross_by_side', 'synthetic', 'rel_error'), 3)} | "
+                   f"{fixed(by_side(r, 'cross_by_side', 'real', 'rel_error'), 3)} | "
                    f"{fixed(r.get('cross_gt_noise_rel'), 3)} |")
     out.append("")
     probe = stored.need("probe", "direct_light", "probe")
