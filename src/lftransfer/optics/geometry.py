@@ -10,8 +10,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 __all__ = ["apply_homography", "backproject", "crosses_rectangle", "env_directions", "env_solid_angles", "in_window",
-           "pixel_rays", "plane_axes", "project", "rectangle_to_world", "rotation_2d", "rotation_matrix", "rotation_xy",
-           "rotation_z", "view_camera"]
+           "pixel_rays", "plane_axes", "project", "rectangle_to_world", "rigid", "rigid_points", "rigid_points_back",
+           "rigid_vectors", "rotation_2d", "rotation_matrix", "rotation_xy", "rotation_z", "view_camera"]
 
 
 def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -20,6 +20,29 @@ def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
     q = np.concatenate([p, np.ones((len(p), 1))], axis=1) @ np.asarray(H, np.float64).T
     with np.errstate(divide="ignore", invalid="ignore"):
         return q[:, :2] / q[:, 2:3]
+
+
+def rigid(matrix, name: str = "matrix") -> np.ndarray:
+    """``matrix`` as a (4, 4) float64 rigid transform, or a ValueError naming ``name``."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
+        raise ValueError(f"{name} must be a (4, 4) rigid transform, got shape {m.shape}")
+    return m
+
+
+def rigid_points(m: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) points through the (4, 4) rigid transform ``m``: R p + t."""
+    return np.asarray(points) @ m[:3, :3].T + m[:3, 3]
+
+
+def rigid_points_back(m: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) points through the inverse of the (4, 4) rigid transform ``m``: R^T (p - t)."""
+    return (np.asarray(points) - m[:3, 3]) @ m[:3, :3]
+
+
+def rigid_vectors(m: np.ndarray, vectors: np.ndarray, *, back: bool = False) -> np.ndarray:
+    """(N, 3) directions turned by the (4, 4) rigid transform ``m`` (R v), or by its inverse with ``back`` (R^T v)."""
+    return np.asarray(vectors) @ (m[:3, :3] if back else m[:3, :3].T)
 
 
 def rotation_2d(theta: float) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 from lftransfer.choices import DEFAULT_LIGHTING_MODEL, DEFAULT_SPP, LightingModel
 from lftransfer.lightfield import LightField
 from lftransfer.optics import LensArray
+from lftransfer.optics.geometry import rigid_points, rigid_vectors
 from lftransfer.render.integrator import Light
 
 __all__ = ["RayRenderer", "SampleMeans", "ViewImage", "aperture_offsets", "data_entry_rays", "lightfield_rays",
@@ -249,9 +250,9 @@ class RayRenderer(ABC):
             origins, directions, entries = data_entry_rays(array, U, V, side=side, area=model == "area", spp=spp,
                                                            seed=seed)
             if pose is not None:
-                rot, shift = np.asarray(pose, np.float64)[:3, :3], np.asarray(pose, np.float64)[:3, 3]
-                origins = (origins @ rot.T + shift).astype(np.float32)
-                directions = (directions @ rot.T).astype(np.float32)
+                m = np.asarray(pose, np.float64)
+                origins = rigid_points(m, origins).astype(np.float32)
+                directions = rigid_vectors(m, directions).astype(np.float32)
             return origins, directions, np.repeat(entries, 3)
 
         placed = None if pose is None else np.asarray(pose, np.float64).tobytes()

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lftransfer.backend import mitsuba
+from lftransfer.optics.geometry import rigid_points_back, rigid_vectors
 
 __all__ = ["Windows"]
 
@@ -48,8 +49,7 @@ class Windows:
         """
         out = np.zeros(len(origins), bool)
         for m, (x0, x1, y0, y1) in zip(self.to_frame, self.extents):
-            rot, shift = m[:3, :3], m[:3, 3]
-            o, d = (origins - shift) @ rot, directions @ rot          # into the array's frame
+            o, d = rigid_points_back(m, origins), rigid_vectors(m, directions, back=True)   # into the array's frame
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = -o[:, 2] / d[:, 2]
             x, y = o[:, 0] + t * d[:, 0], o[:, 1] + t * d[:, 1]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lftransfer.optics.geometry import rotation_xy
+from lftransfer.optics.geometry import rigid, rotation_xy
 from lftransfer.scenes.loader import with_overrides
 from lftransfer.scenes.scene import SceneConfig, SyntheticScene
 
@@ -31,9 +31,7 @@ def scene_in_frame(scene: SceneConfig | SyntheticScene, matrix: np.ndarray) -> S
         world frame's interpolation by about the frame's tilt: pose a moving scene first
         (``scene_in_frame(scene.at(t), matrix)``) where that matters.
     """
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
-        raise ValueError(f"matrix must be a (4, 4) rigid transform, got shape {m.shape}")
+    m = rigid(matrix)
     if np.allclose(m, np.eye(4), rtol=0, atol=1e-15):
         return scene
     rot, shift = m[:3, :3], m[:3, 3]

@@ -11,6 +11,7 @@ import numpy as np
 
 from lftransfer.lightfield import LightField
 from lftransfer.lightfield.window import SteepRays, steep_rays
+from lftransfer.optics.geometry import rigid_points, rigid_vectors
 from lftransfer.render.base import ViewImage
 from lftransfer.render.camera import sensor_dict
 from lftransfer.render.lights import EDGE_REACH, EmitterLight, EnvironmentLight, LightFieldLight, PointLight
@@ -319,8 +320,8 @@ class SyntheticSide:
             return origins, directions
         kept = getattr(self, "_placed_rays", None)
         if kept is None or kept[0] is not origins or kept[1] is not directions:
-            rot, shift = self.array_pose[:3, :3], self.array_pose[:3, 3]
-            moved = ((origins @ rot.T + shift).astype(np.float32), (directions @ rot.T).astype(np.float32))
+            moved = (rigid_points(self.array_pose, origins).astype(np.float32),
+                     rigid_vectors(self.array_pose, directions).astype(np.float32))
             for a in moved:
                 a.flags.writeable = False        # constant rays: the renderer keeps their Dr.Jit copies
             self._placed_rays = kept = (origins, directions, moved)

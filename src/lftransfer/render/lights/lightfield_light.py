@@ -13,6 +13,7 @@ from lftransfer.backend import mitsuba
 from lftransfer import choices
 from lftransfer.choices import LIGHTING_MODELS, RECONSTRUCTIONS, WINDOWS, LightingModel, Reconstruction, Window
 from lftransfer.lightfield import LightField
+from lftransfer.optics.geometry import rigid, rigid_points, rigid_points_back, rigid_vectors
 from lftransfer.lightfield.window import SteepRays, extend_beyond_window, steep_rays
 from lftransfer.render.lights.jit import jit_array
 from lftransfer.render.lights.sampling import (EDGE_REACH, aperture_points, extended_table, linear_blend,
@@ -41,9 +42,7 @@ def _rigid(pose) -> np.ndarray | None:
     transform)."""
     if pose is None:
         return None
-    m = np.asarray(pose, np.float64)
-    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
-        raise ValueError(f"pose must be a (4, 4) rigid transform, got shape {m.shape}")
+    m = rigid(pose, "pose")
     return None if np.allclose(m, np.eye(4), rtol=0, atol=1e-15) else m
 
 
@@ -162,8 +161,7 @@ class LightFieldLight:
         xmin, xmax, ymin, ymax = self.lightfield.array.extent()
         corners = np.array([[xmin, ymin, 0.0], [xmin, ymax, 0.0], [xmax, ymin, 0.0], [xmax, ymax, 0.0]])
         if self.pose is not None:           # into the array's frame
-            rot, shift = self.pose[:3, :3], self.pose[:3, 3]
-            points, normals = (np.asarray(points) - shift) @ rot, np.asarray(normals) @ rot
+            points, normals = rigid_points_back(self.pose, points), rigid_vectors(self.pose, normals, back=True)
         side = points[:, 2] > 0 if self.side == "real" else points[:, 2] < 0
         facing = (np.einsum("nd,cnd->cn", normals, corners[:, None, :] - points[None]) > 0).any(axis=0)
         return side & facing
@@ -367,7 +365,7 @@ class LightFieldLight:
     def to_lit_frame(self, points: np.ndarray) -> np.ndarray:
         """(N, 3) points of the array's frame -> the lit frame (float64; themselves without a pose)."""
         points = np.asarray(points, np.float64)
-        return points if self.pose is None else points @ self.pose[:3, :3].T + self.pose[:3, 3]
+        return points if self.pose is None else rigid_points(self.pose, points)
 
     def _on_side(self, p):
         """mi.Bool: points of the lit frame on this light's side of the array plane."""
