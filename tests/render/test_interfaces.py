@@ -121,7 +121,7 @@ def test_03_windows_cut_the_rays_that_cross_an_array():
 
 def test_04_windows_in_drjit_agree(variant):
     from lftransfer.backend import mitsuba
-    from lftransfer.render.lights import jit_array
+    from lftransfer.render.lights import jit_array, jit_rays
 
     mi = mitsuba()
     m = _motion()
@@ -131,8 +131,7 @@ def test_04_windows_in_drjit_agree(variant):
     d = rng.normal(size=(3000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     reach = rng.uniform(0.01, 0.4, 3000)
-    ray = mi.Ray3f(mi.Point3f(*(jit_array(mi.Float, o[:, i].astype(np.float32)) for i in range(3))),
-                   mi.Vector3f(*(jit_array(mi.Float, d[:, i].astype(np.float32)) for i in range(3))))
+    ray = jit_rays(o, d)
     got = np.array(windows.crossed_jit(ray, jit_array(mi.Float, reach.astype(np.float32))), bool)
     expected = windows.crossed(o.astype(np.float32).astype(np.float64), d.astype(np.float32).astype(np.float64),
                                reach.astype(np.float32).astype(np.float64))

@@ -364,7 +364,7 @@ class SimRig:
         """(N, 3) float64 the light of the other interfaces' projectors along rays of this array's frame that meet
         their lenslets before anything else (``distance``: where each ray hits, inf where none)."""
         from lftransfer.backend import mitsuba
-        from lftransfer.render.lights import jit_array, to_numpy
+        from lftransfer.render.lights import jit_rays, to_numpy
         from lftransfer.render.windows import Windows
 
         mi = mitsuba()
@@ -374,10 +374,8 @@ class SimRig:
             idx = np.flatnonzero(crossing)
             if not len(idx):
                 continue
-            o, d = origins[idx].astype(np.float32), directions[idx].astype(np.float32)
-            seen = light.incident(mi.Point3f(*(jit_array(mi.Float, o[:, i]) for i in range(3))),
-                                  mi.Vector3f(*(jit_array(mi.Float, d[:, i]) for i in range(3))), mi.Bool(True))
-            out[idx] += to_numpy(seen.radiance)
+            rays = jit_rays(origins[idx], directions[idx])
+            out[idx] += to_numpy(light.incident(rays.o, rays.d, mi.Bool(True)).radiance)
         return out
 
     def _scene_lights(self) -> list:
