@@ -33,7 +33,7 @@ from lftransfer.render.lights import EnvironmentLight, LightFieldLight, PointLig
 from lftransfer.render.base import aperture_offsets
 from lftransfer.render.renderer import HalfSpaceRenderer
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
-from lftransfer.rig.model import RigModel, nominal_rig
+from lftransfer.rig.model import RigModel, nominal_interfaces
 from lftransfer.rig.requests import (SCREEN_TRANSMISSION, Board, CleanPlate, Collimator, FocalPlaneDiffuser,
                                      LFCapture, LFFrame, MirrorBall, RealScene, RigInfo, Setup, ViewCapture, ViewFrame,
                                      WhiteField)
@@ -92,8 +92,7 @@ class SimRig:
         if not 0 <= interface < max(1, len(faces)):
             raise ValueError(f"SimRig: interface {interface} of a scene with {max(1, len(faces))} interface(s)")
         self.interface = int(interface)
-        self._truth = truth or (nominal_rig(faces[interface].rig(scene.rig), faces[interface].to_world()) if faces
-                                else nominal_rig(scene.rig))
+        self._truth = truth or nominal_interfaces(scene)[self.interface]
         self._world_to_array = self._truth.world_to_array()
         # set-ups are placed in the rig's own frame: its interface's, as the scene places it (the world's for one)
         placement = np.asarray(self._truth.placement, np.float64) if self._truth.placement else np.eye(4)
