@@ -47,8 +47,8 @@ def test_01_a_run_through_two_interfaces_and_its_negative_control(variant, tmp_p
 
 
 @pytest.mark.parametrize("options, what", [
-    (RunOptions(rig_model="calibrated"), "calibrating each into one world frame is not built yet"),
     (RunOptions(rig_model="oracle", rig=RigSpec("replay", None)), "they run on the simulated rig in this process"),
+    (RunOptions(rig_model="calibrated", rig=RigSpec("replay", None)), "they run on the simulated rig in this process"),
 ])
 def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path, options, what):
     with pytest.raises(SceneError, match=what):
@@ -57,13 +57,13 @@ def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path,
 
 
 def test_03_the_use_cases_of_one_interface_refuse_several(variant, tmp_path):
-    """A sequence, the live page, a benchmark, a study or a calibration would run the first interface alone:
-    they refuse such a scene in one line instead."""
+    """A sequence, the live page, a benchmark or a study would run the first interface alone: they refuse such a
+    scene in one line instead."""
     from lftransfer.runs.rigs import open_rig
 
     from lftransfer.sim.oracle import open_simulated_rig
 
-    with pytest.raises(SceneError, match="lft run takes them"):
+    with pytest.raises(SceneError, match="lft run and lft calibrate take them"):
         open_rig(_corner(), RunOptions(rig_model="oracle"))
     with pytest.raises(SceneError, match="this command simulates one"):      # lft depth, the device twin, ...
         open_simulated_rig(_corner(), 0)

@@ -61,7 +61,7 @@ def sees_lit_side(view, depth: float = 0.1) -> bool:
 
 
 def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.045, *, translucent: bool = False,
-                  extent: tuple[float, float] | None = None) -> BoardPattern:
+                  extent: tuple[float, float] | None = None, walls: np.ndarray | None = None) -> BoardPattern:
     """The board plane: centred on the array's axis at ``depth``, turned halfway towards the view camera.
 
     Facing both the array (which lights it) and the view camera (which photographs it) keeps the board well lit
@@ -69,6 +69,9 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
     :func:`sees_lit_side`) is seen from behind: it faces halfway between the array and the direction away from the
     camera, stands on the camera's line of sight to its target (in the middle of its view), and moves away from
     the array until a board of ``extent`` (width, height, metres) keeps :data:`BOARD_CLEARANCE_M` from it.
+    ``walls``: (N, 4) the other light field interfaces' planes in this array's frame (``n . x + d > 0`` on their
+    real side, :func:`lftransfer.scenes.interfaces.walls`); a screen that would reach within
+    :data:`BOARD_CLEARANCE_M` of one on the camera's line of sight stays on the array's axis.
     """
     centre = np.array([0.0, 0.0, float(depth)])
     to_cam = np.asarray(view.origin, np.float64) - centre
@@ -82,8 +85,23 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
         centre[2] = max(centre[2], BOARD_CLEARANCE_M + reach)
     origin, target = np.asarray(view.origin, np.float64), np.asarray(view.target, np.float64)
     if abs(origin[2] - target[2]) > 1e-9:
-        centre[:2] = (target + (origin - target) * (centre[2] - target[2]) / (origin[2] - target[2]))[:2]
+        sight = centre.copy()
+        sight[:2] = (target + (origin - target) * (centre[2] - target[2]) / (origin[2] - target[2]))[:2]
+        if _clear(sight, ex, ey, extent, walls):
+            centre = sight
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
+
+
+def _clear(centre: np.ndarray, ex: np.ndarray, ey: np.ndarray, extent: tuple[float, float] | None,
+           walls: np.ndarray | None) -> bool:
+    """Whether a board of ``extent`` (its centre alone for None) centred at ``centre`` with axes ``ex``, ``ey``
+    keeps :data:`BOARD_CLEARANCE_M` on the real side of every plane of ``walls`` ((N, 4), or None: no walls)."""
+    if walls is None or len(walls) == 0:
+        return True
+    w, h = (0.0, 0.0) if extent is None else (float(extent[0]) / 2, float(extent[1]) / 2)
+    corners = np.array([centre + sx * w * ex + sy * h * ey for sx in (-1, 1) for sy in (-1, 1)])
+    planes = np.asarray(walls, np.float64).reshape(-1, 4)
+    return bool(np.all(corners @ planes[:, :3].T + planes[:, 3] >= BOARD_CLEARANCE_M))
 
 
 PANEL_STEP_M = 0.005       # a board a camera behind the array's plane would see partly through the array's panel
@@ -91,7 +109,7 @@ PANEL_MAX_SHIFT_M = 0.15   # moves away from the array in these steps, at most t
 
 
 def panel_shift(view, depth: float, extent: tuple[float, float], array_extent: tuple[float, float, float, float],
-                *, translucent: bool = False) -> float:
+                *, translucent: bool = False, walls: np.ndarray | None = None) -> float:
     """How much farther from the array than ``depth`` a board must stand for the view camera to see all of it past
     the array's panel (0 for a camera in front of or in the array's plane, whose rays to the real side never cross
     the panel).
@@ -106,7 +124,7 @@ def panel_shift(view, depth: float, extent: tuple[float, float], array_extent: t
         return 0.0
     shift = 0.0
     while shift <= PANEL_MAX_SHIFT_M:
-        b = board_pattern(view, depth + shift, translucent=translucent, extent=extent)
+        b = board_pattern(view, depth + shift, translucent=translucent, extent=extent, walls=walls)
         corners = np.array([b.centre + sx * extent[0] / 2 * b.ex + sy * extent[1] / 2 * b.ey
                             for sx in (-1, 1) for sy in (-1, 1)])
         if not crosses_rectangle(origin, corners - origin, array_extent).any():
@@ -388,7 +406,7 @@ def _board_diagnostics(b: dict, pose: "ArrayPose") -> dict:
 
 
 def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, rounds: int = POSE_ROUNDS,
-                   chart=CHART, spp: int = 16,
+                   chart=CHART, spp: int = 16, walls: np.ndarray | None = None,
                    progress: Callable[[str], None] | None = None) -> tuple[ArrayPose, dict]:
     """Ask for a board at each depth, find its plane, project phase-shifted fringes on it, solve the pose from all
     boards at once; then again, with the fringes drawn on each board where it stands.
@@ -418,6 +436,7 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
         chart: (columns, rows, square size in metres) of the printed chessboard; the board is two squares larger
             each way, and the fringes light all of it.
         spp: view camera quality (samples per pixel of a simulated camera) of the calibration photographs.
+        walls: the other light field interfaces' planes in this array's frame (:func:`board_pattern`), or None.
         progress: called with a message per capture.
 
     Returns:
@@ -439,13 +458,14 @@ def calibrate_pose(rig: Rig, model: RigModel, scene, *, depths=POSE_DEPTHS, roun
     # a view camera in front of the boards sees them through translucent screens, which may have to move away from
     # the array (board_pattern); every board moves as far as the nearest one, so the depths keep their parallax
     screen = not sees_lit_side(scene.view, min(depths))
-    shift = board_pattern(scene.view, min(depths), translucent=screen, extent=size).centre[2] - min(depths)
+    shift = board_pattern(scene.view, min(depths), translucent=screen, extent=size, walls=walls).centre[2] - min(depths)
     # a camera behind the array's plane sees the boards past the array's panel: they move away until it hides none
-    shift += panel_shift(scene.view, min(depths) + shift, size, model.array.extent(), translucent=screen)
+    shift += panel_shift(scene.view, min(depths) + shift, size, model.array.extent(), translucent=screen,
+                         walls=walls)
     for r in range(rounds):
         boards = []
         for depth in depths:
-            asked = board_pattern(scene.view, depth + shift, translucent=screen, extent=size)
+            asked = board_pattern(scene.view, depth + shift, translucent=screen, extent=size, walls=walls)
             tag = f"pose round {r + 1}: board at {100 * asked.centre[2]:.0f} cm" if rounds > 1 else \
                 f"pose: board at {100 * asked.centre[2]:.0f} cm"
             boards.append(_photograph_board(rig, model, scene, asked, pose, screen, shot,

@@ -45,7 +45,7 @@ from lftransfer.scenes import check_synthetic
 from lftransfer.validation import read_json
 
 __all__ = ["Calibration", "CalibrationFileError", "STEPS", "calibrate_exposure", "calibrate_rig",
-           "count_calibration_steps", "load_calibration"]
+           "calibration_from_json", "count_calibration_steps", "load_calibration"]
 
 STEPS = ("lenslet centres", "lenslet distortion", "projector mapping", "radiometry", "global pose", "point light")
 
@@ -155,7 +155,8 @@ def _device_json(dev: LensletDevice, array: LensArray, bits: int) -> dict:
 
 
 def load_calibration(path, scene) -> Calibration:
-    """Read a calibration file written by :meth:`Calibration.write` for the scene's rig.
+    """Read a calibration file written by :meth:`Calibration.write` for the scene's rig (a scene of several light
+    field interfaces: :func:`lftransfer.calibration.interfaces.read_calibration`).
 
     The file is validated field by field (:mod:`lftransfer.calibration.calibration_file`: types, ranges, no
     unknown keys), then against the scene's rig: the array's lattice and size, the devices' sizes and bit depths,
@@ -172,14 +173,27 @@ def load_calibration(path, scene) -> Calibration:
         CalibrationFileError: unreadable file, malformed JSON, wrong format, an invalid field or a rig that does
             not match the scene's; one line naming the file and the field.
     """
+    if scene.interfaces:
+        raise TypeError("load_calibration reads one interface's calibration; a scene of several is read by "
+                        "lftransfer.calibration.interfaces.read_calibration")
     path = Path(path)
-    entry = parse_calibration_file(read_json(path, "calibration file", CalibrationFileError), str(path))
+    data = read_json(path, "calibration file", CalibrationFileError)
+    if isinstance(data, dict) and "interfaces" in data:
+        raise CalibrationFileError(f"{path}: interfaces: a calibration of several light field interfaces, but the "
+                                   f"scene has one ([rig])")
+    return calibration_from_json(data, str(path), scene)
+
+
+def calibration_from_json(data, source: str, scene) -> Calibration:
+    """A :class:`Calibration` from a calibration file's JSON value (:func:`load_calibration`; ``source`` names
+    the file, or the file and the entry, in messages; ``scene``: whose ``rig`` it must describe)."""
+    entry = parse_calibration_file(data, source)
     nominal = nominal_rig(scene.rig)
-    _check_fits_scene(path, entry, nominal, scene)
+    _check_fits_scene(source, entry, nominal, scene)
     la = entry.lens_array
 
     def bad(field_name: str, exc: Exception) -> CalibrationFileError:
-        return CalibrationFileError(f"{path}: {field_name}: {exc}")
+        return CalibrationFileError(f"{source}: {field_name}: {exc}")
 
     try:
         array = LensArray(lattice=la.lattice, rows=la.rows, cols=la.cols, pitch=la.pitch_m,
@@ -218,7 +232,7 @@ def load_calibration(path, scene) -> Calibration:
                        pose=pose, lights=lights)
 
 
-def _check_fits_scene(path: Path, entry, nominal: RigModel, scene) -> None:
+def _check_fits_scene(path: str, entry, nominal: RigModel, scene) -> None:
     """A CalibrationFileError naming the first field of the file that does not fit the scene's rig."""
     la, a = entry.lens_array, nominal.array
     if (la.lattice, la.rows, la.cols) != (a.lattice, a.rows, a.cols):
@@ -349,7 +363,8 @@ def _gray_groups(scene) -> int:
 
 
 def count_calibration_steps(scene) -> int:
-    """Progress messages of :func:`calibrate_rig` (for a progress bar)."""
+    """Progress messages of :func:`calibrate_rig` (for a progress bar; a scene of several interfaces:
+    :func:`lftransfer.calibration.interfaces.count_steps`)."""
     return 1 + SWEEP_STEPS ** 2 + _gray_groups(scene) + _RADIOMETRY_MESSAGES + 1 + _POSE_MESSAGES \
         + count_light_messages(scene)
 
@@ -367,7 +382,8 @@ def check_rig_matches(rig: Rig, scene) -> None:
         raise ValueError("the rig does not match the scene's [rig] and [view]: " + "; ".join(wrong))
 
 
-def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = None) -> Calibration:
+def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = None,
+                  walls: np.ndarray | None = None) -> Calibration:
     """Run every calibration step through the rig (images only; the rig file's nominal values as the start).
 
     Args:
@@ -376,6 +392,8 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
         scene: the synthetic part of the scene (``SceneConfig.synthetic_part()``): the rig file's nominal
             values, the view camera and the point lights as the scene file places them (the last step's start).
         progress: called with a message per capture or step.
+        walls: (N, 4) the planes of the scene's other light field interfaces in this one's frame, which the
+            boards keep clear of (:func:`lftransfer.scenes.interfaces.walls`); None for a scene of one interface.
 
     Returns:
         Calibration (``lights`` empty for a scene without a point light).
@@ -422,14 +440,14 @@ def calibrate_rig(rig: Rig, scene, *, progress: Callable[[str], None] | None = N
                     projector=replace(nominal.projector, device=projector))
 
     # 4. radiometry
-    radiometry = calibrate_radiometry(rig, model, scene, progress=say)
+    radiometry = calibrate_radiometry(rig, model, scene, progress=say, walls=walls)
     model = radiometry.apply(model)
     say("camera exposure: the LF camera and the view camera see the same board")
     radiometry.camera_exposure, diag["exposure"] = calibrate_exposure(rig, model, scene)
     model = radiometry.apply(model)
 
     # 5. global pose
-    pose, pose_diag = calibrate_pose(rig, model, scene, progress=say)
+    pose, pose_diag = calibrate_pose(rig, model, scene, progress=say, walls=walls)
     diag["pose"] = pose_diag
     model = apply_pose(model, pose)
 

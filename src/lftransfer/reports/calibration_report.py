@@ -62,6 +62,9 @@ _ERROR_ROWS = {
     "exposure_rel_error": ("camera exposure, relative", "%", 100.0),
     "camera_gain_rel_rms": ("camera gain (exposure x vignetting), RMS relative", "%", 100.0),
     "light_position_error_mm": ("point light position", "mm", 1.0),
+    "relative_position_rms_mm": ("lenslet positions in the first interface's array frame, RMS", "mm", 1.0),
+    "relative_position_max_mm": ("lenslet positions in the first interface's array frame, max", "mm", 1.0),
+    "relative_rotation_deg": ("orientation against the first interface's array", "deg", 1.0),
 }
 
 # brightness measurements: (radiometry diagnostics "rad" or exposure diagnostics "exp", key, what, format, unit)
@@ -107,22 +110,38 @@ def write_calibration_report(path, calibration, errors=None) -> Path:
 
 
 def render_calibration_report(calibration, errors=None) -> str:
-    """The calibration report as an HTML document (see :func:`write_calibration_report`).
+    """The calibration report as an HTML document (see :func:`write_calibration_report`); a calibration of several
+    light field interfaces (:class:`~lftransfer.calibration.interfaces.InterfacesCalibration`) shows each in turn,
+    with its errors (``errors["interfaces"][name]``).
 
     Returns:
         the document's text.
     """
-    cal = calibration
     errors = errors.to_json() if hasattr(errors, "to_json") else errors
-    diag = cal.diagnostics if isinstance(cal.diagnostics, dict) else {}
-    a, cam, prj = cal.model.array, cal.model.camera.device, cal.model.projector.device
+    names = getattr(calibration, "names", None)
+    if names is None:
+        parts = [_part(calibration, errors)]
+    else:
+        each = (errors or {}).get("interfaces", {})
+        parts = [_part(c, each.get(n), name=n, prefix=f"i{i}-" if i else "",
+                       note=" (the world's frame; the point lights)" if i == 0 else "")
+                 for i, (n, c) in enumerate(zip(names, calibration.interfaces))]
+    first = calibration.model
+    a, cam, prj = first.array, first.camera.device, first.projector.device
+    count = "" if names is None else f"{len(names)} interfaces ({', '.join(names)}), each a "
     return environment().get_template("calibration_report.html").render(
         title="Light field transfer rig: calibration report", sections=SECTIONS, not_available=NOT_AVAILABLE,
-        subtitle=f"{a.rows} x {a.cols} {a.lattice} lens array; LF camera {cam.width} x {cam.height} px, "
-                 f"projector {prj.width} x {prj.height} px",
-        summary=_attempt(_summary, cal, errors), lenslets=_attempt(_lenslets, cal, diag),
-        distortion=_attempt(_distortion, cal), projector=_attempt(_projector, cal),
-        radiometry=_attempt(_radiometry, cal, diag), pose=_attempt(_pose, cal, diag))
+        subtitle=f"{count}{a.rows} x {a.cols} {a.lattice} lens array; LF camera {cam.width} x {cam.height} px, "
+                 f"projector {prj.width} x {prj.height} px", parts=parts)
+
+
+def _part(cal, errors: dict | None, *, name: str = "", prefix: str = "", note: str = "") -> dict:
+    """One interface's sections of the report."""
+    diag = cal.diagnostics if isinstance(cal.diagnostics, dict) else {}
+    return dict(name=name, prefix=prefix, note=note, summary=_attempt(_summary, cal, errors),
+                lenslets=_attempt(_lenslets, cal, diag), distortion=_attempt(_distortion, cal),
+                projector=_attempt(_projector, cal), radiometry=_attempt(_radiometry, cal, diag),
+                pose=_attempt(_pose, cal, diag))
 
 
 # ---- sections: each returns the values its part of the template shows ------------------------------------------

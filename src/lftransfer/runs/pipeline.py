@@ -22,7 +22,7 @@ from lftransfer.reports.report import emitter_ceiling, write_outputs
 from lftransfer.runs.rigs import (NOMINAL, CalibrationFailedError, Knowledge, OpenedRig, RigSpec, calibrate,
                                  know_rig, knowledge, open_rig, will_calibrate, write_calibration)
 from lftransfer.runs.run_folder import VIEWS_FILE, clear_run_folder, tracked_run, write_status, write_views
-from lftransfer.calibration.rig import count_calibration_steps
+from lftransfer.calibration.interfaces import count_steps as count_calibration_steps
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
@@ -196,8 +196,8 @@ def count_run_steps(scene, options: RunOptions) -> int:
 
         n = len(scene.interfaces)
         control = count_interface_steps(replace(settings.transfer, bounce_views=False), 1) if _verifies(options) else 0
-        return (1 + count_interface_steps(settings.transfer, n) + (gt_steps(settings) if _verifies(options) else 0)
-                + floor + control + 1)
+        return (1 + calibration + count_interface_steps(settings.transfer, n)
+                + (gt_steps(settings) if _verifies(options) else 0) + floor + control + 1)
     # each ablation: the transfer without its bounce views, given a depth (no step to measure it)
     ablations = 2 * (count_steps(replace(settings.transfer, bounce_views=False)) - 1) \
         if _runs_ablations(options, settings) else 0

@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from lftransfer.reports.report import write_json
-from lftransfer.calibration.rig import calibrate_rig, load_calibration
+from lftransfer.calibration.interfaces import read_calibration
+from lftransfer.calibration.rig import calibrate_rig
 from lftransfer.runs.calibration_cache import CachedCalibration, inputs_sha256, read_entry, write_entry
 from lftransfer.sim.gt_cache import CacheProblem
 from lftransfer.rig.base import Rig
@@ -70,18 +71,24 @@ class CalibrationFailedError(RuntimeError):
     sizes that matter."""
 
 
-def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None):
-    """:func:`lftransfer.calibration.rig.calibrate_rig`, its failures (other than a rig fault) as one
-    :class:`CalibrationFailedError` that says what to try.
+def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None, rigs: tuple = ()):
+    """:func:`lftransfer.calibration.rig.calibrate_rig` (for a scene of several light field interfaces,
+    :func:`lftransfer.calibration.interfaces.calibrate_interfaces` through ``rigs``), its failures (other than a rig
+    fault) as one :class:`CalibrationFailedError` that says what to try.
 
     Args:
         rig: the rig.
         scene: the synthetic part of the scene.
         progress: called with a message per capture or step.
+        rigs: with several interfaces, one rig per interface (:attr:`OpenedRig.rigs`).
     """
     from lftransfer.rig.base import RigError
 
     try:
+        if scene.interfaces:
+            from lftransfer.calibration.interfaces import calibrate_interfaces
+
+            return calibrate_interfaces(list(rigs), scene, progress=progress)
         return calibrate_rig(rig, scene, progress=progress)
     except RigError:
         raise
@@ -149,6 +156,20 @@ class OpenedRig:
         """The hidden truth's seed (None: no oracle, or a rig built exactly as its file says)."""
         return None if self.oracle is None else self.oracle.truth_seed
 
+    def noise_state(self) -> dict:
+        """The simulated rig's random streams (every interface's, with several), for the calibration cache."""
+        if self.rigs:
+            return {"interfaces": [r.noise_state() for r in self.rigs]}
+        return self.rig.noise_state()
+
+    def restore_noise_state(self, state: dict) -> None:
+        """Set the random streams to ``state`` (:meth:`noise_state`)."""
+        if self.rigs:
+            for r, own in zip(self.rigs, state["interfaces"]):
+                r.restore_noise_state(own)
+        else:
+            self.rig.restore_noise_state(state)
+
     def start_frame(self, index: int) -> None:
         """Begin frame ``index`` of a sequence of independent frames: the simulated rig draws the frame's sensor
         noise from its seed and the index alone (:meth:`lftransfer.sim.SimRig.start_frame`), so the frame is the
@@ -179,9 +200,8 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
         if not interfaces:
             from lftransfer.scenes import SceneError
 
-            raise SceneError(f"{interfaces_named(scene)}: lft run takes them (--rig-model oracle or nominal); live "
-                             "loops, sequences, benchmarks, studies and calibration run one interface so far "
-                             "(docs/interfaces.md)")
+            raise SceneError(f"{interfaces_named(scene)}: lft run and lft calibrate take them; live loops, "
+                             "sequences, benchmarks and studies run one interface so far (docs/interfaces.md)")
         return _open_interfaces(scene, options, simulator)
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads
@@ -282,17 +302,12 @@ def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, sou
     """
     ps = scene.synthetic_part()
     label = "calibrated"
-    if scene.interfaces and (calibration is not None or rig_model == "calibrated"):
-        from lftransfer.scenes import SceneError
-
-        raise SceneError(f"{interfaces_named(scene)}: calibrating each into one world frame is not built yet; run "
-                         "with --rig-model oracle (each interface as built, not what users run) or --rig-model "
-                         "nominal (the rig file's values)")
     models: tuple = ()                # with several interfaces, each one's (model is the first's)
     if calibration is None and rig_model == "calibrated":
-        calibration = calibrate(opened.rig, ps, progress=progress)
+        calibration = calibrate(opened.rig, ps, progress=progress, rigs=opened.rigs)
     if calibration is not None:
         model = calibration.model
+        models = tuple(getattr(calibration, "models", ()))
     elif rig_model == "oracle":
         if opened.oracle is None:
             raise ValueError("--rig-model oracle needs the simulated rig's truth (--rig sim)")
@@ -352,17 +367,17 @@ def _reuse(opened: OpenedRig, scene, options, out_file: Path, resume: bool, warn
     cache entry that cannot be used goes to ``warn``."""
     ps = scene.synthetic_part()
     if options.calibration is not None:
-        return load_calibration(options.calibration, ps), f"calibration file {options.calibration}", \
+        return read_calibration(options.calibration, ps), f"calibration file {options.calibration}", \
             options.calibration, None
     if options.rig_model == "calibrated" and resume and out_file.is_file():
-        return load_calibration(out_file, ps), f"calibrated (resumed from {out_file})", out_file, None
+        return read_calibration(out_file, ps), f"calibrated (resumed from {out_file})", out_file, None
     key = calibration_key(scene, options)
     entry = None if key is None or options.recalibrate else read_entry(key)
     if isinstance(entry, CacheProblem):
         warn(entry.message())
     elif entry is not None:
-        calibration = load_calibration(entry.calibration_file, ps)
-        opened.rig.restore_noise_state(entry.rig_state)       # as the calibrating run's rig stood after calibrating
+        calibration = read_calibration(entry.calibration_file, ps)
+        opened.restore_noise_state(entry.rig_state)           # as the calibrating run's rig stood after calibrating
         return calibration, f"calibrated (reused from the calibration cache, {entry.folder}; --recalibrate makes " \
                             f"a new one)", entry.calibration_file, entry
     return None, None, None, None
@@ -403,7 +418,7 @@ def know_rig(opened: OpenedRig, scene, options, out_file: Path, *, progress: Cal
     known = knowledge(opened, scene, options.rig_model, calibration=loaded, source=source, progress=progress)
     now = loaded is None and known.calibration is not None
     key = calibration_key(scene, options) if now else None
-    state = opened.rig.noise_state() if key is not None else None
+    state = opened.noise_state() if key is not None else None
     errors = None
     resumed = options.calibration is None and source == out_file
     if known.calibration is not None and not resumed:

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["box_corners", "facing_interfaces", "interface_names", "interfaces_named", "placements", "region_problem"]
+__all__ = ["box_corners", "facing_interfaces", "interface_names", "interfaces_named", "placements", "region_problem",
+           "walls"]
 
 
 def placements(interfaces) -> list[np.ndarray]:
@@ -29,6 +30,20 @@ def interfaces_named(scene) -> str:
     (``"scene.toml: interface: the scene has 2 light field interfaces (front, side)"``)."""
     names, count = ", ".join(interface_names(scene.interfaces)), len(scene.interfaces)
     return f"{scene.source or '<scene>'}: interface: the scene has {count} light field interfaces ({names})"
+
+
+def walls(interfaces, i: int) -> np.ndarray:
+    """(N - 1, 4) float64 the array planes of every interface of ``interfaces`` but the ``i``-th, in the ``i``-th's
+    frame: ``(n, d)`` with ``n . x + d`` the height of a point x above the plane towards that interface's real side
+    (metres); (0, 4) for a ``[rig]`` scene."""
+    faces = placements(interfaces)
+    to_i = np.linalg.inv(faces[i])
+    out = []
+    for j, m in enumerate(faces):
+        if j != i:
+            local = to_i @ m
+            out.append([*local[:3, 2], -float(local[:3, 2] @ local[:3, 3])])
+    return np.asarray(out, np.float64).reshape(-1, 4)
 
 
 def box_corners(bounds: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 
 from lftransfer.optics.geometry import apply_homography, rotation_xy, rotation_z
 
-__all__ = ["CalibrationErrors", "calibration_errors"]
+__all__ = ["CalibrationErrors", "InterfacesCalibrationErrors", "calibration_errors", "interfaces_calibration_errors"]
 
 
 def _rig_rotation(model) -> np.ndarray:
@@ -115,7 +115,7 @@ def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int 
     e = np.linalg.norm(to_prj(cal, px[inside]) - to_prj(truth, px[inside]), axis=1)
     out["projector_mapping_rms_px"] = float(np.sqrt(np.mean(e ** 2)))
     # global pose: the lenslet centres in the world, and the array's orientation
-    ct, cc = ta.centres3d @ rt.T, ca.centres3d @ rc.T
+    ct, cc = ta.centres3d @ rotation_xy(truth.tilt).T, ca.centres3d @ rotation_xy(cal.tilt).T   # rotated in-plane
     d = np.linalg.norm(ct - cc, axis=1) * 1000
     out["pose_position_rms_mm"] = float(np.sqrt(np.mean(d ** 2)))
     out["pose_position_max_mm"] = float(d.max())
@@ -145,3 +145,64 @@ def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int 
         out["light_position_error_mm"] = max(float(1000 * np.linalg.norm(fit.position - np.asarray(at, float)))
                                              for fit, at in zip(fits, true_lights))
     return CalibrationErrors(**out)
+
+
+def _seen_from(model, first) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) ``model``'s lenslet centres and (3, 3) its array's orientation, in the frame of ``first``'s array
+    (its placement, its tilt, then its in-plane offset and rotation)."""
+    def plane(m) -> np.ndarray:                   # the array plane's frame in the world: placement, then tilt
+        out = np.eye(4)
+        out[:3, :3] = rotation_xy(m.tilt)
+        return (np.asarray(m.placement, np.float64) if m.placement else np.eye(4)) @ out
+
+    frame = plane(first)
+    frame[:3, 3] += frame[:3, :2] @ np.asarray(first.array.offset, np.float64)
+    frame[:3, :3] = frame[:3, :3] @ rotation_z(first.array.rotation)
+    rel = np.linalg.inv(frame) @ plane(model)
+    return model.array.centres3d @ rel[:3, :3].T + rel[:3, 3], rel[:3, :3] @ rotation_z(model.array.rotation)
+
+
+@dataclass(frozen=True)
+class InterfacesCalibrationErrors:
+    """A calibration of several light field interfaces against the simulated rig's hidden truth.
+
+    Attributes:
+        names: the interfaces' names, in the scene's order.
+        errors: each interface's :class:`CalibrationErrors` (its pose in the world; the point lights with the
+            first).
+        relative: per interface after the first, its array against the first's as the calibration places both
+            (what light that crosses from one to the other depends on): ``relative_position_rms_mm`` and
+            ``relative_position_max_mm`` (its lenslet centres in the first array's frame) and
+            ``relative_rotation_deg``.
+    """
+
+    names: tuple[str, ...]
+    errors: tuple[CalibrationErrors, ...]
+    relative: tuple[dict, ...]
+
+    def to_json(self) -> dict:
+        """``{"interfaces": {name: quantity -> error}}``, the relative pose among the errors of the interfaces
+        after the first."""
+        out = {self.names[0]: self.errors[0].to_json()}
+        for name, errors, rel in zip(self.names[1:], self.errors[1:], self.relative):
+            out[name] = {**errors.to_json(), **rel}
+        return {"interfaces": out}
+
+
+def interfaces_calibration_errors(calibration, truths, *, true_lights=None) -> InterfacesCalibrationErrors:
+    """Errors of a calibration of several interfaces
+    (:class:`lftransfer.calibration.interfaces.InterfacesCalibration`) against each interface's true model
+    (``truths``, in the scene's order); ``true_lights`` as for :func:`calibration_errors` (the first's)."""
+    cals = calibration.interfaces
+    errors = tuple(calibration_errors(c, t, true_lights=true_lights if i == 0 else None)
+                   for i, (c, t) in enumerate(zip(cals, truths)))
+    relative = []
+    for c, t in zip(cals[1:], truths[1:]):
+        xc, rc = _seen_from(c.model, cals[0].model)
+        xt, rt = _seen_from(t, truths[0])
+        d = np.linalg.norm(xc - xt, axis=1) * 1000
+        cosang = (np.trace(rc.T @ rt) - 1) / 2
+        relative.append({"relative_position_rms_mm": float(np.sqrt(np.mean(d ** 2))),
+                         "relative_position_max_mm": float(d.max()),
+                         "relative_rotation_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))})
+    return InterfacesCalibrationErrors(names=tuple(calibration.names), errors=errors, relative=tuple(relative))

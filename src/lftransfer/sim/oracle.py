@@ -116,9 +116,12 @@ class Oracle:
 
     def calibration_errors(self, calibration):
         """A calibration's errors against the rig as built
-        (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`)."""
-        from lftransfer.sim.calibration_errors import calibration_errors
+        (:class:`lftransfer.sim.calibration_errors.CalibrationErrors`; for several interfaces,
+        :class:`~lftransfer.sim.calibration_errors.InterfacesCalibrationErrors`)."""
+        from lftransfer.sim.calibration_errors import calibration_errors, interfaces_calibration_errors
 
+        if self.models:
+            return interfaces_calibration_errors(calibration, self.models, true_lights=self.true_lights())
         return calibration_errors(calibration, self.model, true_lights=self.true_lights())
 
 
@@ -149,7 +152,7 @@ def one_interface(scene) -> None:
         from lftransfer.scenes import SceneError
         from lftransfer.scenes.interfaces import interfaces_named
 
-        raise SceneError(f"{interfaces_named(scene)}: lft run takes them; this command simulates one "
+        raise SceneError(f"{interfaces_named(scene)}: lft run and lft calibrate take them; this command simulates one "
                          "(docs/interfaces.md)")
 
 

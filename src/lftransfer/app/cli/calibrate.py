@@ -56,19 +56,20 @@ def calibrate_rig_cmd(scene_file: Annotated[Path, typer.Argument(metavar="SCENE.
     """
     from lftransfer.runs.pipeline import RunOptions
     from lftransfer.runs.rigs import CalibrationFailedError, calibrate, open_rig, write_calibration
-    from lftransfer.calibration.rig import count_calibration_steps
+    from lftransfer.calibration.interfaces import count_steps
     from lftransfer.rig.base import RigError
 
     scene = load(scene_file, quick)
     options = RunOptions(truth_seed=truth.seed, rig=rig_spec(rig))
     check_before_work(scene, out_file=out, example="calibration.json", max_memory=max_memory)
     try:
-        with step_bar(count_calibration_steps(scene)) as progress:
-            opened = open_rig(scene, options, operator=operator())
+        with step_bar(count_steps(scene)) as progress:
+            opened = open_rig(scene, options, operator=operator(), interfaces=True)
             try:
-                cal = calibrate(opened.rig, scene.synthetic_part(), progress=progress)
+                cal = calibrate(opened.rig, scene.synthetic_part(), progress=progress, rigs=opened.rigs)
             finally:
-                opened.rig.close()
+                for r in opened.rigs or (opened.rig,):
+                    r.close()
     except CalibrationFailedError as exc:           # (after the progress bar's last line)
         fail(str(exc), FAILED)
     except RigError as exc:
@@ -77,28 +78,38 @@ def calibrate_rig_cmd(scene_file: Annotated[Path, typer.Argument(metavar="SCENE.
     table = Table(title=escape(f"calibration -> {out}"))
     table.add_column("quantity")
     table.add_column("value", justify="right")
-    pose = cal.pose.to_json()
-    row(table, "lenslets found", f"{len(cal.lattice.centres)} ({cal.lattice.rms_px:.3f} px lattice RMS)")
-    row(table, "array rotation / offset", f"{pose['rotation_deg']:.3f} deg / "
-                                           f"({pose['offset_mm'][0]:.2f}, {pose['offset_mm'][1]:.2f}) mm")
-    row(table, "array tilt / pitch scale", f"({pose['tilt_deg'][0]:.3f}, {pose['tilt_deg'][1]:.3f}) deg / "
-                                            f"{pose['scale']:.5f}")
-    row(table, "projector mapping RMS", f"{cal.projector_fit.rms_px:.3f} px")
-    placement = cal.diagnostics.get("pose", {}).get("board_placement")
-    if placement:
-        row(table, "board as measured vs as asked for", f"{placement['depth_mm']:+.2f} mm along its normal, "
-                                                       f"{placement['tilt_deg']:.2f} deg")
-    if errors is not None:
-        row(table, "error vs hidden truth: lenslet centres", f"{errors.lenslet_centre_rms_px:.3f} px")
-        row(table, "error vs hidden truth: projector mapping", f"{errors.projector_mapping_rms_px:.3f} px")
-        row(table, "error vs hidden truth: pose", f"{errors.pose_position_rms_mm:.2f} mm, "
-                                                   f"{errors.pose_rotation_deg:.3f} deg")
-        row(table, "error vs hidden truth: responses", f"camera {errors.camera_response_error:.4f}, "
-                                                        f"projector {errors.projector_response_error:.4f}")
+    if scene.interfaces:
+        each = errors.errors if errors is not None else [None] * len(cal.names)
+        for name, one, err in zip(cal.names, cal.interfaces, each):
+            _rows(table, one, err, f"{name}: ")
+    else:
+        _rows(table, cal, errors, "")
     Console().print(table)
     Console().print(escape(f"wrote {out}, {out.parent / 'calibration_report.html'}"
                            + (f", {out.parent / 'calibration_errors.json'}" if errors is not None else "")),
                   soft_wrap=True)
+
+
+def _rows(table: Table, cal, errors, tag: str) -> None:
+    """The table's rows of one interface's calibration (``tag`` before each quantity) and its errors."""
+    pose = cal.pose.to_json()
+    row(table, f"{tag}lenslets found", f"{len(cal.lattice.centres)} ({cal.lattice.rms_px:.3f} px lattice RMS)")
+    row(table, f"{tag}array rotation / offset", f"{pose['rotation_deg']:.3f} deg / "
+                                                 f"({pose['offset_mm'][0]:.2f}, {pose['offset_mm'][1]:.2f}) mm")
+    row(table, f"{tag}array tilt / pitch scale", f"({pose['tilt_deg'][0]:.3f}, {pose['tilt_deg'][1]:.3f}) deg / "
+                                                  f"{pose['scale']:.5f}")
+    row(table, f"{tag}projector mapping RMS", f"{cal.projector_fit.rms_px:.3f} px")
+    placement = cal.diagnostics.get("pose", {}).get("board_placement")
+    if placement:
+        row(table, f"{tag}board as measured vs as asked for", f"{placement['depth_mm']:+.2f} mm along its normal, "
+                                                             f"{placement['tilt_deg']:.2f} deg")
+    if errors is not None:
+        row(table, f"{tag}error vs hidden truth: lenslet centres", f"{errors.lenslet_centre_rms_px:.3f} px")
+        row(table, f"{tag}error vs hidden truth: projector mapping", f"{errors.projector_mapping_rms_px:.3f} px")
+        row(table, f"{tag}error vs hidden truth: pose", f"{errors.pose_position_rms_mm:.2f} mm, "
+                                                         f"{errors.pose_rotation_deg:.3f} deg")
+        row(table, f"{tag}error vs hidden truth: responses", f"camera {errors.camera_response_error:.4f}, "
+                                                              f"projector {errors.projector_response_error:.4f}")
 
 
 def _parse_seeds(seeds: str) -> list[int]:

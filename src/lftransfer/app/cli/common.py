@@ -104,7 +104,7 @@ def rig_spec(rig: str):
 def rig_options(scene, truth: TruthArgs, rig: RigArgs) -> dict:
     """The rig part of the run options (``truth_seed``, ``rig_model``, ``calibration``, ``rig``), checked; a
     calibration file is read and checked against the scene."""
-    from lftransfer.calibration.rig import load_calibration
+    from lftransfer.calibration.interfaces import read_calibration
 
     spec = rig_spec(rig.rig)
     if rig.rig_model == "oracle" and spec.kind != "sim":
@@ -112,7 +112,7 @@ def rig_options(scene, truth: TruthArgs, rig: RigArgs) -> dict:
     if rig.calibration is not None:
         if not rig.calibration.is_file():
             fail(f"--calibration {rig.calibration}: no such file")
-        load_calibration(rig.calibration, scene)              # CalibrationFileError: one line, exit code 2
+        read_calibration(rig.calibration, scene)              # CalibrationFileError: one line, exit code 2
     return {"truth_seed": truth.seed, "rig_model": rig.rig_model, "calibration": rig.calibration, "rig": spec,
             "recalibrate": rig.recalibrate}
 

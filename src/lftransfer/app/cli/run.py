@@ -124,11 +124,14 @@ def summary(report: dict, out: Path) -> None:
             f"{b['real_energy']:.3g} / {b['synthetic_energy']:.3g}")
     row(table, "rig_model", report["rig_model"])
     errors = report.get("calibration_errors") or {}
-    if "lenslet_centre_rms_px" in errors:
-        row(table, "calibration_errors.lenslet_centre_rms_px", f"{errors['lenslet_centre_rms_px']:.3f} px")
-    if "pose_position_rms_mm" in errors and "pose_rotation_deg" in errors:
-        row(table, "calibration_errors.pose_position_rms_mm / pose_rotation_deg",
-            f"{errors['pose_position_rms_mm']:.2f} mm / {errors['pose_rotation_deg']:.3f} deg")
+    each = errors.get("interfaces") or {"": errors}          # several interfaces: each one's errors
+    for name, e in each.items():
+        key = f"calibration_errors.interfaces.{name}." if name else "calibration_errors."
+        if "lenslet_centre_rms_px" in e:
+            row(table, f"{key}lenslet_centre_rms_px", f"{e['lenslet_centre_rms_px']:.3f} px")
+        if "pose_position_rms_mm" in e and "pose_rotation_deg" in e:
+            row(table, f"{key}pose_position_rms_mm / pose_rotation_deg",
+                f"{e['pose_position_rms_mm']:.2f} mm / {e['pose_rotation_deg']:.3f} deg")
     row(table, "timings_s.total", f"{report['timings_s']['total']:.1f} s")
     Console().print(table)
     for key, reason in undefined.items():

@@ -15,16 +15,18 @@ from lftransfer.lightfield import ResponseCurve
 from lftransfer.optics.geometry import project
 from lftransfer.render.shapes import board_shapes, lens_array_absorber
 from lftransfer.rig.base import Rig
-from lftransfer.rig.requests import Board, ViewCapture
+from lftransfer.rig.requests import SCREEN_TRANSMISSION, Board, ViewCapture
 
 
-def _board_pose(scene, model):
+def _board_pose(scene, model, translucent: bool = False, walls=None):
     """Where the board is asked for: centre, normal (rig frame, the best guess of the model's frame before the
     pose step), the view camera in the model's array frame and the board centre's view pixel.
 
     The centre lies on the array's axis at the first of :data:`BOARD_DISTANCES` whose image falls well inside
     the view (15 % from every border); the normal is half-way between -z (towards the array, which lights it)
-    and the direction to the view camera.
+    and the direction to the view camera, or, for a ``translucent`` screen seen from behind, half-way between -z
+    and the direction away from it (:func:`~lftransfer.calibration.pose.board_pattern`, clear of ``walls``: the
+    other interfaces' planes).
     """
     from lftransfer.calibration.pose import board_pattern
     from lftransfer.scenes.frame import scene_in_frame
@@ -32,7 +34,7 @@ def _board_pose(scene, model):
     view = scene_in_frame(scene, model.world_to_array()).view
     vw, vh = view.resolution
     for z in BOARD_DISTANCES:
-        board = board_pattern(scene.view, z)
+        board = board_pattern(scene.view, z, translucent=translucent, extent=BOARD_SIZE, walls=walls)
         centre, normal = tuple(board.centre.tolist()), board.normal
         px = project(view, board.centre[None])[0]
         if 0.15 * vw <= px[0] <= 0.85 * vw and 0.15 * vh <= px[1] <= 0.85 * vh:
@@ -74,9 +76,9 @@ def _held_board(image: np.ndarray, view, asked_normal) -> np.ndarray:
 
 def _predict_board(model, scene, projector, image: np.ndarray, to_world: np.ndarray,
                    pixels: tuple[np.ndarray, np.ndarray], *, angular_samples: int, spp: int, aperture_samples: int,
-                   seed: int = 0):
-    """Our own render of the board (``to_world``: its rectangle, printed chart included) at view pixels, lit by
-    ``projector`` showing ``image``."""
+                   seed: int = 0, translucent: bool = False):
+    """Our own render of the board (``to_world``: its rectangle, printed chart included; a ``translucent`` screen
+    with its datasheet's transmission, seen from behind) at view pixels, lit by ``projector`` showing ``image``."""
     from lftransfer.backend import mitsuba
     from lftransfer.lightfield import LightFieldEncoder
     from lftransfer.render.camera import sensor_dict
@@ -87,7 +89,7 @@ def _predict_board(model, scene, projector, image: np.ndarray, to_world: np.ndar
     mi = mitsuba()
     array = model.array
     view = scene_in_frame(scene, model.world_to_array()).view
-    shapes = board_shapes(to_world, BOARD_ALBEDO, BOARD_CHART)
+    shapes = board_shapes(to_world, BOARD_ALBEDO, BOARD_CHART, SCREEN_TRANSMISSION if translucent else 0.0)
     renderer = HalfSpaceRenderer([], extra_shapes={**shapes, "lens_array_absorber": lens_array_absorber(array)},
                                  max_depth=1)
     encoder = LightFieldEncoder(array, projector, angular_samples, angular_samples)
@@ -112,6 +114,8 @@ class _BoardMeasurement:
         pixels: view pixels used (the board hit by every ray of our render, not dark).
         held: ``(4, 4)`` ``to_world`` of the board where it really stood (its printed chart's pose).
         centre_pixel: ``(x, y)`` view pixel of the held board's centre.
+        translucent: whether the board was a translucent screen seen from behind (the opaque board's chart was not
+            found: a view camera that sees its back sees it too obliquely).
     """
 
     max_radiance: float
@@ -120,11 +124,24 @@ class _BoardMeasurement:
     pixels: int
     held: np.ndarray
     centre_pixel: tuple[int, int]
+    translucent: bool = False
+
+
+def _photograph_board(rig: Rig, model, scene, white: np.ndarray, board_spp: int | None, translucent: bool,
+                      walls=None):
+    """The board (a ``translucent`` screen or not) asked for, lit by the projector's ``white`` image and
+    photographed: (the normal asked for, the view image, where the board really stands from its chart)."""
+    centre, normal, _, _ = _board_pose(scene, model, translucent, walls)
+    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART,
+                    translucent=translucent))
+    rig.project(white)
+    measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
+    return normal, measured, _held_board(measured, scene.view, normal)         # held by hand: from its chart
 
 
 def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, white: np.ndarray, *,
                         board_spp: int | None, predict_spp: int, angular_samples: int, seed: int,
-                        say: Progress) -> _BoardMeasurement:
+                        say: Progress, walls=None) -> _BoardMeasurement:
     """Step (d, i): the board lit by the full-code projector image, measured and predicted by our own render.
 
     The view pixels around the held board's centre (a square of half-width 4 % of the view's width, halved up
@@ -139,12 +156,18 @@ def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, wh
             the view, or our render of it is dark.
     """
     say("projector brightness: board in front of the array (view camera)")
-    centre, normal, view, _ = _board_pose(scene, model)
-    rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART))
-    rig.project(white)
-    measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
-    # where the board really stands (held by hand): from the chessboard printed on it
-    held = _held_board(measured, scene.view, normal)
+    translucent = False
+    try:
+        normal, measured, held = _photograph_board(rig, model, scene, white, board_spp, translucent, walls)
+    except RadiometryError:
+        from lftransfer.calibration.pose import sees_lit_side
+
+        if sees_lit_side(scene.view, _board_pose(scene, model)[0][2]):
+            raise
+        # a view camera that sees the board's back may see its chart too obliquely: a screen, seen from behind
+        translucent = True
+        normal, measured, held = _photograph_board(rig, model, scene, white, board_spp, translucent, walls)
+    view = _board_pose(scene, model, translucent, walls)[2]         # the view camera in the model's array frame
     cx, cy = (int(round(v)) for v in project(view, held[:3, 3][None])[0])
     projector = replace(model.projector, response=ResponseCurve(tuple(projector_fit.gamma)), max_radiance=1.0,
                         cross_talk=projector_fit.cross_talk, black_level=tuple(projector_fit.black_level.tolist()))
@@ -158,7 +181,7 @@ def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, wh
             raise RadiometryError(f"brightness: the board centre projects outside the view camera ({cx}, {cy})")
         predicted, hit, _ = _predict_board(model, scene, projector, white, held, (xs, ys),
                                            angular_samples=angular_samples, spp=predict_spp,
-                                           aperture_samples=8, seed=seed)
+                                           aperture_samples=8, seed=seed, translucent=translucent)
         if hit.all() or half <= 3:
             break
         half = max(3, half // 2)
@@ -168,4 +191,5 @@ def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, wh
     meas = measured[ys[use], xs[use]].astype(np.float64)
     pred = predicted[use].astype(np.float64)
     return _BoardMeasurement(max_radiance=float(meas.sum() / pred.sum()), per_channel=meas.sum(0) / pred.sum(0),
-                             measured_mean=meas.mean(0), pixels=int(use.sum()), held=held, centre_pixel=(cx, cy))
+                             measured_mean=meas.mean(0), pixels=int(use.sum()), held=held, centre_pixel=(cx, cy),
+                             translucent=translucent)

@@ -36,12 +36,13 @@ def _diagnostics(response: _CameraResponse, flat: _FlatField, projector_fit: _Pr
         "board_pixels": board.pixels,
         "board_centre_m": board.held[:3, 3].tolist(),
         "board_centre_pixel": [int(cx), int(cy)],
+        "board_translucent": board.translucent,
         "board_ratio_per_channel": board.per_channel.tolist(),
         "board_measured_mean": board.measured_mean.tolist(),
         # focal-plane signal per unit exposure_scale and radiance = diffuser transmission x camera exposure
         "exposure_times_diffuser": projector_fit.scale / board.max_radiance,
         "camera_exposure_source": "model (no capture measures it)",
-        "captures": {"focal_plane": focal_plane_captures, "board": 1},
+        "captures": {"focal_plane": focal_plane_captures, "board": 2 if board.translucent else 1},
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
     }
 
@@ -49,7 +50,7 @@ def _diagnostics(response: _CameraResponse, flat: _FlatField, projector_fit: _Pr
 def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = None,
                          exposures: int = 5, projector_levels: int = 4, vignetting_degree: int = 4,
                          board_spp: int | None = None, predict_spp: int = 16, angular_samples: int = 64,
-                         seed: int = 0) -> Radiometry:
+                         seed: int = 0, walls=None) -> Radiometry:
     """Calibrate the camera's and the projector's radiometry from rig captures (module docstring: the steps).
 
     Args:
@@ -64,6 +65,8 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
         predict_spp: samples per pixel of our own render of the board.
         angular_samples: U = V of the light field that lights our own render of the board.
         seed: seed of the sampling in our own render and of the diagnostic subsets.
+        walls: the other light field interfaces' planes in this array's frame, which the board keeps clear of
+            (:func:`lftransfer.calibration.pose.board_pattern`), or None.
 
     Returns:
         Radiometry. ``diagnostics`` holds the camera response samples (per channel a list of (relative
@@ -89,7 +92,8 @@ def calibrate_radiometry(rig: Rig, model, scene, *, progress: Progress | None = 
     timings["projector"] = time.perf_counter() - t
     t = time.perf_counter()
     board = _measure_brightness(rig, model, scene, projector_fit, flat.white, board_spp=board_spp,   # d.
-                                predict_spp=predict_spp, angular_samples=angular_samples, seed=seed, say=say)
+                                predict_spp=predict_spp, angular_samples=angular_samples, seed=seed, say=say,
+                                walls=walls)
     timings["brightness"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
