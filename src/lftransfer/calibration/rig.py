@@ -263,6 +263,8 @@ def _check_fits_scene(path: str, entry, nominal: RigModel, scene) -> None:
 
 
 EXPOSURE_LEVEL = 0.9              # the exposure step's projector level, of its range, before any clipping
+EXPOSURE_MAX_INCIDENCE_DEG = 80.0  # LF camera rays meeting the exposure board farther than this from its normal are
+                                   # left out (from behind, or grazing); none are on a board turned at most 53 degrees
 EXPOSURE_TRIES = 5                # levels tried, each a quarter of the one before
 
 
@@ -277,7 +279,10 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     The projector lights the board through the lenslets, so its irradiance ripples with the lens pitch and the
     ripple's phase depends on the board's depth, which the operator's hand gets wrong by a few millimetres. An
     LF camera pixel averages over a whole lenslet aperture, a view pixel does not: the disc is wider than a
-    lenslet (``radius`` > pitch) so that both average over the ripple, and the lit lenslets reach past it.
+    lenslet (``radius`` > pitch) so that both average over the ripple, and the lit lenslets reach past it. An LF
+    camera ray that meets the board more than :data:`EXPOSURE_MAX_INCIDENCE_DEG` from its normal is left out: on a
+    board turned far from the array's axis (a view camera that faces the array, as with several interfaces), the
+    lenslets' steepest rays meet it from behind, where it is unlit (7 % low on the enclosure's side interface).
 
     Returns:
         (exposure, diagnostics with both measurements).
@@ -297,7 +302,11 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     dn = d[ok] @ board.normal
     lam = ((board.centre - origin) @ board.normal) / np.where(dn != 0, dn, np.nan)
     hit = origin + lam[:, None] * d[ok]
-    near = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
+    # rays that meet the board from behind see its unlit back, and grazing ones stretch a lenslet's aperture across
+    # the lit spot: a board turned far from the array's axis (a view camera facing the array) has both
+    facing = dn < -np.cos(np.radians(EXPOSURE_MAX_INCIDENCE_DEG))
+    on_disc = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
+    near = on_disc & facing
     sel = px[ok][near].astype(int)
     vw, vh = scene.view.resolution
     vy, vx = np.mgrid[0:vh, 0:vw]
@@ -338,6 +347,7 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     ratio = float(np.mean(lf_radiance / view_radiance))
     return model.camera.exposure * ratio, {"view_radiance": view_radiance.tolist(),
                                            "lf_radiance": lf_radiance.tolist(), "rays": int(near.sum()),
+                                           "rays_left_out": int((on_disc & ~facing).sum()),
                                            "view_pixels": int(seen.sum()), "projector_level": level}
 
 
