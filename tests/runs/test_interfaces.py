@@ -28,8 +28,11 @@ def test_01_a_run_through_two_interfaces_and_its_negative_control(variant, tmp_p
     report = run_scene(scene, tmp_path / "run", options, progress=lambda _msg, done: steps.append(done))
     assert steps[-1] == count_run_steps(scene, options)
     assert json.loads((tmp_path / "run" / "report.json").read_text()) == json.loads(json.dumps(report))
-    panel = iio.imread(tmp_path / "run" / "interfaces.png")          # each projector's final image, one above the other
-    assert panel.shape[0] == 2 * scene.rig.projector[1] and panel.shape[1] == scene.rig.projector[0]
+    panel = iio.imread(tmp_path / "run" / "interfaces.png")   # per interface: its LF camera's capture, its projector's
+    w, h = scene.rig.projector                                  # final image (the LF camera's resized to its width)
+    assert panel.shape[:2] == (2 * h, 2 * w)
+    for row in (panel[:h], panel[h:]):
+        assert row[h // 4:, :w].mean() > 5 and row[h // 4:, w:].mean() > 1      # below the labels: both lit
     faces = report["interfaces"]
     assert faces["names"] == ["front", "side"]
     assert all(len(energies) == 2 and energies[1] > 0 for energies in faces["real_energy"])

@@ -251,7 +251,8 @@ def write_outputs(out: str | Path, result, ground_truth: np.ndarray | None, comp
     ]
     names = (report.get("interfaces") or {}).get("names")
     if names and len(getattr(result, "projected_images", ())) == len(names):
-        files.append(write_png(out / "interfaces.png", interfaces_panel(result.projected_images, names)))
+        files.append(write_png(out / "interfaces.png", interfaces_panel(
+            result.projected_images, names, getattr(result, "captured_raws", ()), camera_bits)))
     if captured_raw is not None:
         files.append(write_png(out / "captured_lf.png", device_image(captured_raw, camera_bits, stretch=True)))
     if getattr(result, "probe", None) is not None:
@@ -266,13 +267,21 @@ def _eight_bits(image: np.ndarray) -> np.ndarray:
     return image[..., :3].astype(np.uint8) if image.dtype == np.uint8 else (image >> 8).astype(np.uint8)
 
 
-def interfaces_panel(images, names) -> np.ndarray:
-    """(H', W, 3) uint8: each interface's projector image in the final frame, one above the other, named (the light
-    field each array sends its real objects; docs/interfaces.md)."""
-    tiles = [_label(_eight_bits(np.asarray(image)), f"{name}: its projector, final frame")
-             for image, name in zip(images, names)]
-    width = tiles[0].shape[1]
-    return np.concatenate([t if t.shape[1] == width else _resize(t, width) for t in tiles], axis=0)
+def interfaces_panel(images, names, captured=(), camera_bits: int = 12) -> np.ndarray:
+    """(H', W', 3) uint8: a row per interface, named: the light field its LF camera captured in the direct frame
+    (``captured``, device integers, stretched; left out where not given) beside the one its projector sends the real
+    objects in the final frame (``images``): what each array takes in and gives back (docs/interfaces.md)."""
+    rows = []
+    for i, (image, name) in enumerate(zip(images, names)):
+        shown = _eight_bits(np.asarray(image))
+        tiles = [_label(shown, f"{name}: its projector, final frame")]
+        if i < len(captured):
+            taken = _resize(device_image(captured[i], camera_bits, stretch=True), shown.shape[1])
+            tiles.insert(0, _label(taken, f"{name}: its LF camera, direct frame"))
+        height = max(t.shape[0] for t in tiles)
+        rows.append(np.concatenate([np.pad(t, ((0, height - t.shape[0]), (0, 0), (0, 0))) for t in tiles], axis=1))
+    width = max(r.shape[1] for r in rows)
+    return np.concatenate([r if r.shape[1] == width else _resize(r, width) for r in rows], axis=0)
 
 
 def probe_panel(probe) -> np.ndarray:

@@ -175,6 +175,8 @@ class TransferResult:
             the first exchanging one's. Empty for one interface.
         projected_images: with several interfaces, each exchanging one's final projector image, in the scene's
             order (:attr:`projected_image` is the first's). Empty for one interface.
+        captured_raws: with several interfaces, each exchanging one's LF camera image of the direct frame (device
+            integers), in the scene's order (:attr:`captured_raw` is the first's). Empty for one interface.
     """
 
     bounces: list[Bounce]
@@ -193,6 +195,7 @@ class TransferResult:
     probe: ProbeMeasurement | None = None
     interfaces: tuple = ()
     projected_images: tuple = ()
+    captured_raws: tuple = ()
 
     def composite(self) -> np.ndarray:
         """(H, W, 3) the final frame: the synthetic render and the real view, by the run's composite (the over

@@ -91,7 +91,8 @@ def run_interfaces(rigs: Sequence[Rig], models: Sequence[RigModel], scene: Synth
         captured_raw=raw0[main],
         saturated_fraction=float(np.mean(raw0[main] >= 2 ** rigs[main].info.lf_camera_bits - 1)),
         timings_s=loop.timer.totals,
-        interfaces=tuple(bounces.get(i) for i in range(len(rigs))), projected_images=tuple(patterns[i] for i in used))
+        interfaces=tuple(bounces.get(i) for i in range(len(rigs))), projected_images=tuple(patterns[i] for i in used),
+        captured_raws=tuple(raw0[i] for i in used))
 
 
 @dataclass

@@ -126,12 +126,14 @@ def summary(report: dict, out: Path) -> None:
     errors = report.get("calibration_errors") or {}
     each = errors.get("interfaces") or {"": errors}          # several interfaces: each one's errors
     for name, e in each.items():
-        key = f"calibration_errors.interfaces.{name}." if name else "calibration_errors."
-        if "lenslet_centre_rms_px" in e:
-            row(table, f"{key}lenslet_centre_rms_px", f"{e['lenslet_centre_rms_px']:.3f} px")
+        if not name:
+            if "lenslet_centre_rms_px" in e:
+                row(table, "calibration_errors.lenslet_centre_rms_px", f"{e['lenslet_centre_rms_px']:.3f} px")
+            key = "calibration_errors.pose_position_rms_mm / pose_rotation_deg"
+        else:
+            key = f"calibration_errors: {name}'s pose"
         if "pose_position_rms_mm" in e and "pose_rotation_deg" in e:
-            row(table, f"{key}pose_position_rms_mm / pose_rotation_deg",
-                f"{e['pose_position_rms_mm']:.2f} mm / {e['pose_rotation_deg']:.3f} deg")
+            row(table, key, f"{e['pose_position_rms_mm']:.2f} mm / {e['pose_rotation_deg']:.3f} deg")
     row(table, "timings_s.total", f"{report['timings_s']['total']:.1f} s")
     Console().print(table)
     for key, reason in undefined.items():
