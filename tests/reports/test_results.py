@@ -145,16 +145,25 @@ def test_05_every_kind_renders(tmp_path):
         "point": {"psnr_objects_db": 27.01, "psnr_by_side": {"real": 27.4, "synthetic": 28.81},
                   "cross_transfer_rel_error": 0.836, "cross_gt_noise_rel": 0.12, "cross_by_side": side(0.54, 0.86),
                   "direct_light": {"kind": "point"}}})
+    write(store, "interfaces_calibration", "interfaces_calibration", {
+        "corner": {"interfaces": {"front": {"pose_position_rms_mm": 0.4123, "pose_position_max_mm": 0.7765,
+                                            "pose_rotation_deg": 0.0912, "exposure_rel_error": -0.0021,
+                                            "light_position_error_mm": 0.5432},
+                                  "side": {"pose_position_rms_mm": 0.3456, "pose_rotation_deg": 0.1543,
+                                           "relative_position_rms_mm": 0.6789, "relative_rotation_deg": 0.1876}}}})
     md = render_results(load_store(store))
     for text in ("30.61 dB", "28.81 dB", "0.683", "0.836", "92.4 %", "0.16 degrees", "-1.6 % off", "30 %",
                  "one point light at the probe's brightest direction"):
+        assert text in md, text
+    for text in ("| corner | front | 0.41 | 0.78 | 0.091 | - | - | -0.21 | 0.54 |",
+                 "| corner | side | 0.35 | - | 0.154 | 0.68 | 0.188 | - | - |"):
         assert text in md, text
     for text in ("16.2 (15.2 to 17.2)", "61.5 / 3.70", "`incident_light`", "122,880 + 196,608", "9.56",
                  "76.31 dB / 64.02 dB", "0.612", "30.71 dB", "265.1", "0.00871 / 0.00872", "0.161",
                  "seed 1", "0.391", "met", "0.156", "0.143", "39.90 dB", "0.013 apart", "174 ms",
                  "machine: x86_64, vm", "wall time not recorded", "uncommitted"):
         assert text in md, text
-    assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 5
+    assert md.count(NOT_STORED) == len(RUN_BY_NAME) - 6
 
 
 def test_08_live_page_tables(tmp_path):

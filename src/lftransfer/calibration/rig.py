@@ -302,9 +302,7 @@ def calibrate_exposure(rig: Rig, model: RigModel, scene, *, depth: float = 0.1, 
     dn = d[ok] @ board.normal
     lam = ((board.centre - origin) @ board.normal) / np.where(dn != 0, dn, np.nan)
     hit = origin + lam[:, None] * d[ok]
-    # rays that meet the board from behind see its unlit back, and grazing ones stretch a lenslet's aperture across
-    # the lit spot: a board turned far from the array's axis (a view camera facing the array) has both
-    facing = dn < -np.cos(np.radians(EXPOSURE_MAX_INCIDENCE_DEG))
+    facing = dn < -np.cos(np.radians(EXPOSURE_MAX_INCIDENCE_DEG))      # not from behind (unlit), not grazing
     on_disc = (lam > 0) & (np.linalg.norm(hit - board.centre, axis=1) < radius)
     near = on_disc & facing
     sel = px[ok][near].astype(int)

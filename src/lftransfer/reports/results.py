@@ -33,7 +33,7 @@ from lftransfer.reports.results_format import (db, fixed, median_p95, num, resol
                                                 table)
 from lftransfer.reports.results_live import (live_fps_tables, paired_tables, profile_tables,
                                              simulator_places_tables, soak_tables)
-from lftransfer.reports.results_interfaces import interfaces_tables
+from lftransfer.reports.results_interfaces import interfaces_calibration_tables, interfaces_tables
 from lftransfer.reports.results_occlusion import occlusion_tables
 from lftransfer.reports.results_probe import probe_tables
 from lftransfer.reports.results_study import study_tables
@@ -140,6 +140,12 @@ RUNS: tuple[Run, ...] = (
         tuple((name, f"out/runs/interfaces_{name}_calibrated_quick/report.json")
               for name in ("fig4", "corner", "enclosure")),
         quick=True),
+    Run("interfaces_calibration", "interfaces_calibration", "Each interface of the corner and the enclosure "
+        "calibrated from its images at the paper's resolution (`lft calibrate corner`, `lft calibrate enclosure`)",
+        tuple(("lft", "calibrate", name, "--out", f"out/runs/interfaces_calibration/{name}/calibration.json")
+              for name in ("corner", "enclosure")),
+        tuple((name, f"out/runs/interfaces_calibration/{name}/calibration_errors.json")
+              for name in ("corner", "enclosure"))),
     Run("oracle", "demo", "Fig. 4 with the hidden true rig and light (the oracle, no calibration)",
         (("lft", "run", "fig4", "--rig-model", "oracle", "--compare-models", "--out", "out/runs/oracle"),),
         (("", "out/runs/oracle/report.json"),)),
@@ -276,7 +282,7 @@ class StoredRun:
 
 PROVENANCE_FIELDS = ("commands", "commit", "date", "machine", "wall_s")
 KINDS = ("demo", "bench", "sequence", "calibration_seeds", "twin_compare", "live_fps", "soak", "profile", "study",
-         "occlusion", "probe", "paired", "simulator_places", "interfaces")
+         "occlusion", "probe", "paired", "simulator_places", "interfaces", "interfaces_calibration")
 
 
 def load_run(path: str | Path) -> StoredRun:
@@ -579,6 +585,7 @@ TABLES = {"demo": demo_tables, "bench": bench_tables, "sequence": sequence_table
           "study": lambda s: study_tables(s.data),
           "occlusion": lambda s: demo_tables(s) + occlusion_tables(s),
           "probe": probe_tables, "paired": paired_tables, "interfaces": interfaces_tables,
+          "interfaces_calibration": interfaces_calibration_tables,
           "simulator_places": lambda s: simulator_places_tables(s, list(s.data))}
 
 GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracle")),
@@ -595,7 +602,7 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracl
             "occlusion_reverse_quick")),
           ("A light probe: the room's light as direct light", ("probe_quick",)),
           ("Several light field interfaces around the real objects",
-           ("interfaces_quick", "interfaces_calibrated_quick")),
+           ("interfaces_quick", "interfaces_calibrated_quick", "interfaces_calibration")),
           ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from lftransfer.reports.results_format import by_side, fixed
 
-__all__ = ["TARGET_OVER_FIG4", "interfaces_tables"]
+__all__ = ["TARGET_OVER_FIG4", "interfaces_calibration_tables", "interfaces_tables"]
 
 TARGET_OVER_FIG4 = 1.5          # issue 43: several interfaces within 1.5x of Fig. 4's cross-transfer error
 
@@ -59,11 +59,22 @@ def interfaces_tables(stored) -> list[str]:
     return out
 
 
+def interfaces_calibration_tables(stored) -> list[str]:
+    """The tables of a stored calibration of scenes with several interfaces (kind ``interfaces_calibration``: one
+    ``calibration_errors.json`` per scene, of ``lft calibrate SCENE``)."""
+    out = _calibration_table({name: stored.need(name) for name in stored.data})
+    return out[1:] + [""] if out else ["No calibration errors were stored.", ""]
+
+
 def _calibration(stored) -> list[str]:
     """Each interface's calibration against its hidden truth, where the runs calibrated (``calibration_errors``)."""
+    return _calibration_table({name: stored.need(name).get("calibration_errors") or {} for name in stored.data})
+
+
+def _calibration_table(errors_by_scene: dict) -> list[str]:
+    """Rows per scene and interface of ``calibration_errors`` (scene name -> its errors; one interface's are flat)."""
     rows = []
-    for name in stored.data:
-        errors = stored.need(name).get("calibration_errors") or {}
+    for name, errors in errors_by_scene.items():
         for face, e in (errors.get("interfaces") or {"(one)": errors} if errors else {}).items():
             rows.append(f"| {name} | {face} | {fixed(e.get('pose_position_rms_mm'), 2)} | "
                         f"{fixed(e.get('pose_position_max_mm'), 2)} | {fixed(e.get('pose_rotation_deg'), 3)} | "
