@@ -90,7 +90,7 @@ def test_03_a_run_reuses_the_calibration_and_reports_the_same(variant, tmp_path,
     scene = load_scene(write_tiny_scene(tmp_path / "tiny.toml", view=(32, 24), gt_spp=4))
     calls = []
 
-    def calibrate(rig, ps, *, progress=None):
+    def calibrate(rig, ps, *, progress=None, rigs=()):
         calls.append(ps)
         rig.capture_lf()
         rig.capture_lf()

@@ -77,7 +77,7 @@ _BRIGHTNESS = (
     ("exp", "view_radiance", "exposure board: view camera radiance (R, G, B)", ".4g", "W / (m^2 sr)"),
     ("exp", "lf_radiance", "exposure board: LF camera radiance before correction (R, G, B)", ".4g", "W / (m^2 sr)"),
     ("exp", "rays", "exposure board: LF camera rays used", ".10g", ""),
-    ("exp", "rays_left_out", "exposure board: LF camera rays left out (from behind or grazing)", ".10g", ""),
+    ("exp", "rays_left_out", "exposure board: LF camera rays not used (from behind or grazing)", ".10g", ""),
 )
 # response plots: device -> (x label, y label, what the dots and lines are)
 _RESPONSES = {"camera": ("relative exposure x linear signal", "normalised camera code",

@@ -42,7 +42,8 @@ def test_01_quick_bench_writes_json_with_settings(tmp_path, monkeypatch):
 
 def test_02_calibrates_first_and_says_so(tmp_path, monkeypatch):
     scene = write_tiny_scene(tmp_path / "tiny.toml")
-    monkeypatch.setattr(rigs, "calibrate", lambda rig, s, progress=None: nominal_calibration(load_scene(scene)))
+    monkeypatch.setattr(rigs, "calibrate",
+                        lambda rig, s, progress=None, rigs=(): nominal_calibration(load_scene(scene)))
     result = _invoke(["bench", "--scene", scene, "--iterations", "1", "--no-peer", "--no-accuracy"])
     assert result.exit_code == 0, (result.output, result.exception)
     assert "calibrates the simulated rig first" in result.stderr and "--calibration FILE" in result.stderr

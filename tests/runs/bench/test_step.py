@@ -126,7 +126,7 @@ def tiny(tmp_path):
 def test_05_calibrates_first_without_a_file(tiny, monkeypatch):
     done = []
 
-    def calibrate(rig, scene, *, progress=None):
+    def calibrate(rig, scene, *, progress=None, rigs=()):
         done.append(scene)
         return nominal_calibration(tiny)
 
