@@ -70,3 +70,20 @@ def test_03_the_use_cases_of_one_interface_refuse_several(variant, tmp_path):
         open_rig(_corner(), RunOptions(rig_model="oracle"))
     with pytest.raises(SceneError, match="this command simulates one"):      # lft depth, the device twin, ...
         open_simulated_rig(_corner(), 0)
+
+
+def test_04_a_reused_calibration_restores_every_interface_s_noise(variant):
+    """The calibration cache stores the rigs' random streams after calibrating, so a run that reuses it draws the
+    noise the calibrating run drew next: with several interfaces, every interface's. A capture after restoring
+    repeats the one after saving, on each interface; without restoring it does not (the control)."""
+    from lftransfer.runs.rigs import open_rig
+
+    opened = open_rig(_corner(), RunOptions(rig_model="oracle"), interfaces=True)
+    state = opened.noise_state()
+    assert len(state["interfaces"]) == 2
+    first = [r.capture_lf().codes for r in opened.rigs]
+    again = [r.capture_lf().codes for r in opened.rigs]
+    assert all((a != b).any() for a, b in zip(first, again))                 # the sensor noise moved on
+    opened.restore_noise_state(state)
+    repeated = [r.capture_lf().codes for r in opened.rigs]
+    assert all((a == b).all() for a, b in zip(first, repeated))
