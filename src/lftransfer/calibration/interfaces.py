@@ -1,4 +1,5 @@
-"""Calibration of several light field interfaces into one world frame (docs/interfaces.md, "Calibration").
+"""Calibration of several light field interfaces into one world frame (docs/interfaces.md, "Calibration into one
+world frame").
 
 Each interface is calibrated from images through its own rig, by every step of
 :func:`~lftransfer.calibration.rig.calibrate_rig`, in its own frame (:func:`interface_scene`): the scene's
@@ -23,12 +24,12 @@ import numpy as np
 from lftransfer.calibration.calibration_file import CalibrationFileError
 from lftransfer.calibration.rig import (Calibration, calibrate_rig, calibration_from_json, count_calibration_steps,
                                        load_calibration)
-from lftransfer.validation import read_json
 from lftransfer.imageio_utils import write_json
 from lftransfer.rig.base import Rig
 from lftransfer.rig.model import placed
 from lftransfer.scenes.frame import scene_in_frame
 from lftransfer.scenes.interfaces import interface_names, walls
+from lftransfer.validation import read_json
 
 __all__ = ["FORMAT", "InterfacesCalibration", "calibrate_interfaces", "count_steps", "interface_scene",
            "interfaces_from_json", "placed_calibration", "read_calibration"]

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from lftransfer.reports.report import write_json
-from lftransfer.calibration.interfaces import read_calibration
+from lftransfer.calibration.interfaces import calibrate_interfaces, read_calibration
 from lftransfer.calibration.rig import calibrate_rig
 from lftransfer.runs.calibration_cache import CachedCalibration, inputs_sha256, read_entry, write_entry
 from lftransfer.sim.gt_cache import CacheProblem
@@ -86,8 +86,6 @@ def calibrate(rig: Rig, scene, *, progress: Callable[[str], None] | None = None,
 
     try:
         if scene.interfaces:
-            from lftransfer.calibration.interfaces import calibrate_interfaces
-
             return calibrate_interfaces(list(rigs), scene, progress=progress)
         return calibrate_rig(rig, scene, progress=progress)
     except RigError:
