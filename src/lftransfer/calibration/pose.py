@@ -87,19 +87,18 @@ def board_pattern(view, depth: float = 0.2, squares=(6, 5), square_m: float = 0.
     if abs(origin[2] - target[2]) > 1e-9:
         sight = centre.copy()
         sight[:2] = (target + (origin - target) * (centre[2] - target[2]) / (origin[2] - target[2]))[:2]
-        if _clear(sight, ex, ey, extent, walls):
-            centre = sight
+        moved = BoardPattern(sight, normal, ex, ey, tuple(squares), float(square_m))
+        if _clear(moved, extent, walls):
+            return moved
     return BoardPattern(centre, normal, ex, ey, tuple(squares), float(square_m))
 
 
-def _clear(centre: np.ndarray, ex: np.ndarray, ey: np.ndarray, extent: tuple[float, float] | None,
-           walls: np.ndarray | None) -> bool:
-    """Whether a board of ``extent`` (its centre alone for None) centred at ``centre`` with axes ``ex``, ``ey``
-    keeps :data:`BOARD_CLEARANCE_M` on the real side of every plane of ``walls`` ((N, 4), or None: no walls)."""
+def _clear(board: BoardPattern, extent: tuple[float, float] | None, walls: np.ndarray | None) -> bool:
+    """Whether ``board`` of ``extent`` (its centre alone for None) keeps :data:`BOARD_CLEARANCE_M` on the real side
+    of every plane of ``walls`` ((N, 4), or None: no walls)."""
     if walls is None or len(walls) == 0:
         return True
-    w, h = (0.0, 0.0) if extent is None else (float(extent[0]) / 2, float(extent[1]) / 2)
-    corners = np.array([centre + sx * w * ex + sy * h * ey for sx in (-1, 1) for sy in (-1, 1)])
+    corners = board.outline((0.0, 0.0) if extent is None else extent)
     planes = np.asarray(walls, np.float64).reshape(-1, 4)
     return bool(np.all(corners @ planes[:, :3].T + planes[:, 3] >= BOARD_CLEARANCE_M))
 
@@ -124,9 +123,8 @@ def panel_shift(view, depth: float, extent: tuple[float, float], array_extent: t
         return 0.0
     shift = 0.0
     while shift <= PANEL_MAX_SHIFT_M:
-        b = board_pattern(view, depth + shift, translucent=translucent, extent=extent, walls=walls)
-        corners = np.array([b.centre + sx * extent[0] / 2 * b.ex + sy * extent[1] / 2 * b.ey
-                            for sx in (-1, 1) for sy in (-1, 1)])
+        board = board_pattern(view, depth + shift, translucent=translucent, extent=extent, walls=walls)
+        corners = board.outline(extent)
         if not crosses_rectangle(origin, corners - origin, array_extent).any():
             return shift
         shift += PANEL_STEP_M

@@ -41,6 +41,12 @@ class BoardPattern:
     squares: tuple[int, int] = (6, 5)
     square_m: float = 0.045
 
+    def outline(self, extent: tuple[float, float]) -> np.ndarray:
+        """(4, 3) model-frame corners of a rectangle of ``extent`` (width along ``ex``, height along ``ey``,
+        metres) centred on the board."""
+        w, h = float(extent[0]) / 2, float(extent[1]) / 2
+        return np.array([self.centre + sx * w * self.ex + sy * h * self.ey for sx in (-1, 1) for sy in (-1, 1)])
+
     def corners(self) -> np.ndarray:
         """(N, 3) model-frame positions of the inner corners, row-major."""
         b = self.board_2d()

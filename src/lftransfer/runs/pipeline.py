@@ -263,7 +263,7 @@ def run_scene(scene, out: str | Path, options: RunOptions = RunOptions(), *,
             report = run.run()
         finally:
             if opened is not None:
-                opened.rig.close()
+                opened.close()
     return report
 
 

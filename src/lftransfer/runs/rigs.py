@@ -168,6 +168,11 @@ class OpenedRig:
         else:
             self.rig.restore_noise_state(state)
 
+    def close(self) -> None:
+        """Close the rig (every interface's, with several)."""
+        for rig in self.rigs or (self.rig,):
+            rig.close()
+
     def start_frame(self, index: int) -> None:
         """Begin frame ``index`` of a sequence of independent frames: the simulated rig draws the frame's sensor
         noise from its seed and the index alone (:meth:`lftransfer.sim.SimRig.start_frame`), so the frame is the

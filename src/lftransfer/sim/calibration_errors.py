@@ -18,6 +18,11 @@ def _rig_rotation(model) -> np.ndarray:
     return rotation_xy(model.tilt) @ rotation_z(model.array.rotation)
 
 
+def _angle_deg(ra: np.ndarray, rb: np.ndarray) -> float:
+    """The angle between two (3, 3) rotations, degrees."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(ra.T @ rb) - 1) / 2, -1, 1))))
+
+
 @dataclass(frozen=True)
 class CalibrationErrors:
     """A calibration against the simulated rig's hidden truth (:func:`calibration_errors`; verification only). The
@@ -119,8 +124,7 @@ def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int 
     d = np.linalg.norm(ct - cc, axis=1) * 1000
     out["pose_position_rms_mm"] = float(np.sqrt(np.mean(d ** 2)))
     out["pose_position_max_mm"] = float(d.max())
-    cosang = (np.trace(rc.T @ rt) - 1) / 2
-    out["pose_rotation_deg"] = float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))
+    out["pose_rotation_deg"] = _angle_deg(rc, rt)
     out["pitch_rel_error"] = float(ca.pitch / ta.pitch - 1)
     kd = np.asarray(ccam.device.distortion) - np.asarray(tcam.device.distortion)
     out["distortion_k1_rms"] = float(np.sqrt(np.mean(kd[:, 0] ** 2)))
@@ -150,15 +154,10 @@ def calibration_errors(calibration, truth, *, true_lights=None, max_pixels: int 
 def _seen_from(model, first) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) ``model``'s lenslet centres and (3, 3) its array's orientation, in the frame of ``first``'s array
     (its placement, its tilt, then its in-plane offset and rotation)."""
-    def plane(m) -> np.ndarray:                   # the array plane's frame in the world: placement, then tilt
-        out = np.eye(4)
-        out[:3, :3] = rotation_xy(m.tilt)
-        return (np.asarray(m.placement, np.float64) if m.placement else np.eye(4)) @ out
-
-    frame = plane(first)
+    frame = np.linalg.inv(first.world_to_array())                 # the array plane's frame: placement, then tilt
     frame[:3, 3] += frame[:3, :2] @ np.asarray(first.array.offset, np.float64)
     frame[:3, :3] = frame[:3, :3] @ rotation_z(first.array.rotation)
-    rel = np.linalg.inv(frame) @ plane(model)
+    rel = np.linalg.inv(frame) @ np.linalg.inv(model.world_to_array())
     return model.array.centres3d @ rel[:3, :3].T + rel[:3, 3], rel[:3, :3] @ rotation_z(model.array.rotation)
 
 
@@ -201,8 +200,6 @@ def interfaces_calibration_errors(calibration, truths, *, true_lights=None) -> I
         xc, rc = _seen_from(c.model, cals[0].model)
         xt, rt = _seen_from(t, truths[0])
         d = np.linalg.norm(xc - xt, axis=1) * 1000
-        cosang = (np.trace(rc.T @ rt) - 1) / 2
         relative.append({"relative_position_rms_mm": float(np.sqrt(np.mean(d ** 2))),
-                         "relative_position_max_mm": float(d.max()),
-                         "relative_rotation_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))})
+                         "relative_position_max_mm": float(d.max()), "relative_rotation_deg": _angle_deg(rc, rt)})
     return InterfacesCalibrationErrors(names=tuple(calibration.names), errors=errors, relative=tuple(relative))

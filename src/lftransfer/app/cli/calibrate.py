@@ -68,8 +68,7 @@ def calibrate_rig_cmd(scene_file: Annotated[Path, typer.Argument(metavar="SCENE.
             try:
                 cal = calibrate(opened.rig, scene.synthetic_part(), progress=progress, rigs=opened.rigs)
             finally:
-                for r in opened.rigs or (opened.rig,):
-                    r.close()
+                opened.close()
     except CalibrationFailedError as exc:           # (after the progress bar's last line)
         fail(str(exc), FAILED)
     except RigError as exc:

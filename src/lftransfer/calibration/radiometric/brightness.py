@@ -127,16 +127,15 @@ class _BoardMeasurement:
     translucent: bool = False
 
 
-def _photograph_board(rig: Rig, model, scene, white: np.ndarray, board_spp: int | None, translucent: bool,
-                      walls=None):
-    """The board (a ``translucent`` screen or not) asked for, lit by the projector's ``white`` image and
-    photographed: (the normal asked for, the view image, where the board really stands from its chart)."""
-    centre, normal, _, _ = _board_pose(scene, model, translucent, walls)
+def _photograph_board(rig: Rig, scene, asked, white: np.ndarray, board_spp: int | None, translucent: bool):
+    """The board (a ``translucent`` screen or not) asked for where ``asked`` (:func:`_board_pose`) says, lit by the
+    projector's ``white`` image and photographed: (the view image, where the board really stands from its chart)."""
+    centre, normal, _, _ = asked
     rig.setup(Board(centre=centre, normal=tuple(normal), size=BOARD_SIZE, albedo=BOARD_ALBEDO, chart=BOARD_CHART,
                     translucent=translucent))
     rig.project(white)
     measured = rig.capture_view(ViewCapture(quality=board_spp)).radiance
-    return normal, measured, _held_board(measured, scene.view, normal)         # held by hand: from its chart
+    return measured, _held_board(measured, scene.view, normal)         # held by hand: from its chart
 
 
 def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, white: np.ndarray, *,
@@ -156,18 +155,20 @@ def _measure_brightness(rig: Rig, model, scene, projector_fit: _ProjectorFit, wh
             the view, or our render of it is dark.
     """
     say("projector brightness: board in front of the array (view camera)")
+    asked = _board_pose(scene, model)        # centre, normal, the view camera in the model's array frame, pixel
     translucent = False
     try:
-        normal, measured, held = _photograph_board(rig, model, scene, white, board_spp, translucent, walls)
+        measured, held = _photograph_board(rig, scene, asked, white, board_spp, translucent)
     except RadiometryError:
         from lftransfer.calibration.pose import sees_lit_side
 
-        if sees_lit_side(scene.view, _board_pose(scene, model)[0][2]):
+        if sees_lit_side(scene.view, asked[0][2]):
             raise
         # a view camera that sees the board's back may see its chart too obliquely: a screen, seen from behind
         translucent = True
-        normal, measured, held = _photograph_board(rig, model, scene, white, board_spp, translucent, walls)
-    view = _board_pose(scene, model, translucent, walls)[2]         # the view camera in the model's array frame
+        asked = _board_pose(scene, model, translucent, walls)
+        measured, held = _photograph_board(rig, scene, asked, white, board_spp, translucent)
+    view = asked[2]
     cx, cy = (int(round(v)) for v in project(view, held[:3, 3][None])[0])
     projector = replace(model.projector, response=ResponseCurve(tuple(projector_fit.gamma)), max_radiance=1.0,
                         cross_talk=projector_fit.cross_talk, black_level=tuple(projector_fit.black_level.tolist()))
