@@ -212,7 +212,8 @@ class RunSettings:
         reruns: the transfer settings of each comparison, resolved as a run asking for that value would be
             (:meth:`rerun`).
         adjustments: what the resolution changed from what the scene and the overrides asked for, and why, one
-            sentence each (a live loop's projection where the real objects move).
+            sentence each (a live loop's projection where the real objects move, a decoupled loop's simulator in
+            this process with several light field interfaces).
         simulator: where a live loop's simulated rig renders its captures and the threads each side gets (the live
             loops open their rig with it: ``lft live``, ``lft render --mode live``, ``lft bench --live``): by
             default its own process beside the decoupled loop, this process where the loop waits for each capture.
@@ -294,6 +295,10 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
         adjustments.append(f"projection: the box light field, not the {transfer.projection} projection the scene "
                            "asks for: the real objects move, and the live loop measures the depth once")
         transfer = replace(transfer, projection="box")
+    several = bool(getattr(scene, "interfaces", ()))
+    if loop == "decoupled" and several and overrides.simulator is None:
+        adjustments.append("simulator: in this process beside the decoupled loop, not in a process of its own, "
+                           "which serves one light field interface")
     comparisons = []
     asked = dict(overrides.compare)
     for name in COMPARABLE:
@@ -309,13 +314,14 @@ def resolve_settings(scene, overrides: Overrides = Overrides(), *, live: bool = 
     return RunSettings(transfer=transfer, gt_spp=gt_spp, comparisons=tuple(comparisons), reruns=reruns,
                        quiet_reference=bool(overrides.quiet_reference), adjustments=tuple(adjustments),
                        reference_budget_s=overrides.reference_budget_s,
-                       simulator=_simulator(overrides, loop))
+                       simulator=_simulator(overrides, loop, several))
 
 
-def _simulator(overrides: Overrides, loop: str | None) -> SimulatorSettings:
+def _simulator(overrides: Overrides, loop: str | None, several: bool = False) -> SimulatorSettings:
     """The simulator's place and threads as the overrides ask, else the defaults: its own process beside a
-    decoupled loop, this process where the loop waits for each capture (a synchronous loop, a run)."""
-    where = overrides.simulator or (choices.DEFAULT_SIMULATOR if loop == "decoupled" else "thread")
+    decoupled loop of one light field interface, this process where the loop waits for each capture (a synchronous
+    loop, a run) or the scene has several interfaces (``several``)."""
+    where = overrides.simulator or (choices.DEFAULT_SIMULATOR if loop == "decoupled" and not several else "thread")
     threads = overrides.simulator_threads or choices.DEFAULT_SIMULATOR_THREADS
     nice = choices.DEFAULT_SIMULATOR_NICE if overrides.simulator_nice is None else overrides.simulator_nice
     share = choices.DEFAULT_SIMULATOR_SHARE if overrides.simulator_share is None else float(overrides.simulator_share)

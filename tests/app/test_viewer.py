@@ -510,3 +510,41 @@ def _lifespan(session):
         finally:
             session.stop()
     return lifespan
+
+
+def test_11_a_session_through_two_interfaces(variant, tmp_path):
+    """The page on the corner's two arrays: the live loop exchanges through both (the decoupled loop's simulator
+    in this process, and said so); the "captured" layer and the panel show a row for each interface's LF camera and
+    projector; a real object moved by the page moves in the world both arrays see; the bounce layers run through
+    both."""
+    from lftransfer.app.viewer.command import open_session
+    from tests.transfer.test_interfaces import _corner
+
+    warnings = []
+    session = open_session(_corner(lamp=True), rig_model="oracle", truth_seed=None, out=tmp_path,
+                           warn=warnings.append)
+    try:
+        live = session.live
+        assert len(live.rigs) == 2 and live.loop == "decoupled"
+        assert any("simulator: in this process" in w for w in warnings)
+        frames = [live.step(0.0) for _ in range(2)]
+        assert [len(f.interfaces) for f in frames] == [2, 2]
+        session.scale = 1.0
+        captured = session._layer(frames[-1], "captured")
+        w, h = session.scene.rig.projector
+        assert captured.shape[:2] == (2 * h, 2 * w)           # per interface: its LF camera, its projector
+        for row in (captured[:h], captured[h:]):
+            assert row[h // 4:, :w].max() > 0                 # below the labels: each LF camera sees the block
+        panel = session._layer(frames[-1], "panel")
+        view_h, view_w = frames[-1].composite.shape[:2]
+        assert round(panel.shape[0] / (panel.shape[1] / 3 * view_h / view_w)) == 3      # two interfaces, the views
+        moved = [o.model_dump() for o in session.sim_rig.real_objects]
+        moved[0]["translate"] = [0.005, 0.0, 0.06]
+        with live.holding_rigs() as rigs:
+            session.sim_rig.place_real(moved)
+            assert all(r.real_objects[0].translate == [0.005, 0.0, 0.06] for r in rigs)
+        layers = session.bounce_layers(1)
+        assert layers.state == "done", layers.error
+        assert [x["index"] for x in layers.layers if x["side"] == "synthetic"] == [0, 1]
+    finally:
+        session.close()

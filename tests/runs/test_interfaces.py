@@ -60,13 +60,13 @@ def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path,
 
 
 def test_03_the_use_cases_of_one_interface_refuse_several(variant, tmp_path):
-    """A sequence, the live page, a benchmark or a study would run the first interface alone: they refuse such a
-    scene in one line instead."""
+    """A benchmark, a study or the exchange check would run the first interface alone: they refuse such a scene in
+    one line instead."""
     from lftransfer.runs.rigs import open_rig
 
     from lftransfer.sim.oracle import open_simulated_rig
 
-    with pytest.raises(SceneError, match="lft run and lft calibrate take them"):
+    with pytest.raises(SceneError, match="lft run, lft calibrate, lft render and lft live take them"):
         open_rig(_corner(), RunOptions(rig_model="oracle"))
     with pytest.raises(SceneError, match="this command simulates one"):      # lft depth, the device twin, ...
         open_simulated_rig(_corner(), 0)
@@ -87,3 +87,41 @@ def test_04_a_reused_calibration_restores_every_interface_s_noise(variant):
     opened.restore_noise_state(state)
     repeated = [r.capture_lf().codes for r in opened.rigs]
     assert all((a == b).all() for a, b in zip(first, repeated))
+
+
+def test_05_live_and_converged_sequences_through_two_interfaces(variant, tmp_path):
+    """``lft render`` through both arrays of the corner: a live sequence keeps each projector's next light field
+    (an interrupted one resumes from them), its panels show each interface's LF camera and projector, and its
+    frames carry the exchange (the composite brightens after frame 0); a converged frame is the bounce loop through
+    both, verified against the ground truth; the decoupled loop runs its simulator in this process."""
+    import numpy as np
+
+    from lftransfer.imageio_utils import read_exr
+    from lftransfer.runs.sequence import SequenceOptions, render_sequence
+
+    scene = _corner(lamp=True)
+    out = tmp_path / "live"
+    options = RunOptions(rig_model="oracle", settings=Overrides(gt_spp=16))
+
+    def stop_after_two(_record, done, _total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_sequence(scene, out, options, SequenceOptions(frames=3), progress=stop_after_two)
+    with np.load(out / "state" / "projected_lf.npz") as z:
+        assert sorted(z.files) == ["data", "data_1"] and z["data"].any() and z["data_1"].any()
+    report = render_sequence(scene, out, options, SequenceOptions(frames=3, resume=True))
+    assert [f["index"] for f in report["frames"]] == [0, 1, 2]
+    panel = iio.imread(out / "frames" / "panel_0002.png")
+    bottom = iio.imread(out / "frames" / "0002.png")
+    tile_height = panel.shape[1] / 3 * bottom.shape[0] / bottom.shape[1]       # three tiles a row, the view's shape
+    assert round(panel.shape[0] / tile_height) == 3     # "front"'s devices, "side"'s, the views (one interface: 2)
+    first, last = (read_exr(out / "frames" / f"{i:04d}.exr") for i in (0, 2))
+    assert last.sum() > first.sum()                                # the bounces accumulate over the frames
+    converged = render_sequence(scene, tmp_path / "converged", options,
+                                SequenceOptions(mode="converged", frames=1, verify_every=1))
+    metrics = converged["frames"][0]["metrics"]
+    assert metrics["psnr_objects_db"] > 20
+    decoupled = render_sequence(scene, tmp_path / "decoupled", options, SequenceOptions(loop="decoupled", frames=2))
+    assert decoupled["loop"] == "decoupled" and len(decoupled["frames"]) == 2

@@ -145,3 +145,46 @@ def test_03_an_lf_camera_sees_the_projector_of_the_interface_it_faces(variant):
     assert seen.data[inside].max() < 1.01 * level
     assert np.abs(seen.data[outside]).max() < 0.01 * level
     assert np.abs(dark.data).max() < 0.01 * level
+
+
+def _rel(a, b) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def test_04_the_live_loop_through_both_interfaces_reaches_the_bounce_loops_fixed_point(variant):
+    """The live loop through both arrays of the corner: frame 0 sees every projector black (the bounce loop's
+    direct frame); each frame carries one more exchange, through both arrays at once, so after three frames each
+    LF camera's capture and the real view equal the bounce loop's with two bounces. Frame 0 is far from that
+    (negative control: the exchange adds about 5 % to each capture)."""
+    from dataclasses import replace
+
+    from lftransfer.transfer.live import LiveTransfer
+
+    scene = _corner(lamp=True)
+    models = nominal_interfaces(scene)
+    world = SimInterfaces(scene, capture_spp=2)
+    reference = run_interfaces(world.rigs, models, scene.synthetic_part(), SETTINGS)
+    live = LiveTransfer(world.rigs[0], models[0], scene.synthetic_part(), replace(SETTINGS, bounces=1),
+                        rigs=world.rigs, models=models)
+    frames = [live.step(0.0) for _ in range(3)]
+    assert [len(f.interfaces) for f in frames] == [2, 2, 2]
+    assert not any(light.projected_lf.data.any() for light in frames[0].interfaces)
+    # what each projector shows in frame k is what the synthetic side sent towards it in frame k - 1
+    for before, after in zip(frames, frames[1:]):
+        for a, b in zip(before.interfaces, after.interfaces):
+            np.testing.assert_array_equal(b.projected_lf.data, a.synthetic_lf.data)
+            assert b.projected_lf.data.any()
+    np.testing.assert_allclose(frames[0].real_view, reference.real_view_direct, rtol=1e-5, atol=1e-7)
+    for i in (0, 1):
+        direct = reference.interfaces[i][0].real_lf.data
+        every = sum(b.real_lf.data for b in reference.interfaces[i])
+        gain = _rel(every, direct)                                         # measured 5.8 % and 5.2 %
+        assert gain > 0.02
+        assert _rel(frames[0].interfaces[i].captured_lf.data, direct) < 0.01 * gain      # measured 0.03 %, 0
+        assert _rel(frames[2].interfaces[i].captured_lf.data, every) < 0.05 * gain       # measured 1.1 %, 1.5 %
+        assert _rel(frames[0].interfaces[i].captured_lf.data, every) > 0.5 * gain
+    view_gain = _rel(reference.real_view, reference.real_view_direct)
+    assert view_gain > 0
+    assert _rel(frames[2].real_view, reference.real_view) < 0.05 * view_gain            # measured 0.24 %
+    # one interface's frame fields are the first's
+    np.testing.assert_array_equal(frames[2].captured_lf.data, frames[2].interfaces[0].captured_lf.data)

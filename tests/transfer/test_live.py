@@ -210,7 +210,7 @@ def test_06_decoupled_worker_failure_and_holding_the_rig(quick):
     with LiveTransfer(_SlowRig(opened.rig, delay_s=0.2), opened.oracle.model, scene.synthetic_part(), settings,
                       loop="decoupled") as live:
         live.step(0.0)
-        with live.holding_rig():
+        with live.holding_rigs():
             count = live._worker.count
             time.sleep(0.6)
             assert live._worker.count <= count + 1           # at most the capture in progress finished

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -144,16 +145,18 @@ def device_image(codes: np.ndarray, bits: int, *, stretch: bool = False) -> np.n
 
 
 def live_panel(frame, ground_truth: np.ndarray | None, scale: float, *, camera_bits: int, projector_bits: int,
-               tile_width: int = 384) -> np.ndarray:
+               tile_width: int = 384, names: Sequence[str] = ()) -> np.ndarray:
     """One frame of the live loop as a panel (the Fig. 4 panel of a live sequence).
 
     Top row: the LF camera's capture, the projector's image (the previous frame's synthetic light field) and the
-    ground truth where there is one; bottom row: real view, synthetic view, composite, all at display ``scale``.
+    ground truth where there is one (with several light field interfaces, a row for each interface's LF camera and
+    projector, named); bottom row: real view, synthetic view, composite, all at display ``scale``.
 
     Args:
         frame: :class:`lftransfer.transfer.live.LiveFrame`.
         ground_truth: (H, W, 3) path-traced image at the frame's time, or None.
         scale: display scale of the radiance images (kept over a sequence so that it does not flicker).
+        names: the interfaces' names, with several (``frame.interfaces``); else unused.
 
     Returns:
         (H, W, 3) uint8 sRGB.
@@ -167,11 +170,18 @@ def live_panel(frame, ground_truth: np.ndarray | None, scale: float, *, camera_b
         tile = cv2.resize(img, (tile_width, h), interpolation=cv2.INTER_AREA)
         return _label(tile, title)
 
-    top = [fit(device_image(frame.captured_raw, camera_bits, stretch=True), "LF camera (captured)"),
-           fit(device_image(frame.projected_image, projector_bits), "projector (previous Ls)")]
-    top.append(_label(_resize(to_display(ground_truth, scale), tile_width), "ground truth (path traced)")
-               if ground_truth is not None else np.zeros_like(bottom[0]))
-    return np.concatenate([np.concatenate(top, axis=1), np.concatenate(bottom, axis=1)], axis=0)
+    lit = [(light.captured_raw, light.projected_image) for light in frame.interfaces] or \
+        [(frame.captured_raw, frame.projected_image)]
+    named = [f"{name}: " for name in names] if frame.interfaces and len(names) == len(lit) else \
+        [f"interface {k}: " for k in range(len(lit))] if frame.interfaces else [""]
+    rows = []
+    for k, ((raw, image), name) in enumerate(zip(lit, named)):
+        top = [fit(device_image(raw, camera_bits, stretch=True), f"{name}LF camera (captured)"),
+               fit(device_image(image, projector_bits), f"{name}projector (previous Ls)")]
+        top.append(_label(_resize(to_display(ground_truth, scale), tile_width), "ground truth (path traced)")
+                   if ground_truth is not None and k == 0 else np.zeros_like(bottom[0]))
+        rows.append(np.concatenate(top, axis=1))
+    return np.concatenate([*rows, np.concatenate(bottom, axis=1)], axis=0)
 
 
 def _base_scale(result, composite_rgb: np.ndarray, ceiling: float | None) -> float:
@@ -267,17 +277,20 @@ def _eight_bits(image: np.ndarray) -> np.ndarray:
     return image[..., :3].astype(np.uint8) if image.dtype == np.uint8 else (image >> 8).astype(np.uint8)
 
 
-def interfaces_panel(images, names, captured=(), camera_bits: int = 12) -> np.ndarray:
+def interfaces_panel(images, names, captured=(), camera_bits: int = 12,
+                     titles: tuple[str, str] = ("its LF camera, direct frame", "its projector, final frame")
+                     ) -> np.ndarray:
     """(H', W', 3) uint8: a row per interface, named: the light field its LF camera captured in the direct frame
     (``captured``, device integers, stretched; left out where not given) beside the one its projector sends the real
-    objects in the final frame (``images``): what each array takes in and gives back (docs/interfaces.md)."""
+    objects in the final frame (``images``): what each array takes in and gives back (docs/interfaces.md). A live
+    frame's (the page) says so in ``titles`` (the capture's, the projector's)."""
     rows = []
     for i, (image, name) in enumerate(zip(images, names)):
         shown = _eight_bits(np.asarray(image))
-        tiles = [_label(shown, f"{name}: its projector, final frame")]
+        tiles = [_label(shown, f"{name}: {titles[1]}")]
         if i < len(captured):
             taken = _resize(device_image(captured[i], camera_bits, stretch=True), shown.shape[1])
-            tiles.insert(0, _label(taken, f"{name}: its LF camera, direct frame"))
+            tiles.insert(0, _label(taken, f"{name}: {titles[0]}"))
         height = max(t.shape[0] for t in tiles)
         rows.append(np.concatenate([np.pad(t, ((0, height - t.shape[0]), (0, 0), (0, 0))) for t in tiles], axis=1))
     width = max(r.shape[1] for r in rows)

@@ -150,6 +150,11 @@ class OpenedRig:
     rigs: tuple = ()
 
     @property
+    def each_rig(self) -> list[Rig]:
+        """One rig per light field interface, in the scene's order (``[rig]`` for one)."""
+        return list(self.rigs) or [self.rig]
+
+    @property
     def truth_seed(self) -> int | None:
         """The hidden truth's seed (None: no oracle, or a rig built exactly as its file says)."""
         return None if self.oracle is None else self.oracle.truth_seed
@@ -177,9 +182,10 @@ class OpenedRig:
         """Begin frame ``index`` of a sequence of independent frames: the simulated rig draws the frame's sensor
         noise from its seed and the index alone (:meth:`lftransfer.sim.SimRig.start_frame`), so the frame is the
         same whichever process renders it and whatever it rendered before. Other rigs have no seed to set."""
-        start = getattr(self.rig, "start_frame", None)
-        if start is not None:
-            start(index)
+        for rig in self.each_rig:                 # every interface's, with several
+            start = getattr(rig, "start_frame", None)
+            if start is not None:
+                start(index)
 
 
 def open_rig(scene, options, *, operator: Operator | None = None, simulator=None,
@@ -195,7 +201,8 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
             (:class:`lftransfer.sim.process.SimulatorProcess`), in turns with the frames where its ``share`` is
             above 0 (``OpenedRig.turns``); its ``renderer_threads`` set this process's Dr.Jit threads. None: the
             simulated rig in this process, the threads as they are.
-        interfaces: the caller runs scenes of several light field interfaces (``OpenedRig.rigs``, ``lft run``);
+        interfaces: the caller runs scenes of several light field interfaces (``OpenedRig.rigs``: ``lft run``,
+            ``lft calibrate``, ``lft render``, ``lft live``);
             other callers get a :class:`~lftransfer.scenes.SceneError` for such a scene, not its first interface.
     """
     spec = options.rig
@@ -203,8 +210,9 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
         if not interfaces:
             from lftransfer.scenes import SceneError
 
-            raise SceneError(f"{interfaces_named(scene)}: lft run and lft calibrate take them; live loops, "
-                             "sequences, benchmarks and studies run one interface so far (docs/interfaces.md)")
+            raise SceneError(f"{interfaces_named(scene)}: lft run, lft calibrate, lft render and lft live take "
+                             "them; benchmarks, studies and the exchange check run one interface so far "
+                             "(docs/interfaces.md)")
         return _open_interfaces(scene, options, simulator)
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads
@@ -253,9 +261,9 @@ def _open_interfaces(scene, options, simulator) -> OpenedRig:
 
     if options.rig.kind != "sim" or (simulator is not None and simulator.where == "process") \
             or options.record is not None:
-        raise SceneError(f"{interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, the "
-                         "bounce loop, no recording); a physical rig, a recording and the simulator's own process have "
-                         "one interface")
+        raise SceneError(f"{interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, "
+                         "--simulator thread, no recording); a physical rig, a recording and the simulator's own "
+                         "process have one interface")
     rigs, oracle = open_simulated_interfaces(scene, options.truth_seed, capture_spp=options.capture_spp)
     return OpenedRig(rig=rigs[0], oracle=oracle, rigs=tuple(rigs))
 
@@ -284,6 +292,11 @@ class Knowledge:
     warnings: tuple[str, ...] = ()
     lights_from: str = "the scene file"
     models: tuple = ()
+
+    @property
+    def each_model(self) -> list[RigModel]:
+        """One rig model per light field interface, in the scene's order (``[model]`` for one)."""
+        return list(self.models) or [self.model]
 
 
 def knowledge(opened: OpenedRig, scene, rig_model: str, *, calibration=None, source=None,

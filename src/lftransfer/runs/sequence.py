@@ -34,7 +34,8 @@ from lftransfer.reports.report import bounce_panel, display_scale, emitter_ceili
 from lftransfer.runs.run_folder import tracked_run, write_status
 from lftransfer.imageio_utils import write_exr, write_json, write_png, write_video
 from lftransfer.lightfield import LightField
-from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view, run_transfer
+from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view
+from lftransfer.transfer.interfaces import transfer_through
 from lftransfer.settings import RunSettings
 from lftransfer.transfer.live import LiveTransfer
 from lftransfer.render.selection import approximations, visible_steps
@@ -258,14 +259,14 @@ def _composite_note(scene, seq: SequenceOptions, settings: TransferSettings) -> 
             f"(the real objects stand still){outline}; no structured light, which takes 24 photographs"]
 
 
-def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings, index: int, time_s: float
+def converged_frame(opened: OpenedRig, models, scene, settings: TransferSettings, index: int, time_s: float
                     ) -> tuple[TransferResult, float]:
     """Frame ``index`` of a converged sequence: an independent N-bounce transfer at ``time_s``, its random numbers
     drawn from the frame's index (:meth:`OpenedRig.start_frame`), whatever the rig did before.
 
     Args:
-        opened: the rig.
-        model: the rig model.
+        opened: the rig (one per light field interface, with several).
+        models: the rig model of each interface, in the scene's order (:attr:`Knowledge.each_model`).
         scene: the synthetic part of the scene.
         settings: the transfer's settings.
 
@@ -274,7 +275,7 @@ def converged_frame(opened: OpenedRig, model, scene, settings: TransferSettings,
     """
     t0 = time.perf_counter()
     opened.start_frame(index)
-    result = run_transfer(opened.rig, model, scene, settings, time_s=time_s)
+    result = transfer_through(opened.each_rig, models, scene, settings, time_s=time_s)
     return replace(result, captured_raw=None), time.perf_counter() - t0
 
 
@@ -293,22 +294,22 @@ class FrameWorker(Worker):
     Args:
         scene: the whole scene (the simulated rig's hidden world).
         options: the run's options (the rig, its truth seed, the ground truth's samples).
-        model: the rig model the driver calibrated or chose.
+        models: the rig model of each interface the driver calibrated or chose.
         settings: the transfer's settings.
         synthetic: the synthetic scene the driver knows (its point lights where calibrated), or None: the scene's.
         threads: Dr.Jit threads (:class:`lftransfer.runs.cluster.Worker`).
     """
 
-    def __init__(self, scene, options: RunOptions, model, settings: TransferSettings, synthetic=None,
+    def __init__(self, scene, options: RunOptions, models, settings: TransferSettings, synthetic=None,
                  threads: int | None = None):
         super().__init__(threads)
-        self.opened = open_rig(scene, options)
-        self.model, self.settings = model, settings
+        self.opened = open_rig(scene, options, interfaces=True)
+        self.models, self.settings = models, settings
         self.scene = synthetic if synthetic is not None else scene.synthetic_part()
 
     def transfer(self, index: int, time_s: float, spp: int | None, use_cache: bool) -> ConvergedFrame:
         """:func:`converged_frame` and, where ``spp`` is given, :func:`frame_ground_truth`."""
-        result, seconds = converged_frame(self.opened, self.model, self.scene, self.settings, index, time_s)
+        result, seconds = converged_frame(self.opened, self.models, self.scene, self.settings, index, time_s)
         gt = None
         if spp is not None:
             gt, gt_seconds = frame_ground_truth(self.opened.oracle, time_s, spp, use_cache)
@@ -395,9 +396,10 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
     with tracked_run(out, str(options.rig), interrupted="interrupted (Ctrl-C); --resume continues"):
         opened = None
         try:
-            opened = open_rig(scene, options, simulator=resolved.simulator if seq.mode == "live" else None)
+            opened = open_rig(scene, options, simulator=resolved.simulator if seq.mode == "live" else None,
+                              interfaces=True)
             known = acquire_model(opened, scene, options, out, seq.resume, step)
-            model, rig_model, ps = known.model, known.rig_model, known.scene
+            rig_model, ps = known.rig_model, known.scene
             report = {"key": key, "mode": seq.mode, "loop": seq.loop if seq.mode == "live" else None,
                       "rig_model": rig_model, "variant": _variant(),
                       "warnings": [*known.warnings, *visible_steps(ps, settings.renderer)],
@@ -411,18 +413,18 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             verify = seq.verify_every > 0 and opened.oracle is not None
             gt_spp = resolved.gt_spp
             if seq.mode == "live":
-                _live_frames(writer, opened, model, ps, settings, times, done, out, scene,
+                _live_frames(writer, opened, known, settings, times, done, out, scene,
                              lambda i: verify and i % seq.verify_every == 0, gt_spp, options.use_cache, seq.loop)
             else:
                 finished = {f["index"] for f in done}
                 todo = [(i, float(times[i]), gt_spp if verify and i % seq.verify_every == 0 else None,
                          options.use_cache) for i in range(n) if i not in finished]
                 if seq.cluster is None:
-                    pool = LocalPool(_InProcess(opened, model, ps, settings))
+                    pool = LocalPool(_InProcess(opened, known.each_model, ps, settings))
                     writer.converged(frame for _, frame in pool.map("transfer", todo))
                 else:
-                    report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, model, ps,
-                                                              settings, todo, step)
+                    report["cluster"] = _converged_on_cluster(writer, seq.cluster, scene, options, known.each_model,
+                                                              ps, settings, todo, step)
             step("write the videos")
             report["summary"] = sequence_summary(report["frames"])
             _stale_captures(report, opened.rig)
@@ -430,18 +432,18 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
             write_json(report_path, report)
         finally:
             if opened is not None:
-                opened.rig.close()
+                opened.close()
     return report
 
 
 class _InProcess(FrameWorker):
     """A :class:`FrameWorker` on the rig the driver opened (no cluster)."""
 
-    def __init__(self, opened: OpenedRig, model, scene, settings: TransferSettings) -> None:
-        self.opened, self.model, self.scene, self.settings = opened, model, scene, settings
+    def __init__(self, opened: OpenedRig, models, scene, settings: TransferSettings) -> None:
+        self.opened, self.models, self.scene, self.settings = opened, models, scene, settings
 
 
-def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, options: RunOptions, model, synthetic,
+def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, options: RunOptions, models, synthetic,
                           settings: TransferSettings, todo: list[tuple], step: Callable[[str], None]) -> dict:
     """The converged frames ``todo`` on a Ray cluster, written as they finish; returns what the report keeps of
     the cluster (where, how many workers)."""
@@ -450,7 +452,7 @@ def _converged_on_cluster(writer: "_FrameWriter", spec: ClusterSpec, scene, opti
     step(f"start the cluster ({spec})")
     with connect(spec) as info:
         step("start the workers")
-        pool = WorkerPool(FrameWorker, (scene, options, model, settings, synthetic), info, spec.workers)
+        pool = WorkerPool(FrameWorker, (scene, options, models, settings, synthetic), info, spec.workers)
         step(f"frames on {len(pool.actors)} workers")
         writer.converged(frame for _, frame in pool.map("transfer", todo))
         return pool.describe()
@@ -508,10 +510,11 @@ class _FrameWriter:
             self.progress(record, len(self.report["frames"]), self.total)
 
 
-def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: TransferSettings, times: np.ndarray,
-                 done: list[dict], out: Path, scene, verified: Callable[[int], bool], gt_spp: int,
+def _live_frames(writer: _FrameWriter, opened: OpenedRig, known: Knowledge, settings: TransferSettings,
+                 times: np.ndarray, done: list[dict], out: Path, scene, verified: Callable[[int], bool], gt_spp: int,
                  use_cache: bool, loop: str = choices.DEFAULT_SEQUENCE_LOOP) -> None:
-    """The live loop over the frames after ``done``, each written as it is finished.
+    """The live loop over the frames after ``done``, each written as it is finished (through every light field
+    interface of the scene, each one's projector state kept).
 
     Decoupled (``loop``): the frames are rendered one after another as fast as the renderer goes, the captures
     running beside them; while a frame's ground truth is rendered and its files written, no new capture begins
@@ -519,16 +522,22 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
     head start it would not have."""
     state, depth_file = out / STATE_FILE, out / DEPTH_FILE
     n = len(times)
+    models = known.each_model
     projected = None
     if done and state.is_file():
-        with np.load(state) as z:
-            projected = LightField(z["data"], model.array)
+        projected = _read_each(state, "data", len(models))
+        if projected is None:
+            raise SequenceError(f"--resume: {state} does not hold a light field for each of the {len(models)} "
+                                "interfaces")
+        projected = [LightField(data, m.array) for data, m in zip(projected, models)]
     elif done:
         raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
-    depth = read_depth(out) if done else None
-    with LiveTransfer(opened.rig, model, ps, settings, projected=projected,
+    depth = _read_each(depth_file, "depth", len(models)) if done and depth_file.is_file() else None
+    names = [i.name for i in scene.interfaces]
+    with LiveTransfer(opened.rig, known.model, known.scene, settings, projected=projected,
                       time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop,
-                      depth_every_frame=_depth_every_frame(scene, settings), turns=opened.turns) as live:
+                      depth_every_frame=_depth_every_frame(scene, settings), turns=opened.turns,
+                      rigs=opened.rigs, models=known.models) as live:
         live.index = len(done)
         for i in range(len(done), n):
             t0 = time.perf_counter()
@@ -542,16 +551,32 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, model, ps, settings: T
                 if writer.scale is None:
                     writer.report["display_scale"] = display_scale(frame.composite, ceiling=writer.ceiling)
                 panel = live_panel(frame, gt.image if gt is not None else None, writer.scale,
-                                   camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits)
-                _write_state(state, data=live.projected.data)
-                if live.depth is not None and not depth_file.is_file():
-                    _write_state(depth_file, depth=live.depth)
+                                   camera_bits=scene.rig.lf_camera_bits, projector_bits=scene.rig.projector_bits,
+                                   names=names)
+                _write_state(state, **_each_key("data", [lf.data for lf in live.projected_lfs]))
+                if live.depths is not None and not depth_file.is_file():
+                    _write_state(depth_file, **_each_key("depth", live.depths))
                 if verified(i) and live.view_depth is not None:
                     write_frame_depth(out, i, live.depth, live.view_depth)
                 over = composite_view(frame.synthetic_view, frame.real_view, None) \
                     if gt is not None and live.view_depth is not None else None
                 writer.frame(i, t, frame.composite, panel, frame.timings_s, frame.clipped_fraction, gt,
                              time.perf_counter() - t0, capture=capture_record(frame), over=over)
+
+
+def _each_key(key: str, arrays) -> dict[str, np.ndarray]:
+    """The state file's arrays of each interface: ``key`` for the first (the only one with one interface),
+    ``key_1``, ``key_2``, ... for the others."""
+    return {key if i == 0 else f"{key}_{i}": a for i, a in enumerate(arrays)}
+
+
+def _read_each(path: Path, key: str, n: int) -> list[np.ndarray] | None:
+    """:func:`_each_key`'s arrays of ``n`` interfaces from ``path``, or None where it does not hold them all."""
+    with np.load(path) as z:
+        names = list(_each_key(key, range(n)))
+        if not all(name in z.files for name in names) or f"{key}_{n}" in z.files:
+            return None
+        return [z[name] for name in names]
 
 
 def capture_record(frame) -> dict:

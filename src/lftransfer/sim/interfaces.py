@@ -44,9 +44,9 @@ class SimInterfaces:
         return [r.truth for r in self.rigs]
 
     def place_real(self, objects) -> None:
-        """Put the real objects somewhere else, for every interface (:meth:`SimRig.place_real`)."""
-        for rig in self.rigs:
-            rig.place_real(objects)
+        """Put the real objects somewhere else, for every interface (:meth:`SimRig.place_real` moves them in the
+        world all the joined rigs share)."""
+        self.rigs[0].place_real(objects)
 
     def start_frame(self, index: int) -> None:
         """Begin frame ``index`` of an independent sequence on every interface (:meth:`SimRig.start_frame`)."""

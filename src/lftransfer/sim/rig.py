@@ -221,13 +221,16 @@ class SimRig:
 
         Raises:
             SceneError: an object outside the real half-space, or otherwise invalid.
+
+        The rigs of a scene's other interfaces (:meth:`join`) share the real world: they see the objects moved too.
         """
         from lftransfer.scenes import with_overrides
 
-        self._world_scene = with_overrides(self._world_scene, real=list(objects))
-        self._real = self._real_renderer(self._time_s)
-        if isinstance(self._setup, RealScene):
-            self._world = self._real
+        for rig in (self, *self._siblings):
+            rig._world_scene = with_overrides(rig._world_scene, real=list(objects))
+            rig._real = rig._real_renderer(rig._time_s)
+            if isinstance(rig._setup, RealScene):
+                rig._world = rig._real
 
     @property
     def real_objects(self) -> list:

@@ -21,7 +21,7 @@ import time
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -37,31 +37,39 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class Projection:
-    """A synthetic light field for the projector, and the version of the synthetic scene it was rendered from.
+    """The synthetic light field each projector is to show, and the version of the synthetic scene it was rendered
+    from.
 
     Attributes:
-        lf: Ls, (K, V, U, 3) radiance; the all-zero light field means a black projector.
+        lfs: Ls of each light field interface, in the scene's order (one for one interface), each (K, V, U, 3)
+            radiance; an all-zero light field means a black projector.
         version: the synthetic scene's version (0 = as it started; each pose change or edit adds one).
-        black: whether it is the black start (projected as the device's black image, not encoded).
+        black: whether it is the black start (projected as each device's black image, not encoded).
     """
 
-    lf: LightField
+    lfs: tuple[LightField, ...]
     version: int
     black: bool = False
+
+    @property
+    def lf(self) -> LightField:
+        """The first interface's light field (the only one with one interface)."""
+        return self.lfs[0]
 
 
 @dataclass(frozen=True)
 class Capture:
-    """One capture of the real scene under one projection.
+    """One capture of the real scene under one projection (every interface's LF camera, the one view camera).
 
     Attributes:
         index: captures since the loop started (0 = the first).
-        captured_lf: R, the decoded LF camera image (real point light plus the response to the projection).
-        captured_raw: the LF camera image (device integers).
-        real_view: (H, W, 3) float32 view camera radiance under the same projection.
-        projection: what the projector showed (:class:`Projection`).
-        projected_image: the projector image shown (device integers).
-        clipped_fraction: fraction of lit samples of the projection above the projector's range (clipped).
+        captured_lfs: R of each interface, the decoded LF camera image (real point light plus the response to every
+            projection).
+        captured_raws: each interface's LF camera image (device integers).
+        real_view: (H, W, 3) float32 view camera radiance under the same projections.
+        projection: what the projectors showed (:class:`Projection`).
+        projected_images: each projector's image shown (device integers).
+        clipped_fraction: fraction of lit samples of the projections above their projectors' range (clipped).
         real_time_s: the scene time the real scene was posed at, seconds.
         started_s: ``time.perf_counter()`` when the projection was shown (the capture's moment), seconds.
         finished_s: ``time.perf_counter()`` when the capture was decoded and ready, seconds.
@@ -70,79 +78,102 @@ class Capture:
     """
 
     index: int
-    captured_lf: LightField
-    captured_raw: np.ndarray
+    captured_lfs: tuple[LightField, ...]
+    captured_raws: tuple[np.ndarray, ...]
     real_view: np.ndarray
     projection: Projection
-    projected_image: np.ndarray
+    projected_images: tuple[np.ndarray, ...]
     clipped_fraction: float
     real_time_s: float
     started_s: float
     finished_s: float
     timings_s: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def captured_lf(self) -> LightField:
+        """The first interface's R."""
+        return self.captured_lfs[0]
+
+    @property
+    def captured_raw(self) -> np.ndarray:
+        """The first interface's LF camera image."""
+        return self.captured_raws[0]
+
+    @property
+    def projected_image(self) -> np.ndarray:
+        """The first interface's projector image."""
+        return self.projected_images[0]
+
 
 class _Encoded:
-    """The projector image of the newest projection and its clipped fraction, found once."""
+    """The projector images of the newest projection and its clipped fraction, found once."""
 
     def __init__(self) -> None:
         self.projection: Projection | None = None
-        self.image: np.ndarray | None = None
+        self.images: tuple[np.ndarray, ...] | None = None
         self.clipped = 0.0
 
 
-def _clipped(projection: Projection, max_radiance: float) -> float:
-    """Fraction of the projection's lit samples above the projector's range."""
-    lit = projection.lf.data[projection.lf.data > 0]
-    return float(np.mean(lit > max_radiance)) if lit.size else 0.0
+def _clipped(projection: Projection, max_radiances: Sequence[float]) -> float:
+    """Fraction of the projection's lit samples (every interface's) above their projector's range."""
+    lit = [(lf.data[lf.data > 0], peak) for lf, peak in zip(projection.lfs, max_radiances)]
+    count = sum(v.size for v, _ in lit)
+    return float(sum(np.count_nonzero(v > peak) for v, peak in lit) / count) if count else 0.0
 
 
-def capture_once(rig: Rig, encoder: Callable, decoder: Callable, projection: Projection, *, index: int,
-                 real_time_s: float, max_radiance: float, pose_real: bool = True, cache: _Encoded | None = None,
-                 timer: StageTimer | None = None) -> Capture:
-    """Project ``projection``, capture the LF camera and the view camera, decode.
+def capture_once(rigs: Sequence[Rig], encoders: Sequence[Callable], decoders: Sequence[Callable],
+                 projection: Projection, *, index: int, real_time_s: float, max_radiances: Sequence[float],
+                 pose_real: bool = True, cache: _Encoded | None = None, timer: StageTimer | None = None) -> Capture:
+    """Project ``projection`` through every interface, capture every LF camera and the view camera, decode.
 
     Args:
-        rig: the rig (only the caller's thread uses it meanwhile).
-        encoder: LightField -> projector image (the rig model's).
-        decoder: LF camera image -> LightField (the rig model's).
-        projection: what to project.
+        rigs: one rig per light field interface, in the scene's order (one for one interface; several share one
+            real world and one view camera, the first's is used). Only the caller's thread uses them meanwhile.
+        encoders: LightField -> projector image, each interface's (its rig model's).
+        decoders: LF camera image -> LightField, each interface's.
+        projection: what to project (a light field per interface).
         index: the capture's number.
         real_time_s: the scene time the real scene is posed at, seconds.
-        max_radiance: the projector's largest radiance (for the clipped fraction).
+        max_radiances: each projector's largest radiance (for the clipped fraction).
         pose_real: pose the real scene first (``rig.setup(RealScene(real_time_s))``); False: the caller did.
-        cache: the projector image of the projection shown last (encoding is skipped when it is the same); None:
+        cache: the projector images of the projection shown last (encoding is skipped when it is the same); None:
             encode every time.
         timer: a stage timer to add the stages to (a new one when None).
 
     Returns:
         :class:`Capture` (its ``timings_s`` are this capture's own stages).
     """
+    if not len(rigs) == len(encoders) == len(decoders) == len(projection.lfs):
+        raise ValueError(f"capture_once: {len(rigs)} rigs, {len(encoders)} encoders, {len(decoders)} decoders and "
+                         f"{len(projection.lfs)} light fields to project")
     own = StageTimer()
-    if cache is not None and cache.projection is projection and cache.image is not None:
-        pattern, clipped = cache.image, cache.clipped
+    if cache is not None and cache.projection is projection and cache.images is not None:
+        patterns, clipped = cache.images, cache.clipped
         own.totals["encode"] = 0.0
     else:
         with own("encode"):
-            pattern = rig.info.black() if projection.black else encoder(projection.lf)
-        clipped = _clipped(projection, max_radiance)
+            patterns = tuple(rig.info.black() if projection.black else enc(lf)
+                             for rig, enc, lf in zip(rigs, encoders, projection.lfs))
+        clipped = _clipped(projection, max_radiances)
         if cache is not None:
-            cache.projection, cache.image, cache.clipped = projection, pattern, clipped
+            cache.projection, cache.images, cache.clipped = projection, patterns, clipped
     if pose_real:
-        rig.setup(RealScene(time_s=float(real_time_s)))
+        for rig in rigs:
+            rig.setup(RealScene(time_s=float(real_time_s)))
     started = time.perf_counter()
-    rig.project(pattern)
+    for rig, pattern in zip(rigs, patterns):
+        rig.project(pattern)
     with own("capture"):
-        raw = rig.capture_lf().codes
+        raws = tuple(rig.capture_lf().codes for rig in rigs)
     with own("decode"):
-        captured = decoder(raw)
+        captured = tuple(dec(raw) for dec, raw in zip(decoders, raws))
     with own("capture_view"):
-        real_view = rig.capture_view().radiance
+        real_view = rigs[0].capture_view().radiance
     if timer is not None:
         for k, v in own.totals.items():
             timer.totals[k] = timer.totals.get(k, 0.0) + v
-    return Capture(index=index, captured_lf=captured, captured_raw=raw, real_view=real_view, projection=projection,
-                   projected_image=pattern, clipped_fraction=clipped,
+    return Capture(index=index, captured_lfs=captured, captured_raws=raws, real_view=real_view, projection=projection,
+                   projected_images=patterns, clipped_fraction=clipped,
                    real_time_s=float(real_time_s), started_s=started,
                    finished_s=time.perf_counter(), timings_s=dict(own.totals))
 
@@ -152,24 +183,25 @@ class CaptureWorker:
 
     The render loop hands it each new synthetic light field (:meth:`show`) and takes the newest capture
     (:meth:`newest`, or :meth:`wait` for one newer than it has); neither waits for the other. Only the worker's
-    thread uses the rig while it runs; whoever else needs the rig (the bounce layers, moving a simulated real
+    thread uses the rigs while it runs; whoever else needs them (the bounce layers, moving a simulated real
     object) holds it with :meth:`holding`, which waits for the capture in progress and keeps the next one back.
 
     Args:
-        rig: the rig.
-        encoder: LightField -> projector image.
-        decoder: LF camera image -> LightField.
+        rigs: one rig per light field interface (:func:`capture_once`).
+        encoders: LightField -> projector image, each interface's.
+        decoders: LF camera image -> LightField, each interface's.
         first: the projection to start with.
-        max_radiance: the projector's largest radiance.
+        max_radiances: each projector's largest radiance.
         real_time: returns the scene time the real scene is to be posed at for the next capture (the newest render
             frame's time), seconds.
         keep_rate_of: captures over which :attr:`rate_hz` is measured.
     """
 
-    def __init__(self, rig: Rig, encoder: Callable, decoder: Callable, first: Projection, *, max_radiance: float,
-                 real_time: Callable[[], float], keep_rate_of: int = 8) -> None:
-        self.rig, self.encoder, self.decoder = rig, encoder, decoder
-        self.max_radiance = max_radiance
+    def __init__(self, rigs: Sequence[Rig], encoders: Sequence[Callable], decoders: Sequence[Callable],
+                 first: Projection, *, max_radiances: Sequence[float], real_time: Callable[[], float],
+                 keep_rate_of: int = 8) -> None:
+        self.rigs, self.encoders, self.decoders = list(rigs), list(encoders), list(decoders)
+        self.max_radiances = list(max_radiances)
         self._real_time = real_time
         self._projection = first
         self._newest: Capture | None = None
@@ -222,11 +254,11 @@ class CaptureWorker:
         return rate_hz(self._starts, last=len(self._starts))
 
     @contextmanager
-    def holding(self) -> Iterator[Rig]:
-        """The rig to the caller alone: waits for the capture in progress; captures resume on exit (unless
-        something else still keeps them back)."""
+    def holding(self) -> Iterator[list[Rig]]:
+        """The rigs (one per interface) to the caller alone: waits for the capture in progress; captures resume on
+        exit (unless something else still keeps them back)."""
         with self.paused(), self._rig_lock:
-            yield self.rig
+            yield self.rigs
 
     def hold(self, held: bool) -> None:
         """No new capture begins while held (the one in progress finishes), until ``hold(False)``."""
@@ -283,8 +315,8 @@ class CaptureWorker:
                     with self._lock:
                         projection = self._projection
                     self._starts.append(time.perf_counter())
-                    cap = capture_once(self.rig, self.encoder, self.decoder, projection, index=self.count,
-                                       real_time_s=self._real_time(), max_radiance=self.max_radiance,
+                    cap = capture_once(self.rigs, self.encoders, self.decoders, projection, index=self.count,
+                                       real_time_s=self._real_time(), max_radiances=self.max_radiances,
                                        cache=self._cache)
                 with self._fresh:
                     self._newest = cap

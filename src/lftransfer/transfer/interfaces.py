@@ -32,15 +32,28 @@ from lftransfer.rig.requests import RealScene
 from lftransfer.scenes import SyntheticScene
 from lftransfer.transfer.bounce import Bounce, TransferResult, TransferSettings, final_projection, projector_gain
 from lftransfer.transfer.projection import measure_depth
-from lftransfer.transfer.synthetic_side import SyntheticSide
+from lftransfer.transfer.synthetic_side import SyntheticSide, render_sides
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["count_interface_steps", "run_interfaces"]
+__all__ = ["count_interface_steps", "run_interfaces", "transfer_through"]
 
 
 def count_interface_steps(settings: TransferSettings, interfaces: int) -> int:
     """Number of progress callbacks :func:`run_interfaces` makes through ``interfaces`` interfaces."""
     return 3 + (interfaces if settings.prefilters else 0) + 2 * settings.bounces
+
+
+def transfer_through(rigs: Sequence[Rig], models: Sequence[RigModel], scene: SyntheticScene,
+                     settings: TransferSettings = TransferSettings(), *,
+                     progress: Callable[[str], None] | None = None, time_s: float = 0.0) -> TransferResult:
+    """N bounces through one interface (:func:`~lftransfer.transfer.bounce.run_transfer`, ``rigs`` and ``models``
+    of one) or several (:func:`run_interfaces`): what ``lft run``, a converged sequence and the page's bounce layers
+    run."""
+    from lftransfer.transfer.bounce import run_transfer
+
+    if len(rigs) == 1 and len(models) == 1:
+        return run_transfer(rigs[0], models[0], scene, settings, progress=progress, time_s=time_s)
+    return run_interfaces(rigs, models, scene, settings, progress=progress, time_s=time_s)
 
 
 def run_interfaces(rigs: Sequence[Rig], models: Sequence[RigModel], scene: SyntheticScene,
@@ -132,7 +145,7 @@ class _Exchange:
                 sides[i].set_depth(swept.depth)
                 rigs[i].project(rigs[i].info.black())
         self.step("render synthetic direct")
-        ls, s0 = _render(sides, used, sides[0].direct_lights, s.seed, timer)
+        ls, s0 = render_sides(sides, sides[0].direct_lights, s.seed, timer, used=used)
         bounces = {i: [Bounce(0, self.r0[i], ls[i], s0 if i == used[0] else None, real_view=real_view_direct)]
                    for i in used}
         return bounces, [s0], raw0, real_view_direct
@@ -159,7 +172,7 @@ class _Exchange:
         self.step(f"bounce {n}: render synthetic lit by every R_{n - 1}")
         with timer("incident_light"):
             lights = [sides[i].incident_light(prev[i].real_lf, s.seed + n + 7 * i) for i in used]
-        ls, sn = _render(sides, used, lights, s.seed + 1000 * n, timer)
+        ls, sn = render_sides(sides, lights, s.seed + 1000 * n, timer, used=used)
         for i in used:
             bounces[i].append(Bounce(n, rn[i], ls[i], sn if i == used[0] else None, real_view=real_view_n,
                                      projector_gain=gain))
@@ -179,15 +192,3 @@ class _Exchange:
         for i in self.used:
             rigs[i].project(rigs[i].info.black())
         return patterns, real_view
-
-
-def _render(sides: list[SyntheticSide], used: list[int], lights: list, seed: int,
-            timer: StageTimer) -> tuple[dict, ViewImage]:
-    """Each exchanging interface's outgoing light field under ``lights`` and the synthetic view (the first side
-    renders the view and its own light field together)."""
-    ls0, view = sides[0].render(lights, seed, timer)
-    out = {0: ls0} if 0 in used else {}
-    for i in used:
-        if i:
-            out[i] = sides[i].lightfield(lights, seed + 17 * i, timer)
-    return out, view

@@ -33,7 +33,7 @@ import time
 from collections import deque
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -51,10 +51,10 @@ from lftransfer.transfer.bounce import TransferSettings, composite_view
 from lftransfer.transfer.capture import Capture, CaptureWorker, Projection, capture_once
 from lftransfer.transfer.projection import measure_depth
 from lftransfer.transfer.share import TurnTaking
-from lftransfer.transfer.synthetic_side import SyntheticSide
+from lftransfer.transfer.synthetic_side import SyntheticSide, render_sides
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["CAPTURE_STAGES", "FrameTimes", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
+__all__ = ["CAPTURE_STAGES", "FrameTimes", "InterfaceLight", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
 
 CAPTURE_STAGES = ("encode", "capture", "decode", "capture_view")
 RENDER_STAGES = ("pose", "measure_depth", "wait_capture", "incident_light", "render_lightfield", "prefilter",
@@ -94,6 +94,8 @@ class LiveFrame:
         capture_time_s: the scene time the real scene was posed at for that capture, seconds.
         capture_timings_s: that capture's own stages (:data:`CAPTURE_STAGES`).
         started_s, ready_s: ``time.perf_counter()`` when the step began and when the composite was ready.
+        interfaces: with several light field interfaces, each one's light this frame (:class:`InterfaceLight`, in
+            the scene's order; the fields above without ``interface`` are the first's); empty for one.
     """
 
     index: int
@@ -118,6 +120,26 @@ class LiveFrame:
     capture_timings_s: dict[str, float] = field(default_factory=dict)
     started_s: float = 0.0
     ready_s: float = 0.0
+    interfaces: tuple["InterfaceLight", ...] = ()
+
+
+@dataclass(frozen=True)
+class InterfaceLight:
+    """One light field interface's light in a live frame of several (:attr:`LiveFrame.interfaces`).
+
+    Attributes:
+        projected_lf: what its projector showed during the frame's capture (K, V, U, 3) radiance.
+        captured_lf: R, its decoded capture.
+        synthetic_lf: Ls_t, what the synthetic scene sends towards its array.
+        projected_image: its projector's image (device integers).
+        captured_raw: its LF camera's image (device integers).
+    """
+
+    projected_lf: LightField
+    captured_lf: LightField
+    synthetic_lf: LightField
+    projected_image: np.ndarray
+    captured_raw: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -172,28 +194,41 @@ class LiveTransfer:
     """
 
     def __init__(self, rig: Rig, model: RigModel, scene: SyntheticScene, settings: TransferSettings = TransferSettings(),
-                 *, projected: LightField | None = None, time_s: float = 0.0,
-                 depth: np.ndarray | None = None, loop: choices.LiveLoop = "sync",
-                 depth_every_frame: bool = False, probe=None, turns: TurnTaking | None = None) -> None:
+                 *, projected: LightField | Sequence[LightField] | None = None, time_s: float = 0.0,
+                 depth: np.ndarray | Sequence[np.ndarray] | None = None, loop: choices.LiveLoop = "sync",
+                 depth_every_frame: bool = False, probe=None, turns: TurnTaking | None = None,
+                 rigs: Sequence[Rig] = (), models: Sequence[RigModel] = ()) -> None:
         choices.check_choice("loop", loop, choices.LiveLoop)
-        self.rig = rig
-        self.model = model
+        self.rigs = list(rigs) or [rig]
+        self.models = list(models) or [model]
+        if len(self.rigs) != len(self.models) or self.rigs[0] is not rig:
+            raise ValueError(f"LiveTransfer: {len(self.rigs)} rigs for {len(self.models)} rig models (rig must be "
+                             "the first of rigs)")
+        if len(self.rigs) > 1 and settings.composite != "over":
+            raise ValueError("several interfaces composite with the over operator (composite = 'over'); the depth "
+                             "composite measures one interface's depth")
+        self.rig, self.model = rig, self.models[0]
         self.settings = settings
         self.loop = loop
         self.depth_every_frame = bool(depth_every_frame)
         self.turns = turns
-        self.side = SyntheticSide(model, scene, settings, time_s=time_s)
+        self.sides = SyntheticSide.through(self.models, scene, settings, time_s=time_s)
+        self.side = self.sides[0]
         # a light probe's room is still: photographed once (or given, another run's), before the first capture
         self.probe = None
         if scene.probe is not None:
             self.probe = probe if probe is not None else self.side.measure_probe(rig)
             self.side.set_probe(self.probe.radiance)
         U = V = settings.angular_samples
-        self._black = Projection(LightField.zeros(model.array, U, V), version=-1, black=True)
-        if projected is not None and projected.data.shape != self._black.lf.data.shape:
-            raise ValueError(f"projected light field has shape {projected.data.shape}, the loop needs "
-                             f"{self._black.lf.data.shape}")
-        self.projection = self._black if projected is None else Projection(projected, version=0)
+        self._black = Projection(tuple(LightField.zeros(m.array, U, V) for m in self.models), version=-1, black=True)
+        self.projection = self._black
+        if projected is not None:
+            lfs = _each(projected, len(self.rigs), "projected")
+            for lf, zero in zip(lfs, self._black.lfs):
+                if lf.data.shape != zero.data.shape:
+                    raise ValueError(f"projected light field has shape {lf.data.shape}, the loop needs "
+                                     f"{zero.data.shape}")
+            self.projection = Projection(lfs, version=0)
         self.index = 0
         self.version = 0                         # the synthetic scene's version (pose changes and edits)
         # (version, perf_counter) of the latest changes (a long session keeps the newest MAX_CHANGES)
@@ -201,36 +236,47 @@ class LiveTransfer:
         self._captures = 0
         self._used: tuple[int, int, float] | None = None   # (capture index, version, time) of the last frame
         self._worker: CaptureWorker | None = None
-        self._depth: np.ndarray | None = None
+        self._depths: tuple[np.ndarray, ...] | None = None
         self.view_depth: ViewDepth | None = None     # the real depth in the view camera (the depth composite)
         self._plate: np.ndarray | None = None        # the view camera's clean plate (photographed once)
         if depth is not None and settings.measures_depth:
-            self._set_depth(depth)
+            self._set_depths(_each(depth, len(self.rigs), "depth"))
 
     @property
     def projected(self) -> LightField:
-        """The synthetic light field the projector shows next (black at the start)."""
+        """The synthetic light field the (first) projector shows next (black at the start)."""
         return self.projection.lf
 
     @property
-    def depth(self) -> np.ndarray | None:
-        """(K, V, U) the real scene's depth the projection prefilter or the depth composite uses, metres (NaN:
-        unknown); None before it is measured or when the settings need none."""
-        return self._depth
+    def projected_lfs(self) -> tuple[LightField, ...]:
+        """What each interface's projector shows next, in the scene's order."""
+        return self.projection.lfs
 
-    def _set_depth(self, depth: np.ndarray, response: LightField | None = None,
-                   photograph: np.ndarray | None = None) -> None:
-        """Use ``depth`` ((K, V, U) metres): for the prefilter, and carried into the view camera for the depth
-        composite (inside the real objects' outline where its white ``response`` and the view camera's
-        ``photograph`` with the projector black are given:
+    @property
+    def depth(self) -> np.ndarray | None:
+        """(K, V, U) the real scene's depth the (first interface's) projection prefilter or the depth composite
+        uses, metres (NaN: unknown); None before it is measured or when the settings need none."""
+        return None if self._depths is None else self._depths[0]
+
+    @property
+    def depths(self) -> tuple[np.ndarray, ...] | None:
+        """:attr:`depth` of each interface, in the scene's order (each measured with its own projector)."""
+        return self._depths
+
+    def _set_depths(self, depths: Sequence[np.ndarray], response: LightField | None = None,
+                    photograph: np.ndarray | None = None) -> None:
+        """Use ``depths`` (each interface's (K, V, U) metres): for the prefilter, and carried into the view camera
+        for the depth composite (one interface; inside the real objects' outline where its white ``response`` and
+        the view camera's ``photograph`` with the projector black are given:
         :func:`~lftransfer.real_depth.outline.lightfield_view_depths`)."""
-        self._depth = depth
-        self.side.set_depth(depth)                   # prefilters only where the settings ask for it
-        if self.side.surface_solve is not None:
-            self.side.surface_solve.live = True      # converge over the frames (surface_solve.WARM_ITERATIONS)
+        self._depths = tuple(depths)
+        for side, depth in zip(self.sides, self._depths):
+            side.set_depth(depth)                    # prefilters only where the settings ask for it
+            if side.surface_solve is not None:
+                side.surface_solve.live = True       # converge over the frames (surface_solve.WARM_ITERATIONS)
         if self.settings.composite == "depth":
-            self.view_depth = lightfield_view_depths(depth, response, self.model, self.side.scene.view, photograph,
-                                                     self._plate, as_it_is=False)[-1]
+            self.view_depth = lightfield_view_depths(self._depths[0], response, self.model, self.side.scene.view,
+                                                     photograph, self._plate, as_it_is=False)[-1]
 
     @property
     def capture_rate_hz(self) -> float | None:
@@ -251,7 +297,8 @@ class LiveTransfer:
         """
         if settings is not None and settings.angular_samples != self.settings.angular_samples:
             raise ValueError("the angular samples of a running live loop cannot change; start a new one")
-        self.side.set_scene(scene, settings)
+        for side in self.sides:                     # the first (which holds the shared renderer) first
+            side.set_scene(scene, settings)
         self.settings = self.side.settings
         self._changed(changed_at)
 
@@ -263,10 +310,11 @@ class LiveTransfer:
             self._worker.show(self._black)
 
     @contextmanager
-    def holding_rig(self) -> Iterator[Rig]:
-        """The rig to the caller alone (a decoupled loop's captures wait meanwhile)."""
-        with (self._worker.holding() if self._worker is not None else nullcontext(self.rig)) as rig:
-            yield rig
+    def holding_rigs(self) -> Iterator[list[Rig]]:
+        """The rigs (one per interface, in the scene's order) to the caller alone (a decoupled loop's captures wait
+        meanwhile)."""
+        with (self._worker.holding() if self._worker is not None else nullcontext(self.rigs)) as rigs:
+            yield rigs
 
     @contextmanager
     def captures_paused(self) -> Iterator[None]:
@@ -305,35 +353,39 @@ class LiveTransfer:
 
     def _measure_depth(self) -> None:
         """The real scene's depth for the projection prefilter (``projection == "depth"``) or the depth composite:
-        two extra frames, projector black then white (:func:`~lftransfer.transfer.projection.measure_depth`), and
-        for the depth composite from a view camera on the real side a view photograph with the projector black
-        and, the first time, the clean plate (the real objects taken away for one photograph: the outline,
-        :mod:`lftransfer.real_depth.outline`). Measured once, at the first step: the real objects are taken to
-        stand still (a sequence whose real objects move projects the box light field and says so), or at every
-        step with ``depth_every_frame``."""
+        two extra frames per interface, its projector black then white, the others black
+        (:func:`~lftransfer.transfer.projection.measure_depth`), and for the depth composite from a view camera on
+        the real side a view photograph with the projector black and, the first time, the clean plate (the real
+        objects taken away for one photograph: the outline, :mod:`lftransfer.real_depth.outline`). Measured once,
+        at the first step: the real objects are taken to stand still (a sequence whose real objects move projects
+        the box light field and says so), or at every step with ``depth_every_frame``."""
         side = self.side
         outline = self.settings.composite == "depth" and on_real_side(self.model, side.scene.view)
-        with self.holding_rig() as rig:
-            rig.project(rig.info.black())
+        U = self.settings.angular_samples
+        with self.holding_rigs() as rigs:
+            for rig in rigs:
+                rig.project(rig.info.black())
             if outline and self._plate is None:
-                self._plate = photograph_clean_plate(rig, side.time_s)
-            direct = side.decoder(rig.capture_lf().codes)
-            photograph = rig.capture_view().radiance if outline else None
-            U = self.settings.angular_samples
-            swept = measure_depth(rig, side.decoder, side.encoder, self.model.projector.max_radiance, U, U, direct)
-            self._set_depth(swept.depth, swept.response, photograph)
+                self._plate = photograph_clean_plate(rigs[0], side.time_s)
+            direct = [s.decoder(rig.capture_lf().codes) for s, rig in zip(self.sides, rigs)]
+            photograph = rigs[0].capture_view().radiance if outline else None
+            swept = []
+            for s, model, rig, black in zip(self.sides, self.models, rigs, direct):
+                swept.append(measure_depth(rig, s.decoder, s.encoder, model.projector.max_radiance, U, U, black))
+                rig.project(rig.info.black())
+            self._set_depths([m.depth for m in swept], swept[0].response, photograph)
 
     def _capture(self, time_s: float, timer: StageTimer) -> Capture:
-        side = self.side
+        sides = self.sides
+        coders = ([s.encoder for s in sides], [s.decoder for s in sides])
+        peaks = [m.projector.max_radiance for m in self.models]
         if self.loop == "sync":
-            cap = capture_once(self.rig, side.encoder, side.decoder, self.projection, index=self._captures,
-                               real_time_s=time_s, max_radiance=self.model.projector.max_radiance,
-                               pose_real=False, timer=timer)
+            cap = capture_once(self.rigs, *coders, self.projection, index=self._captures, real_time_s=time_s,
+                               max_radiances=peaks, pose_real=False, timer=timer)
             self._captures += 1
             return cap
         if self._worker is None:
-            self._worker = CaptureWorker(self.rig, side.encoder, side.decoder, self.projection,
-                                         max_radiance=self.model.projector.max_radiance,
+            self._worker = CaptureWorker(self.rigs, *coders, self.projection, max_radiances=peaks,
                                          real_time=lambda: self.side.time_s)
             self._worker.start()
         with timer("wait_capture"):
@@ -352,34 +404,50 @@ class LiveTransfer:
         side, s = self.side, self.settings
         with timer("pose"):
             moved = side.pose(time_s)
+            for other in self.sides[1:]:
+                other.pose(time_s)
         if moved:
             self._changed(t0)
         if self.loop == "sync":
-            self.rig.setup(RealScene(time_s=time_s))
-        if s.measures_depth and (self._depth is None or self.depth_every_frame):
+            for rig in self.rigs:
+                rig.setup(RealScene(time_s=time_s))
+        if s.measures_depth and (self._depths is None or self.depth_every_frame):
             with timer("measure_depth"):
                 self._measure_depth()
         cap = self._capture(time_s, timer)
         with self._renderer_turn():
             # the same Monte Carlo seed every frame: a still scene shows a still noise pattern, not a flicker
             with timer("incident_light"):
-                lights = [*side.direct_lights, side.incident_light(cap.captured_lf, s.seed)]
-            synthetic_lf, view = side.render(lights, s.seed, timer)
+                lights = [*side.direct_lights, *(each.incident_light(lf, s.seed + 7 * i) for i, (each, lf)
+                                                 in enumerate(zip(self.sides, cap.captured_lfs)))]
+            sent, view = render_sides(self.sides, lights, s.seed, timer)
             with timer("composite"):
                 comp = composite_view(view, cap.real_view, self.view_depth)
-        self.projection = Projection(synthetic_lf, self.version)
+        self.projection = Projection(tuple(sent[i] for i in range(len(self.sides))), self.version)
         if self._worker is not None:
             self._worker.show(self.projection)
         ready = time.perf_counter()
+        several = () if len(self.sides) == 1 else tuple(
+            InterfaceLight(*light) for light in zip(cap.projection.lfs, cap.captured_lfs, self.projection.lfs,
+                                                    cap.projected_images, cap.captured_raws))
         frame = LiveFrame(index=self.index, time_s=float(time_s), projected_lf=cap.projection.lf,
-                          captured_lf=cap.captured_lf, synthetic_lf=synthetic_lf, real_view=cap.real_view,
+                          captured_lf=cap.captured_lf, synthetic_lf=sent[0], real_view=cap.real_view,
                           synthetic_view=view, composite=comp, projected_image=cap.projected_image,
                           captured_raw=cap.captured_raw, clipped_fraction=cap.clipped_fraction, moved=moved,
                           timings_s={**timer.totals, "total": ready - t0}, loop=self.loop,
                           scene_version=self.version, light_version=cap.projection.version,
                           capture_index=cap.index, capture_age_s=ready - cap.started_s,
                           capture_time_s=cap.real_time_s, capture_timings_s=dict(cap.timings_s),
-                          started_s=t0, ready_s=ready)
+                          started_s=t0, ready_s=ready, interfaces=several)
         self._used = (cap.index, self.version, float(time_s))
         self.index += 1
         return frame
+
+
+def _each(value, n: int, name: str) -> tuple:
+    """``value`` for each of ``n`` interfaces: one value (one interface) or a sequence of ``n``."""
+    several = isinstance(value, (list, tuple))
+    values = tuple(value) if several else (value,)
+    if len(values) != n:
+        raise ValueError(f"{name}: {len(values)} given for {n} light field interface(s)")
+    return values

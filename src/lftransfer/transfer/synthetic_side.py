@@ -23,7 +23,7 @@ from lftransfer.real_depth.surface import measured_surface
 from lftransfer.transfer.projection import DepthPrefilter
 from lftransfer.transfer.surface_solve import SolvingEncoder, SurfaceSolve, TargetedLightField
 
-__all__ = ["SyntheticSide"]
+__all__ = ["SyntheticSide", "render_sides"]
 
 
 class SyntheticSide:
@@ -67,6 +67,7 @@ class SyntheticSide:
 
         mi = mitsuba()
         self.model = model
+        self._primary = primary
         self._frame = model.world_to_array() if primary is None else primary._frame     # world -> renderer
         self.array_pose = None if primary is None else self._frame @ np.linalg.inv(model.world_to_array())
         self.settings = settings
@@ -149,6 +150,9 @@ class SyntheticSide:
     def pose(self, t: float) -> bool:
         """Move the synthetic objects to their pose at time ``t`` (seconds); returns whether any moved."""
         t = float(t)
+        if self._primary is not None:      # the first interface's side moves the shared renderer
+            self.time_s = t
+            return False
         if t == self.time_s or not self.scene.moving:
             self.time_s = t
             return False
@@ -157,10 +161,18 @@ class SyntheticSide:
 
     def set_scene(self, scene: SyntheticScene, settings=None) -> None:
         """Replace the synthetic scene (objects moved, materials or lights changed, as an interactive edit does)
-        and optionally the settings; the codecs stay, the renderer is updated in place where it can be."""
+        and optionally the settings; the codecs stay, the renderer is updated in place where it can be. With several
+        interfaces, the first's side is changed first, then the others (:func:`render_sides`)."""
         scene = check_synthetic(scene)
         settings = settings if settings is not None else self.settings
         self.scene, self.settings = scene, settings
+        if self._primary is not None:      # the first interface's side, changed first, holds the shared part
+            first = self._primary
+            self.renderer, self.point_lights, self.direct_lights = first.renderer, first.point_lights, \
+                first.direct_lights
+            if self.depth is not None:
+                self.set_depth(self.depth)
+            return
         posed = self._posed(self.time_s)
         kind = resolve_renderer(posed, settings.renderer)
         if (kind, settings.max_depth, len(posed.synthetic)) == (self.renderer.kind, self.renderer.max_depth,
@@ -343,6 +355,31 @@ class SyntheticSide:
             entries = gain[:len(landed)].reshape(np.shape(depth))
             self._gain = (self.probe, depth, solve, (entries, None if solve is None else gain[len(landed):]))
         return self._gain[3]
+
+
+def render_sides(sides: Sequence[SyntheticSide], lights: Sequence, seed: int, timer: Callable | None = None, *,
+                 used: Sequence[int] | None = None) -> tuple[dict[int, LightField], ViewImage]:
+    """The outgoing light field of each of several interfaces' sides (:meth:`SyntheticSide.through`) under one set
+    of ``lights``, and the synthetic view: the first side renders the view and its own light field together, each
+    other its light field alone (seeds ``seed + 17 i``).
+
+    Args:
+        sides: every interface's side, in the scene's order.
+        lights: the synthetic scene's lights (its own and every interface's captured light field).
+        seed: the first side's Monte Carlo seed.
+        timer: :meth:`SyntheticSide.render`'s stage timer.
+        used: the interfaces whose light field is wanted; None: all.
+
+    Returns:
+        ({interface: Ls}, S).
+    """
+    ls0, view = sides[0].render(lights, seed, timer)
+    wanted = range(len(sides)) if used is None else used
+    out = {0: ls0} if 0 in wanted else {}
+    for i in wanted:
+        if i:
+            out[i] = sides[i].lightfield(lights, seed + 17 * i, timer)
+    return out, view
 
 
 PROBE_SAMPLES = 16          # directions of the light probe's map per shading point

@@ -29,11 +29,14 @@ def open_session(scene, *, rig: str = "sim", rig_model: str = DEFAULT_RIG_MODEL,
     options = RunOptions(rig=RigSpec.parse(rig), rig_model=rig_model, calibration=calibration, truth_seed=truth_seed,
                          settings=settings, recalibrate=recalibrate)
     resolved = options.resolve(scene, live=True, loop=loop)
-    opened = open_rig(scene, options, simulator=resolved.simulator)
+    opened = open_rig(scene, options, simulator=resolved.simulator, interfaces=True)
     known = acquire_model(opened, scene, options, out, False, progress or (lambda _m: None))
     for note in known.warnings:
         (warn or (lambda _m: None))(note)
-    live = LiveTransfer(opened.rig, known.model, known.scene, resolved.transfer, loop=loop, turns=opened.turns)
-    sim = opened.rig if hasattr(opened.rig, "place_real") else None
+    for note in resolved.adjustments:
+        (warn or (lambda _m: None))(note)
+    live = LiveTransfer(opened.rig, known.model, known.scene, resolved.transfer, loop=loop, turns=opened.turns,
+                        rigs=opened.rigs, models=known.models)
+    sim = opened.rig if hasattr(opened.rig, "place_real") else None     # moves them for every interface
     return LiveSession(scene, live, out, sim_rig=sim, oracle=opened.oracle, lights=known.scene.lights,
                        overrides=options.settings)

@@ -6,8 +6,8 @@ with a message, the loop never sees it) and applied between frames, so a change 
 frame and the page never waits for a render.
 
 In the live loop a frame is one exchange, so its bounces cannot be told apart. On demand (an edit of type
-"bounces") the loop thread itself runs the bounce loop (:func:`lftransfer.transfer.bounce.run_transfer`, with
-``bounce_views``) on the scene as it stands, between two frames: the live loop waits meanwhile (one thread uses
+"bounces") the loop thread itself runs the bounce loop (:func:`lftransfer.transfer.interfaces.transfer_through`,
+through every light field interface, with ``bounce_views``) on the scene as it stands, between two frames: the live loop waits meanwhile (one thread uses
 the rig) and goes on afterwards as it was (paused or running, its accumulated light kept), and the per-bounce
 layers R_n and S_n, each at its own display gain (:func:`lftransfer.reports.report.bounce_layers`), go to a callback
 (:class:`ViewerBounces`). Nothing of this runs unless asked for.
@@ -31,14 +31,15 @@ import numpy as np
 
 from lftransfer.app.viewer.compare import GT_SPP, GroundTruthCompare
 from lftransfer.app.viewer.recorder import Recorder
-from lftransfer.reports.report import (bounce_layers, device_image, display_scale, emitter_ceiling, live_panel,
-                                   to_display)
+from lftransfer.reports.report import (bounce_layers, device_image, display_scale, emitter_ceiling, interfaces_panel,
+                                      live_panel, to_display)
 from lftransfer.imageio_utils import to_preview
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.rig.base import RigError
 from lftransfer.scenes import SceneError, with_overrides
 from lftransfer.settings import Overrides, resolve_settings
-from lftransfer.transfer.bounce import TransferSettings, run_transfer
+from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.interfaces import transfer_through
 from lftransfer.transfer.latency import motion_latency
 from lftransfer.transfer.live import LIVE_STAGES, FrameTimes, LiveFrame, LiveTransfer
 from lftransfer.transfer.timer import CoreMeter, rate_hz
@@ -217,6 +218,7 @@ class LiveSession:
         self.live = live
         self.out = Path(out)
         self.sim_rig = sim_rig
+        self.interface_names = [i.name for i in getattr(scene, "interfaces", ())]   # several: each one's, in order
         self.paused = False
         self.exchanges = 1
         self.layers: set[str] = {"composite"}
@@ -421,7 +423,7 @@ class LiveSession:
                 else:
                     objs = [o.model_dump() for o in self.sim_rig.real_objects]
                     objs[index] = edited
-                    with self.live.holding_rig():       # not while a capture renders the real scene
+                    with self.live.holding_rigs():      # not while a capture renders the real scene
                         self.sim_rig.place_real(objs)
             elif kind == "save":
                 self.save()
@@ -508,8 +510,9 @@ class LiveSession:
 
         try:
             progress("starting")
-            with self.live.holding_rig() as rig:         # a decoupled loop's captures wait meanwhile
-                result = run_transfer(rig, self.live.model, self.synthetic(), settings, progress=progress, time_s=t)
+            with self.live.holding_rigs() as rigs:       # a decoupled loop's captures wait meanwhile
+                result = transfer_through(rigs, self.live.models, self.synthetic(), settings, progress=progress,
+                                          time_s=t)
             comp = result.composite()
             layers = bounce_layers(result, comp, ceiling=emitter_ceiling(self.scene))
             base = layers[0].scale                        # the direct images' display scale
@@ -608,11 +611,15 @@ class LiveSession:
             return np.concatenate([left, right], axis=1)
         if layer == "panel":
             return live_panel(frame, None, self.scale, camera_bits=rig.lf_camera_bits,
-                              projector_bits=rig.projector_bits, tile_width=320)
+                              projector_bits=rig.projector_bits, tile_width=320, names=self.interface_names)
         if layer == "real":
             return to_preview(np.clip(frame.real_view, 0, None), self.scale)
         if layer == "synthetic":
             return to_preview(np.clip(frame.synthetic_view.rgb, 0, None), self.scale)
+        if layer in ("captured", "projected") and frame.interfaces:     # several interfaces: a row for each
+            return interfaces_panel([x.projected_image for x in frame.interfaces], self.interface_names,
+                                    [x.captured_raw for x in frame.interfaces], rig.lf_camera_bits,
+                                    titles=("its LF camera (captured)", "its projector (previous Ls)"))
         if layer == "captured":
             return device_image(frame.captured_raw, rig.lf_camera_bits, stretch=True)
         if layer == "projected":

@@ -166,7 +166,7 @@ def _stage_medians(frames, stages, times: str = "timings_s") -> dict:
 def _renderer_alone(live: LiveTransfer, times: np.ndarray, first: int, frames: int) -> tuple[float, float, list]:
     """(frames per second, cores busy, the frames) of ``frames`` frames rendered with the captures held, from time
     index ``first`` on: the capture in progress finishes first, then no new one begins."""
-    with live.holding_rig():                     # waits for the capture in progress; none begins meanwhile
+    with live.holding_rigs():                    # waits for the capture in progress; none begins meanwhile
         cores = CoreMeter(window_s=math.inf)
         cores.sample()
         start = time.perf_counter()
