@@ -60,7 +60,7 @@ def test_02_what_several_interfaces_cannot_run_on_yet_is_said(variant, tmp_path,
 
 
 def test_03_the_use_cases_of_one_interface_refuse_several(variant, tmp_path):
-    """A benchmark, a study or the exchange check would run the first interface alone: they refuse such a scene in
+    """A benchmark or a study would run the first interface alone: they refuse such a scene in
     one line instead."""
     from lftransfer.runs.rigs import open_rig
 

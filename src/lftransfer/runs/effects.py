@@ -36,6 +36,7 @@ from lftransfer.runs.sequence import frame_metrics, sequence_summary
 from lftransfer.reports.report import write_error_pictures
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
 from lftransfer.transfer.bounce import TransferSettings, run_transfer
+from lftransfer.transfer.interfaces import run_interfaces
 
 __all__ = ["EffectCurve", "EffectPoint", "ExchangeCheck", "plot_effect", "verify_exchange"]
 
@@ -143,7 +144,7 @@ class _Checking:
     """What every verified frame's check shares (:func:`verify_exchange`)."""
 
     opened: object
-    model: object
+    models: list               # each light field interface's rig model (one for one interface)
     scene: object              # the synthetic part, posed by the sequence's model
     depth: object              # the live frames' own depth, or None
     out: Path
@@ -158,6 +159,15 @@ class _Checking:
     step: Callable[[str], None]
 
 
+def _transfer(rigs, models, scene, settings: TransferSettings, time_s: float, depths: dict):
+    """The bounce loop a frame's check runs: through one interface with the frame's own depth (``depths``: the
+    ``depth`` and ``view_depth`` of :func:`~lftransfer.transfer.bounce.run_transfer`), or through several
+    (:func:`~lftransfer.transfer.interfaces.run_interfaces`, which measures each interface's depth itself)."""
+    if len(rigs) == 1:
+        return run_transfer(rigs[0], models[0], scene, settings, time_s=time_s, **depths)
+    return run_interfaces(rigs, models, scene, settings, time_s=time_s)
+
+
 def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     """One verified frame: its cross-transfer error by side into its metrics, its fidelity floor where asked for,
     and the effect's point where the scene has one (:func:`verify_exchange`)."""
@@ -165,7 +175,8 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
     from lftransfer.sim.metrics import cross_term_image, cross_transfer_error
 
-    opened, oracle, model, ps, out, options = ctx.opened, ctx.opened.oracle, ctx.model, ctx.scene, ctx.out, ctx.options
+    opened, oracle, models, ps, out, options = ctx.opened, ctx.opened.oracle, ctx.models, ctx.scene, ctx.out, ctx.options
+    rigs = opened.each_rig
     spp, settings, direct, effect, depth, step = ctx.spp, ctx.settings, ctx.direct, ctx.effect, ctx.depth, ctx.step
     render, parts = ctx.render, ctx.parts
     i, t = int(f["index"]), float(f["time_s"])
@@ -175,7 +186,7 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     # a depth composite: the frame's own depth, so that both composites hide the same pixels
     kept = read_frame_depth(out, i)
     same = {} if kept is None else {"depth": kept[0], "view_depth": kept[1]}
-    alone = run_transfer(opened.rig, model, ps, direct, time_s=t, **same)
+    alone = _transfer(rigs, models, ps, direct, t, same)
     no_exchange = alone.composite_direct()
     if ctx.quiet:
         gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
@@ -191,16 +202,14 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
         f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
     if floor_skipped(options) is None:
         step(f"fidelity floor: frame {i}")
-        converged = run_transfer(opened.rig, model, ps, settings, time_s=t,
-                                 **(same or {"depth": depth}))
-        _frame_floor(oracle, getattr(opened.rig, "inner", opened.rig), converged, gt, settings, f,
-                     frame - no_exchange)
+        converged = _transfer(rigs, models, ps, settings, t, same or {"depth": depth})
+        _frame_floor(oracle, list(opened.rigs) or getattr(opened.rig, "inner", opened.rig), converged, gt, settings,
+                     f, frame - no_exchange)
     if effect is None:
         return
     truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
                                         use_cache=options.use_cache).image
-    result = run_transfer(opened.rig, model, _without(ps, effect.by), settings, time_s=t,
-                          **(same or {"depth": depth}))
+    result = _transfer(rigs, models, _without(ps, effect.by), settings, t, same or {"depth": depth})
     transfer_without = result.composite()
     pixels = object_pixels(world, effect.on)
     check.effect.points.append(EffectPoint(
@@ -280,22 +289,23 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
     check = ExchangeCheck(effect=EffectCurve(kind=effect.kind, on=effect.on, by=effect.by) if effect else None)
     resolved = options.resolve(scene)
     spp = resolved.gt_spp
-    opened = open_rig(scene, options)
+    opened = open_rig(scene, options, interfaces=True)
     try:
         oracle = opened.oracle
         if oracle is None:
             return None
         known = acquire_model(opened, scene, options, out, True, step)
-        model, ps = known.model, known.scene
+        ps = known.scene
         depth = read_depth(out)         # the live frames' own depth: both sides prefilter alike
         with reference_renderer(options.cluster if resolved.quiet_reference else None,
                                 use_cache=options.use_cache, step=step) as (render, parts):
-            ctx = _Checking(opened, model, ps, depth, out, options, spp, resolved.quiet_reference, settings, direct,
+            ctx = _Checking(opened, known.each_model, ps, depth, out, options, spp, resolved.quiet_reference, settings,
+                            direct,
                             effect, render, parts, step)
             for f in verified:
                 _check_frame(ctx, f, check)
     finally:
-        opened.rig.close()
+        opened.close()
     _summarise(report, check, verified)
     write_json(out / "report.json", report)
     if check.effect is not None:

@@ -37,33 +37,46 @@ NOMINAL = "nominal (rig file)"          # the report's rig_model for the rig fil
 
 @dataclass(frozen=True)
 class RigSpec:
-    """Which rig a run uses: ``sim``, ``hardware:RIG.toml`` or ``replay:DIR``.
+    """Which rig a run uses: ``sim``, ``hardware:RIG.toml`` (``hardware:FRONT.toml,SIDE.toml``: one rig file per
+    light field interface of the scene, in its order) or ``replay:DIR``.
 
     Attributes:
         kind: "sim", "hardware" or "replay".
-        path: the rig file (hardware) or the recording's folder (replay).
+        path: the (first) rig file (hardware) or the recording's folder (replay).
+        paths: every rig file (hardware; one per interface); ``(path,)`` otherwise.
     """
 
     kind: str = "sim"
     path: Path | None = None
+    paths: tuple[Path, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.paths and self.path is not None:
+            object.__setattr__(self, "paths", (self.path,))
 
     @classmethod
     def parse(cls, text: str) -> "RigSpec":
-        """``"sim"``, ``"hardware:RIG.toml"`` or ``"replay:DIR"`` -> RigSpec (ValueError naming what is wrong)."""
+        """``"sim"``, ``"hardware:RIG.toml[,RIG2.toml...]"`` or ``"replay:DIR"`` -> RigSpec (ValueError naming
+        what is wrong)."""
         kind, _, rest = str(text).partition(":")
         if kind == "sim" and not rest:
             return cls("sim")
-        if kind in ("hardware", "replay") and rest:
+        if kind == "hardware" and rest:
+            paths = tuple(Path(part).expanduser() for part in rest.split(","))
+            for path in paths:
+                if not path.is_file():
+                    raise ValueError(f"--rig {text}: the rig file {path} does not exist")
+            return cls(kind, paths[0], paths)
+        if kind == "replay" and rest:
             path = Path(rest).expanduser()
-            if kind == "hardware" and not path.is_file():
-                raise ValueError(f"--rig {text}: the rig file {path} does not exist")
-            if kind == "replay" and not (path / "manifest.json").is_file():
+            if not (path / "manifest.json").is_file():
                 raise ValueError(f"--rig {text}: {path} is not a recording (no manifest.json; make one with lft record)")
             return cls(kind, path)
-        raise ValueError(f"--rig {text!r}: expected 'sim', 'hardware:RIG.toml' or 'replay:DIR'")
+        raise ValueError(f"--rig {text!r}: expected 'sim', 'hardware:RIG.toml' (one rig file per light field "
+                         "interface, separated by commas) or 'replay:DIR'")
 
     def __str__(self) -> str:
-        return self.kind if self.path is None else f"{self.kind}:{self.path}"
+        return self.kind if self.path is None else f"{self.kind}:{','.join(str(p) for p in self.paths)}"
 
 
 class CalibrationFailedError(RuntimeError):
@@ -211,9 +224,11 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
             from lftransfer.scenes import SceneError
 
             raise SceneError(f"{interfaces_named(scene)}: lft run, lft calibrate, lft render and lft live take "
-                             "them; benchmarks, studies and the exchange check run one interface so far "
-                             "(docs/interfaces.md)")
-        return _open_interfaces(scene, options, simulator)
+                             "them; benchmarks and studies run one interface so far (docs/interfaces.md)")
+        return _open_interfaces(scene, options, simulator, operator)
+    if len(spec.paths) > 1:
+        raise ValueError(f"--rig {spec}: {len(spec.paths)} rig files for a scene of one light field interface "
+                         "(several are for a scene's [[interface]] tables, one each)")
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads
 
@@ -254,16 +269,30 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
     return opened
 
 
-def _open_interfaces(scene, options, simulator) -> OpenedRig:
-    """The rigs of a scene with several interfaces: the simulated rig in this process only, so far."""
+def _open_interfaces(scene, options, simulator, operator) -> OpenedRig:
+    """The rigs of a scene with several interfaces: the simulated rig in this process, or a physical rig (the device
+    twin) with one rig file per interface in the scene's order (:func:`lftransfer.rig.hardware.open_interfaces`)."""
     from lftransfer.scenes import SceneError
-    from lftransfer.sim.oracle import open_simulated_interfaces
 
+    names = interfaces_named(scene)
+    if options.rig.kind == "hardware":
+        from lftransfer.rig.hardware import load_rig_file, open_interfaces
+
+        paths = options.rig.paths
+        if len(paths) != len(scene.interfaces):
+            raise SceneError(f"{names}: --rig {options.rig} names {len(paths)} rig file(s); give one per interface, "
+                             "in that order, separated by commas (hardware:FIRST.toml,SECOND.toml)")
+        if options.record is not None:
+            raise SceneError(f"{names}: a recording holds one interface's devices (no --record)")
+        rigs = open_interfaces([load_rig_file(p) for p in paths], operator)
+        return OpenedRig(rig=rigs[0], rigs=tuple(rigs))
     if options.rig.kind != "sim" or (simulator is not None and simulator.where == "process") \
             or options.record is not None:
-        raise SceneError(f"{interfaces_named(scene)}: they run on the simulated rig in this process (--rig sim, "
-                         "--simulator thread, no recording); a physical rig, a recording and the simulator's own "
-                         "process have one interface")
+        raise SceneError(f"{names}: they run on the simulated rig in this process (--rig sim, --simulator thread, "
+                         "no recording) or on a physical rig (--rig hardware:, one rig file per interface); a "
+                         "recording and the simulator's own process have one interface")
+    from lftransfer.sim.oracle import open_simulated_interfaces
+
     rigs, oracle = open_simulated_interfaces(scene, options.truth_seed, capture_spp=options.capture_spp)
     return OpenedRig(rig=rigs[0], oracle=oracle, rigs=tuple(rigs))
 

@@ -152,8 +152,8 @@ def one_interface(scene) -> None:
         from lftransfer.scenes import SceneError
         from lftransfer.scenes.interfaces import interfaces_named
 
-        raise SceneError(f"{interfaces_named(scene)}: lft run and lft calibrate take them; this command simulates one "
-                         "(docs/interfaces.md)")
+        raise SceneError(f"{interfaces_named(scene)}: lft run, lft calibrate, lft render, lft live and lft twin take "
+                         "them; this command simulates one (docs/interfaces.md)")
 
 
 def open_simulated_interfaces(scene, truth_seed: int | None, *, capture_spp: int = DEFAULT_CAPTURE_SPP):
@@ -176,10 +176,13 @@ def open_simulated_interfaces(scene, truth_seed: int | None, *, capture_spp: int
 def hidden_oracle(scene, truth_seed: int | None) -> Oracle:
     """The oracle of the hidden truth ``truth_seed`` draws for ``scene``, without a rig (a recording made on the
     simulated rig, the device twin's world)."""
-    from lftransfer.sim.truth import hidden_world
+    from lftransfer.rig.model import nominal_interfaces
+    from lftransfer.sim.truth import hidden_world, true_interfaces
 
     world, truth = hidden_world(scene, truth_seed)
-    return Oracle(world=world, model=truth if truth is not None else nominal_rig(scene.rig), truth_seed=truth_seed)
+    models = tuple((true_interfaces(scene, truth_seed) or nominal_interfaces(scene)) if scene.interfaces else ())
+    return Oracle(world=world, model=models[0] if models else truth if truth is not None else nominal_rig(scene.rig),
+                  truth_seed=truth_seed, models=models)
 
 
 def oracle_of_recording(scene, meta: dict) -> Oracle | None:

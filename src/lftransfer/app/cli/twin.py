@@ -35,20 +35,27 @@ def _serve_table(twin, scene_file: Path, rig_file: Path, quick: bool, options) -
     table = Table(title=escape(f"lft twin serve {scene_file}"))
     table.add_column("")
     table.add_column("")
-    row(table, "rig file", f"{rig_file} (manifest {manifest_path(rig_file)})")
-    row(table, "streams", f"{twin.server.url}/lf, {twin.server.url}/view")
+    files = ",".join(str(p) for p in twin.rig_files)
+    several = len(twin.names) > 1
+    row(table, "rig file" + ("s" if several else ""), f"{files} (manifest {manifest_path(rig_file)})")
+    if several:
+        row(table, "interfaces", ", ".join(twin.names) + ": each with its LF camera, projector and operator "
+                                 "endpoint; one view camera")
+    row(table, "streams", ", ".join(f"{twin.server.url}/{p}" for p in twin.cameras))
     row(table, "frames", f"LF camera {twin.world.info.lf_camera_bits}-bit codes, view camera linear 16-bit; "
                           "both as three stacked GRAY16LE planes in FFV1 (lossless; OpenCV's FFmpeg reader "
                           "returns 16-bit colour as 8 bits), planar = true in the rig file")
-    row(table, "operator endpoint", f"{twin.server.url}/operator")
-    row(table, "projector", "missing (--projector-missing)" if options.projector_missing else
-         f"display 0 of X display {twin.display}")
+    row(table, "operator endpoint" + ("s" if several else ""),
+        ", ".join(f"{twin.server.url}/{twin.operator_path(i)}" for i in range(len(twin.names))))
+    row(table, "projector" + ("s" if several else ""), "missing (--projector-missing)" if options.projector_missing
+        else f"display 0 of X display {twin.display}" + (", side by side (each rig file's projector.x)"
+                                                          if several else ""))
     o = options
     row(table, "cameras", f"LF {o.lf_fps:g} fps, view {o.view_fps:g} fps; "
                           f"latency {o.latency_ms:g} +- {o.jitter_ms:g} ms"
          + (f"; drop {o.drop_rate:g}" if o.drop_rate else "")
          + (f"; {o.stop_camera} stops after {o.stop_after_s:g} s" if o.stop_after_s is not None else ""))
-    row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{rig_file}")
+    row(table, "use it", f"lft run {scene_file}{' --quick' if quick else ''} --rig hardware:{files}")
     return table
 
 
@@ -110,7 +117,7 @@ def serve_cmd(scene_file: Path = typer.Argument(..., metavar="SCENE.toml",
     with console.status("starting the twin (its world, X display, cameras)"):
         try:
             twin = Twin(scene, rig_file, options, scene_ref=ref)
-        except RuntimeError as exc:
+        except (RuntimeError, ValueError) as exc:
             fail(f"the twin could not start: {exc}", FAILED)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -149,7 +156,7 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
         if not rig.startswith("hardware:"):
             fail(f"{report_path}: rig: the run was made on {rig!r}, not through a twin (hardware:TWIN.toml); "
                  "give --twin TWIN.json")
-        twin = manifest_path(rig.split(":", 1)[1])
+        twin = manifest_path(rig.split(":", 1)[1].split(",")[0])      # beside the (first interface's) rig file
     try:
         manifest = json.loads(twin.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:

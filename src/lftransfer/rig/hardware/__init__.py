@@ -17,8 +17,8 @@ imported when a device is opened.
 from lftransfer.rig.hardware.config import (CameraConfig, HardwareRigConfig, ProjectorConfig, RigFileError,
                                             ViewCameraConfig, load_rig_file, write_rig_value)
 from lftransfer.rig.hardware.latency import LatencyResult, calibrate_latency, measure_latency
-from lftransfer.rig.hardware.rig import HardwareRig, no_operator
+from lftransfer.rig.hardware.rig import HardwareRig, no_operator, open_interfaces
 
 __all__ = ["CameraConfig", "HardwareRig", "HardwareRigConfig", "LatencyResult", "ProjectorConfig",
            "RigFileError", "ViewCameraConfig", "calibrate_latency", "load_rig_file", "measure_latency",
-           "no_operator", "write_rig_value"]
+           "no_operator", "open_interfaces", "write_rig_value"]

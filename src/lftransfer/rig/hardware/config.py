@@ -4,7 +4,8 @@ A TOML file with three tables, validated with pydantic (``example_rig.toml`` bes
 field)::
 
     [lf_camera]     source, width, height, bits, exposure, gain, frames, timeout_s, ...
-    [view_camera]   the same, plus response_gamma and radiance_scale (its radiometric linearisation)
+    [view_camera]   the same, plus response_gamma and radiance_scale (its radiometric linearisation); left out
+                    only in the rig file of a scene's second or later light field interface
     [projector]     display, x_display, width, height, bits, settle_s, drop_frames, stale_check, timeout_s
     [operator]      kind (terminal | http | command), url, command, timeout_s  (optional: who arranges set-ups)
 
@@ -240,6 +241,11 @@ class ProjectorConfig(_Model):
         x_display: the X display the window opens on (``":1"``; the process's ``DISPLAY`` is set to it), or None
             for the session's own ``$DISPLAY``.
         width, height: the projector's resolution, pixels; the monitor must run at it or offer it as a mode.
+        x, y: where the projector's top-left pixel is on its monitor, when the projector is a region of a wider one
+            (projectors side by side on one monitor, as a video wall controller or a graphics card's mosaic mode
+            shows them; the device twin's projectors of several light field interfaces): the window is then a
+            borderless window of width x height there, the monitor at least that large. None (both): the projector
+            is the whole monitor, and the window full screen.
         bits: bit depth of the projector's codes (8: uint8 images; 9..16: uint16 images).
         settle_s: seconds waited after showing an image before a capture counts (display and camera latency;
             written by :func:`~lftransfer.rig.hardware.calibrate_latency`).
@@ -255,11 +261,21 @@ class ProjectorConfig(_Model):
     x_display: str | None = None
     width: PosInt
     height: PosInt
+    x: NonNegInt | None = None
+    y: NonNegInt | None = None
     bits: Annotated[int, _Num, Field(ge=8, le=16)] = 8
     settle_s: NonNegFloat = 0.1
     drop_frames: NonNegInt = 1
     stale_check: bool = True
     timeout_s: PosFloat = 10.0
+
+
+    @model_validator(mode="after")
+    def _region(self) -> "ProjectorConfig":
+        if (self.x is None) != (self.y is None):
+            raise ValueError("x and y: give both (the projector's region on its monitor) or neither (the whole "
+                             "monitor)")
+        return self
 
 
 class OperatorConfig(_Model):
@@ -294,21 +310,27 @@ class HardwareRigConfig(_Model):
 
     Attributes:
         lf_camera: the LF camera behind the lens array.
-        view_camera: the view camera (the rig's radiometric reference).
+        view_camera: the view camera (the rig's radiometric reference). None only in the rig file of a scene's
+            second or later light field interface, which uses the first one's
+            (:func:`~lftransfer.rig.hardware.open_interfaces`).
         projector: the projector behind the lens array.
         operator: who arranges the set-ups (:class:`OperatorConfig`; a person at the terminal by default).
         source: the file it was read from (set by :func:`load_rig_file`), or None.
     """
 
     lf_camera: CameraConfig
-    view_camera: ViewCameraConfig
+    view_camera: ViewCameraConfig | None = None
     projector: ProjectorConfig
     operator: OperatorConfig = OperatorConfig()
     source: Path | None = None
 
     @property
     def info(self) -> RigInfo:
-        """The :class:`~lftransfer.rig.requests.RigInfo` this rig file describes."""
+        """The :class:`~lftransfer.rig.requests.RigInfo` this rig file describes (RigFileError without a view
+        camera)."""
+        if self.view_camera is None:
+            raise RigFileError(f"{self.source or '<rig>'}: view_camera: missing: only the rig file of a scene's second "
+                               "or later light field interface may leave it out (it uses the first one's)")
         return RigInfo(lf_camera=(self.lf_camera.width, self.lf_camera.height), lf_camera_bits=self.lf_camera.bits,
                        projector=(self.projector.width, self.projector.height),
                        projector_bits=self.projector.bits,

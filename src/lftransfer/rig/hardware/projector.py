@@ -204,7 +204,11 @@ class ProjectorWindow:
         mode = glfw.get_video_mode(monitor)
         size = (mode.size.width, mode.size.height)
         refresh = mode.refresh_rate
-        if size != (c.width, c.height):
+        region = c.x is not None
+        if region and (size[0] < c.x + c.width or size[1] < c.y + c.height):
+            raise self._fail(step, f"display {c.display} ({self.monitor_name}) is {size[0]}x{size[1]}: the "
+                             f"projector's region {c.width}x{c.height} at ({c.x}, {c.y}) does not fit on it")
+        if not region and size != (c.width, c.height):
             modes = [(m.size.width, m.size.height, m.refresh_rate) for m in glfw.get_video_modes(monitor) or []]
             fitting = [m for m in modes if m[:2] == (c.width, c.height)]
             if not fitting:
@@ -219,11 +223,18 @@ class ProjectorWindow:
                             (glfw.REFRESH_RATE, refresh), (glfw.DECORATED, False), (glfw.RESIZABLE, False),
                             (glfw.AUTO_ICONIFY, False), (glfw.FOCUS_ON_SHOW, False), (glfw.FLOATING, True),
                             (glfw.CENTER_CURSOR, False), (glfw.DOUBLEBUFFER, True), (glfw.SAMPLES, 0),
-                            (glfw.SRGB_CAPABLE, False), (glfw.SCALE_TO_MONITOR, False)):
+                            (glfw.SRGB_CAPABLE, False), (glfw.SCALE_TO_MONITOR, False),
+                            (glfw.VISIBLE, not region)):
             glfw.window_hint(hint, value)
-        window = glfw.create_window(c.width, c.height, "lftransfer projector", monitor, None)
+        # the whole monitor: full screen; a region of it: a borderless window placed there
+        window = glfw.create_window(c.width, c.height, "lftransfer projector", None if region else monitor, None)
         if not window:
-            raise self._fail(step, "the window system refused to open a full-screen window")
+            raise self._fail(step, "the window system refused to open a full-screen window" if not region else
+                             "the window system refused to open the projector's window")
+        if region:
+            mx, my = glfw.get_monitor_pos(monitor)
+            glfw.set_window_pos(window, mx + c.x, my + c.y)
+            glfw.show_window(window)
         self._window = window
         _windows.add(self)
         glfw.make_context_current(window)

@@ -45,7 +45,7 @@ from lftransfer.rig.hardware.projector import ProjectorWindow
 from lftransfer.rig.requests import (SETUPS, LFCapture, LFFrame, RealScene, RigInfo, Setup, ViewCapture,
                                      ViewFrame)
 
-__all__ = ["HardwareRig", "Operator", "no_operator"]
+__all__ = ["HardwareRig", "Operator", "no_operator", "open_interfaces"]
 
 _log = logging.getLogger(__name__)
 
@@ -76,6 +76,8 @@ class HardwareRig:
             holds them already; they are closed with the rig).
         projector: an open projector window to use instead of opening one.
         sleep: how to wait ``settle_s`` (tests pass a no-op).
+        shared_view: the rig of the scene's first light field interface, whose view camera (and its rig file's
+            ``view_camera``) this one, another interface's, uses and leaves open (:func:`open_interfaces`).
 
     Raises:
         RigError: a device that cannot be opened (the ones already open are closed again).
@@ -84,8 +86,14 @@ class HardwareRig:
 
     def __init__(self, config: HardwareRigConfig | str | Path, operator: Operator | None = None, *,
                  lf_camera: Camera | None = None, view_camera: Camera | None = None,
-                 projector: ProjectorWindow | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
+                 projector: ProjectorWindow | None = None, sleep: Callable[[float], None] = time.sleep,
+                 shared_view: "HardwareRig | None" = None) -> None:
         self.config = config if isinstance(config, HardwareRigConfig) else load_rig_file(config)
+        if shared_view is not None:
+            self.config = self.config.model_copy(update={"view_camera": shared_view.config.view_camera})
+            view_camera = shared_view._view
+        self._owns_view = shared_view is None
+        self._peers: list[HardwareRig] = []       # the other interfaces' rigs of one scene (join)
         self._operator: Operator = operator or no_operator
         self._arrange, self._endpoint = arranger(self.config.operator, lambda prompt: self._operator(prompt))
         self._sleep = sleep
@@ -98,6 +106,7 @@ class HardwareRig:
         self._projector: ProjectorWindow | None = projector
         self._lf: Camera | None = lf_camera
         self._view: Camera | None = view_camera
+        self._info = self.config.info              # RigFileError without a view camera
         try:
             if self._projector is None:
                 self._projector = ProjectorWindow(self.config.projector)
@@ -108,7 +117,6 @@ class HardwareRig:
         except BaseException:
             self.close()
             raise
-        self._info = self.config.info
         if self._endpoint:                   # an endpoint can put the real scene in place itself
             try:
                 self._arrange(RealScene())
@@ -173,13 +181,22 @@ class HardwareRig:
         self._after = "after projecting"
         self._change(shown if shown is not None else time.monotonic())
 
+    def join(self, rigs: list["HardwareRig"]) -> None:
+        """Share one world with the rigs of the scene's other light field interfaces (``rigs``, this one among them):
+        what this projector or this set-up changes, every interface's cameras see, so their frames before the change
+        has settled are stale too."""
+        self._peers = [r for r in rigs if r is not self]
+
     def _change(self, at: float) -> None:
-        """What the cameras see changed at monotonic time ``at``: frames before ``at + settle_s`` are stale."""
+        """What the cameras see changed at monotonic time ``at``: frames before ``at + settle_s`` are stale (on every
+        joined interface's cameras too)."""
         settle = self.config.projector.settle_s
-        cameras = [c for c in (self._lf, self._view) if c is not None]
+        cameras = []
+        for rig in (self, *self._peers):
+            cameras += [c for c in (rig._lf, rig._view) if c is not None and all(c is not k for k in cameras)]
+            rig._changed = {"lf": True, "view": True}
         for cam in cameras:
             cam.mark_change(at + settle)
-        self._changed = {"lf": True, "view": True}
         if any(not cam.continuous for cam in cameras):
             self._sleep(max(0.0, at + settle - time.monotonic()))
 
@@ -299,7 +316,7 @@ class HardwareRig:
         if self._closed:
             return
         self._closed = True
-        for device in (self._lf, self._view, self._projector):
+        for device in (self._lf, self._view if self._owns_view else None, self._projector):
             if device is not None:
                 try:
                     device.close()
@@ -311,3 +328,27 @@ class HardwareRig:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def open_interfaces(configs: list[HardwareRigConfig | str | Path], operator: Operator | None = None
+                    ) -> list[HardwareRig]:
+    """The rigs of a scene's light field interfaces, one rig file each, in the scene's order: the first opens the
+    view camera, the others use it (their rig files may leave ``[view_camera]`` out); each has its own LF camera,
+    projector window and operator, and they are joined (:meth:`HardwareRig.join`). A device that cannot be opened
+    closes the ones already open.
+
+    Raises:
+        RigError: a device that cannot be opened.
+        RigFileError: an invalid rig file, or a first one without a view camera.
+    """
+    rigs: list[HardwareRig] = []
+    try:
+        for config in configs:
+            rigs.append(HardwareRig(config, operator, shared_view=rigs[0] if rigs else None))
+    except BaseException:
+        for rig in reversed(rigs):
+            rig.close()
+        raise
+    for rig in rigs:
+        rig.join(rigs)
+    return rigs

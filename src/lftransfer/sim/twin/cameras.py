@@ -27,6 +27,7 @@ import math
 import queue
 import threading
 import time
+import zlib
 from dataclasses import dataclass
 from typing import Callable
 
@@ -74,10 +75,10 @@ class TwinCamera:
     """One camera of the twin and the clients of its stream.
 
     Args:
-        name: "lf" or "view".
+        name: "lf", "view", or "lf/NAME" (the LF camera of a later light field interface).
         timing: its clock and faults.
-        state: ``state(t) -> (key, image)``: what the projector showed at monotonic time t.
-        render: ``render(image) -> radiance`` (the world's, cached per state).
+        state: ``state(t) -> (key, images)``: what the projectors showed at monotonic time t.
+        render: ``render(images) -> radiance`` (the world's, cached per state).
         frame: ``frame(radiance) -> (3 H, W) uint16`` the frame sent (exposure, noise, codes).
         seed: seed of the jitter and the drops.
     """
@@ -94,7 +95,8 @@ class TwinCamera:
         self._state = state
         self._render = render
         self._frame = frame
-        self._rng = np.random.default_rng([seed, 17, 1 if name == "lf" else 2])
+        stream = {"lf": 1, "view": 2}.get(name, 3 + zlib.crc32(name.encode()) % 100_000)   # another LF camera's
+        self._rng = np.random.default_rng([seed, 17, stream])
         self._clients: set[queue.Queue] = set()
         self._lock = threading.Lock()
         self._stop = threading.Event()

@@ -68,7 +68,9 @@ class ProjectorScreen:
 
     Args:
         x_display: the X display (":N").
-        size: (width, height) of the projector, pixels (the region read, from the screen's top-left corner).
+        size: (width, height) of the projector, pixels (the region read, from ``origin``).
+        origin: (x, y) of the projector's top-left pixel on the screen (several projectors side by side on one
+            screen: the rig file's ``projector.x``, ``y``).
         bits: the projector's bit depth (the screen's 8-bit channels are scaled to it).
         refresh_hz: how often the screen is read (a projector's refresh rate).
         missing: the projector is unplugged: the screen is never read, the projector shows black.
@@ -80,8 +82,9 @@ class ProjectorScreen:
     KEEP = 256                       # screen changes remembered
 
     def __init__(self, x_display: str, size: tuple[int, int], bits: int = 8, refresh_hz: float = 60.0,
-                 missing: bool = False) -> None:
+                 missing: bool = False, origin: tuple[int, int] = (0, 0)) -> None:
         self.size = (int(size[0]), int(size[1]))
+        self.origin = (int(origin[0]), int(origin[1]))
         self.bits = int(bits)
         self._period = 1.0 / refresh_hz
         black = np.zeros((self.size[1], self.size[0], 3), np.uint8 if bits <= 8 else np.uint16)
@@ -96,10 +99,10 @@ class ProjectorScreen:
         if missing:
             return
         screen = XScreen(x_display)
-        if screen.size[0] < self.size[0] or screen.size[1] < self.size[1]:
+        if screen.size[0] < self.origin[0] + self.size[0] or screen.size[1] < self.origin[1] + self.size[1]:
             screen.close()
             raise RuntimeError(f"the X display {x_display} is {screen.size[0]}x{screen.size[1]}, smaller than the "
-                               f"projector's {self.size[0]}x{self.size[1]}")
+                               f"projector's {self.size[0]}x{self.size[1]} at {self.origin}")
         self._thread = threading.Thread(target=self._watch, args=(screen,), name="twin-projector", daemon=True)
         self._thread.start()
 
@@ -114,7 +117,7 @@ class ProjectorScreen:
         try:
             while not self._stop.is_set():
                 try:
-                    rgb = screen.grab(*self.size)
+                    rgb = screen.grab(*self.size, *self.origin)
                 except RuntimeError as exc:
                     with self._lock:
                         self.error = str(exc)

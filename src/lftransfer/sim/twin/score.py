@@ -107,7 +107,7 @@ def score_views(views: SavedViews, scene, truth_seed: int | None, *, gt_spp: int
         calibration_file: the run's calibration file, scored against the true rig, or None.
         progress: called before each render.
     """
-    from lftransfer.calibration.rig import load_calibration
+    from lftransfer.calibration.interfaces import read_calibration
     from lftransfer.sim.metrics import evaluate, gt_noise_verdict
     from lftransfer.sim.oracle import hidden_oracle
 
@@ -122,7 +122,7 @@ def score_views(views: SavedViews, scene, truth_seed: int | None, *, gt_spp: int
     metrics = evaluate(views, gt)
     errors = None
     if calibration_file is not None and Path(calibration_file).is_file():
-        cal = load_calibration(calibration_file, scene.synthetic_part())
+        cal = read_calibration(calibration_file, scene.synthetic_part())    # one interface's, or several
         errors = oracle.calibration_errors(cal)
     return TwinScore(metrics=metrics, ground_truth=gt, calibration_errors=errors,
                      noisy=gt_noise_verdict(metrics, gt_spp))

@@ -129,57 +129,65 @@ def _free_display() -> str:
 class Twin:
     """A running device twin.
 
+    A scene of several light field interfaces gets every interface's devices: one view camera (``/view``), and per
+    interface an LF camera (``/lf`` for the first, ``/lf/NAME`` for the others, each with its exposure control),
+    a projector (side by side on one X display's monitor: each rig file's ``projector.x``) and an operator
+    endpoint (``/operator``, ``/operator/NAME``); and a rig file
+    per interface (``RIG.toml`` for the first, ``RIG_NAME.toml`` for the others, which leave the view camera out:
+    :func:`~lftransfer.rig.hardware.open_interfaces`), all given to ``--rig hardware:RIG.toml,RIG_NAME.toml``.
+
     Args:
         scene: the scene (its real objects are the twin's world; ``--quick`` already applied by the caller).
-        rig_file: the rig file to write.
+        rig_file: the rig file to write (the first interface's).
         options: :class:`TwinOptions`.
         scene_ref: how to load the scene again (``{"scene": path or name, "quick": bool}``), for the manifest.
 
     Raises:
-        RuntimeError: no X display (Xvfb missing), or the display is smaller than the projector.
+        RuntimeError: no X display (Xvfb missing), or the display is smaller than the projector(s).
     """
 
     def __init__(self, scene, rig_file: str | Path, options: TwinOptions = TwinOptions(), *,
                  scene_ref: dict | None = None) -> None:
+        from lftransfer.scenes.interfaces import interface_names
         from lftransfer.sim import hidden_world
+        from lftransfer.sim.truth import true_interfaces
 
         self.options = options
         self.rig_file = Path(rig_file)
-        self._xvfb: subprocess.Popen | None = None
+        self._xvfbs: list[subprocess.Popen] = []
         self._closed = False
+        self.names = interface_names(scene.interfaces) if scene.interfaces else [""]
         world, truth = hidden_world(scene, options.truth_seed)
+        truths = true_interfaces(scene, options.truth_seed) if scene.interfaces else None
         self.world = TwinWorld(world, truth, options.truth_seed, capture_spp=options.capture_spp,
-                               view_spp=options.view_spp)
-        info = self.world.info
+                               view_spp=options.view_spp, truths=truths)
         try:
+            # one X display, its monitor showing the projectors side by side (one process drives one X display)
+            sizes = [info.projector for info in self.world.infos]
+            self.origins = [(sum(w for w, _ in sizes[:i]), 0) for i in range(len(sizes))]
             if options.projector_missing:
                 self.display = _free_display()
             elif options.display is None:
-                self.display, self._xvfb = start_xvfb(*info.projector)
+                self.display, xvfb = start_xvfb(sum(w for w, _ in sizes), max(h for _, h in sizes))
+                self._xvfbs.append(xvfb)
             else:
                 self.display = options.display
-            self.screen = ProjectorScreen(self.display, info.projector, info.projector_bits,
-                                          missing=options.projector_missing)
-            # the LF camera's exposure, in ms like the rig file's exposure of a camera (relative: 1 = nominal)
+            self.screens = [ProjectorScreen(self.display, info.projector, info.projector_bits,
+                                            missing=options.projector_missing, origin=origin)
+                            for info, origin in zip(self.world.infos, self.origins)]
+            self.screen = self.screens[0]
+            # each LF camera's exposure, in ms like the rig file's exposure of a camera (relative: 1 = nominal)
             self.lf_exposure_base = 1000.0 * float(scene.rig.exposure)
-            self._lf_exposure = self.lf_exposure_base
-            black = info.black()
-            peak = float(np.max(self.world.radiance("view", black)))
+            self._lf_exposure = [self.lf_exposure_base] * len(self.names)
+            peak = float(np.max(self.world.radiance("view", [info.black() for info in self.world.infos])))
             self.view_radiance_scale = VIEW_HEADROOM * peak if peak > 0 else 1.0
             self._view_levels = np.float32(65535.0 / self.view_radiance_scale)
-
-            def state(t: float):
-                key, image = self.screen.at(t)
-                return (self.world.epoch, key), image
-
-            self.cameras = {
-                "lf": TwinCamera("lf", options.timing("lf"), state, lambda im: self.world.radiance("lf", im),
-                                 self._lf_frame, seed=options.truth_seed or 0),
-                "view": TwinCamera("view", options.timing("view"), state, lambda im: self.world.radiance("view", im),
-                                   self._view_frame, seed=options.truth_seed or 0),
-            }
-            self.server = TwinServer(self.cameras, {"lf": (lambda: self._lf_exposure, self._set_lf_exposure)},
-                                     self.world.arrange, self.status, options.host, options.port)
+            self.cameras = self._cameras()
+            exposure = {self.lf_path(i): (lambda i=i: self._lf_exposure[i], lambda v, i=i: self._set_lf_exposure(v, i))
+                        for i in range(len(self.names))}
+            arrange = {self.operator_path(i): lambda request, i=i: self.world.arrange(request, i)
+                       for i in range(len(self.names))}
+            self.server = TwinServer(self.cameras, exposure, arrange, self.status, options.host, options.port)
             self.started = time.monotonic()
             self.server.start()
             for cam in self.cameras.values():
@@ -189,41 +197,71 @@ class Twin:
             self.close()
             raise
 
+    def lf_path(self, i: int) -> str:
+        """Interface ``i``'s LF camera stream (``lf``, ``lf/NAME``)."""
+        return "lf" if i == 0 else f"lf/{self.names[i]}"
+
+    def operator_path(self, i: int) -> str:
+        """Interface ``i``'s operator endpoint (``operator``, ``operator/NAME``)."""
+        return "operator" if i == 0 else f"operator/{self.names[i]}"
+
+    @property
+    def rig_files(self) -> list[Path]:
+        """Every interface's rig file, in the scene's order (``--rig hardware:`` joins them with commas)."""
+        stem = self.rig_file.stem
+        return [self.rig_file, *(self.rig_file.with_name(f"{stem}_{name}.toml") for name in self.names[1:])]
+
+    def _cameras(self) -> dict[str, TwinCamera]:
+        """The view camera and each interface's LF camera, by stream path; each frame made from what every
+        projector showed at its moment."""
+        def state(t: float):
+            shown = [screen.at(t) for screen in self.screens]
+            return (self.world.epoch, tuple(key for key, _ in shown)), tuple(image for _, image in shown)
+
+        seed = self.options.truth_seed or 0
+        cameras = {"view": TwinCamera("view", self.options.timing("view"), state,
+                                      lambda images: self.world.radiance("view", images), self._view_frame,
+                                      seed=seed)}
+        for i in range(len(self.names)):
+            path = self.lf_path(i)
+            cameras[path] = TwinCamera(path, self.options.timing("lf"), state,
+                                       lambda images, i=i: self.world.radiance(f"lf{i}", images),
+                                       lambda radiance, i=i: self._lf_frame(radiance, i), seed=seed)
+        return cameras
+
     # -- frames ---------------------------------------------------------------------------------------------
-    def _lf_frame(self, radiance: np.ndarray) -> np.ndarray:
-        scale = np.float32(self._lf_exposure / self.lf_exposure_base)
-        return planar(self.world.expose_lf(radiance * scale if scale != 1 else radiance))
+    def _lf_frame(self, radiance: np.ndarray, interface: int = 0) -> np.ndarray:
+        scale = np.float32(self._lf_exposure[interface] / self.lf_exposure_base)
+        return planar(self.world.expose_lf(radiance * scale if scale != 1 else radiance, interface))
 
     def _view_frame(self, radiance: np.ndarray) -> np.ndarray:
         codes = np.clip(np.rint(radiance * self._view_levels), 0, 65535).astype(np.uint16)
         return planar(codes)
 
-    def _set_lf_exposure(self, value: float) -> float:
-        self._lf_exposure = float(value)
-        return self._lf_exposure
+    def _set_lf_exposure(self, value: float, interface: int = 0) -> float:
+        self._lf_exposure[interface] = float(value)
+        return self._lf_exposure[interface]
 
     # -- files ----------------------------------------------------------------------------------------------
-    def rig_text(self) -> str:
-        """The rig file a ``HardwareRig`` opens to drive this twin."""
-        info, o, url = self.world.info, self.options, self.server.url
+    def rig_text(self, interface: int = 0) -> str:
+        """The rig file a ``HardwareRig`` opens to drive this twin (interface ``interface``'s devices; a later
+        interface's leaves the view camera, the first's, out)."""
+        info, o, url = self.world.infos[interface], self.options, self.server.url
         (lw, lh), (vw, vh), (pw, ph) = info.lf_camera, info.view, info.projector
-        return f"""# Rig file of a device twin, written by `lft twin serve` (lftransfer.sim.twin); see example_rig.toml
-# for every field. The cameras are network streams (NUT/FFV1 over HTTP, opened by OpenCV's VideoCapture).
-# Their 16-bit colour frames travel as three stacked GRAY16LE planes (planar = true): OpenCV's FFmpeg reader
-# returns 16 bits only for grey frames. Each frame carries its camera timestamp (timestamps = "stream").
-# The twin's manifest (scene, truth seed) is {manifest_path(self.rig_file).name}.
-
-[lf_camera]
-source = "{url}/lf"
-control = "{url}/lf/control"
-width = {lw}
-height = {lh}
-bits = {info.lf_camera_bits}
-planar = true
-frames = 1
-timeout_s = {o.camera_timeout_s}
-timestamps = "stream"
-
+        lf, operator = self.lf_path(interface), self.operator_path(interface)
+        several = len(self.names) > 1
+        head = (f"# Rig file of a device twin, written by `lft twin serve` (lftransfer.sim.twin); see "
+                f"example_rig.toml\n# for every field. The cameras are network streams (NUT/FFV1 over HTTP, opened "
+                f"by OpenCV's VideoCapture).\n# Their 16-bit colour frames travel as three stacked GRAY16LE planes "
+                f"(planar = true): OpenCV's FFmpeg reader\n# returns 16 bits only for grey frames. Each frame carries "
+                f"its camera timestamp (timestamps = \"stream\").\n# The twin's manifest (scene, truth seed) is "
+                f"{manifest_path(self.rig_file).name}.\n")
+        if several:
+            head += (f"# Light field interface {self.names[interface]!r} ({interface + 1} of {len(self.names)}): "
+                     f"--rig hardware:{','.join(p.name for p in self.rig_files)}\n")
+        x, y = self.origins[interface]
+        region = f"# the projectors side by side on the X display's monitor\nx = {x}\ny = {y}\n" if several else ""
+        view = "" if interface else f"""
 [view_camera]
 source = "{url}/view"
 width = {vw}
@@ -235,13 +273,25 @@ timeout_s = {o.camera_timeout_s}
 timestamps = "stream"
 response_gamma = 1.0
 radiance_scale = {self.view_radiance_scale!r}
-
+"""
+        return head + f"""
+[lf_camera]
+source = "{url}/{lf}"
+control = "{url}/{lf}/control"
+width = {lw}
+height = {lh}
+bits = {info.lf_camera_bits}
+planar = true
+frames = 1
+timeout_s = {o.camera_timeout_s}
+timestamps = "stream"
+{view}
 [projector]
 display = 0
 x_display = "{self.display}"
 width = {pw}
 height = {ph}
-bits = {info.projector_bits}
+{region}bits = {info.projector_bits}
 # not measured: `lft calibrate latency` measures the delay and writes it here
 settle_s = {o.settle_s}
 drop_frames = 0
@@ -250,17 +300,20 @@ timeout_s = 10.0
 
 [operator]
 kind = "http"
-url = "{url}/operator"
+url = "{url}/{operator}"
 timeout_s = 600.0
 """
 
     def _write(self, scene_ref: dict) -> None:
         self.rig_file.parent.mkdir(parents=True, exist_ok=True)
-        write_text(self.rig_file, self.rig_text())
+        for i, path in enumerate(self.rig_files):
+            write_text(path, self.rig_text(i))
         manifest = {"format": "lftransfer-twin", "version": 1, **scene_ref, "truth_seed": self.options.truth_seed,
                     "rig_file": str(self.rig_file.resolve()), "url": self.server.url, "display": self.display,
                     "pid": os.getpid(), "view_radiance_scale": self.view_radiance_scale,
                     "lf_exposure_base": self.lf_exposure_base, "options": asdict(self.options)}
+        if len(self.names) > 1:
+            manifest.update(interfaces=self.names, rig_files=[str(p.resolve()) for p in self.rig_files])
         write_text(manifest_path(self.rig_file), json.dumps(manifest, indent=2) + "\n")
 
     # -- state ----------------------------------------------------------------------------------------------
@@ -269,9 +322,10 @@ timeout_s = 600.0
         up = time.monotonic() - self.started
         return {
             "uptime_s": round(up, 3), "epoch": self.world.epoch, "setup": self.world.setup.kind,
-            "screen_changes": self.screen.changes, "screen_error": self.screen.error,
+            "screen_changes": sum(s.changes for s in self.screens),
+            "screen_error": next((s.error for s in self.screens if s.error), None),
             "renders": dict(self.world.renders), "render_s": {k: round(v, 3) for k, v in self.world.render_s.items()},
-            "lf_exposure": self._lf_exposure,
+            "lf_exposure": self._lf_exposure[0] if len(self.names) == 1 else self._lf_exposure,
             "cameras": {name: {"published": c.published, "dropped": c.dropped, "rerendered": c.rerendered, "missed": c.missed, "overrun": c.overrun,
                                "clients": c.clients, "down": c.down, "fps_set": c.timing.fps,
                                "fps_delivered": round(c.published / up, 2) if up > 0 else None}
@@ -283,7 +337,7 @@ timeout_s = 600.0
         (stop or threading.Event()).wait()
 
     def close(self) -> None:
-        """Stop the cameras, the server and the twin's own Xvfb (idempotent)."""
+        """Stop the cameras, the server and the twin's own Xvfbs (idempotent)."""
         if self._closed:
             return
         self._closed = True
@@ -291,14 +345,14 @@ timeout_s = 600.0
             cam.stop()
         if hasattr(self, "server"):
             self.server.close()
-        if hasattr(self, "screen"):
-            self.screen.close()
-        if self._xvfb is not None:
-            self._xvfb.terminate()
+        for screen in getattr(self, "screens", []):
+            screen.close()
+        for xvfb in self._xvfbs:
+            xvfb.terminate()
             try:
-                self._xvfb.wait(timeout=5)
+                xvfb.wait(timeout=5)
             except subprocess.TimeoutExpired:
-                self._xvfb.kill()
+                xvfb.kill()
         self.world.close()
 
     def __enter__(self) -> "Twin":

@@ -111,14 +111,16 @@ class TwinServer:
     Args:
         cameras: {"lf": camera, "view": camera}.
         exposure: {"lf": (get, set)}: the cameras whose exposure can be set over the network.
-        arrange: applies a set-up request (blocks until done).
+        arrange: {"operator": apply, ...}: each operator endpoint's path (``operator`` for the first light field
+            interface, ``operator/NAME`` for the others) and what applies a set-up request there (blocks until
+            done).
         status: returns the twin's status (a JSON-able dict).
         host, port: where to listen (port 0: any free one).
     """
 
     def __init__(self, cameras: dict[str, TwinCamera],
                  exposure: dict[str, tuple[Callable[[], float], Callable[[float], float]]],
-                 arrange: Callable[[object], None], status: Callable[[], dict], host: str = "127.0.0.1",
+                 arrange: dict[str, Callable[[object], None]], status: Callable[[], dict], host: str = "127.0.0.1",
                  port: int = 0) -> None:
 
         class Handler(BaseHTTPRequestHandler):
@@ -149,8 +151,8 @@ class TwinServer:
                 elif name == "status":
                     self._json(200, status())
                 else:
-                    self._json(404, {"error": f"no {path}; the twin serves /lf, /view, /lf/control, /operator, "
-                                              "/status"})
+                    served = [*cameras, *(f"{c}/control" for c in exposure), *arrange, "status"]
+                    self._json(404, {"error": f"no {path}; the twin serves " + ", ".join(f"/{x}" for x in served)})
 
             def do_POST(self) -> None:  # noqa: N802
                 name = self.path.split("?")[0].strip("/")
@@ -165,14 +167,14 @@ class TwinServer:
                         self._json(400, {"error": f"expected {{\"exposure\": a positive number}}, got {body}"})
                         return
                     self._json(200, {"exposure": exposure[name[:-8]][1](float(value))})
-                elif name == "operator":
+                elif name in arrange:
                     try:
                         request = setup_from_json(body.get("setup") or {})
                     except (ValueError, TypeError) as exc:
                         self._json(400, {"done": False, "error": str(exc)})
                         return
                     try:
-                        arrange(request)
+                        arrange[name](request)
                     except Exception as exc:  # noqa: BLE001  (told to the rig)
                         self._json(500, {"done": False, "error": f"{type(exc).__name__}: {exc}"})
                         return
