@@ -175,7 +175,8 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     from lftransfer.sim.effects import measure_effect, object_distance, object_pixels
     from lftransfer.sim.metrics import cross_term_image, cross_transfer_error
 
-    opened, oracle, models, ps, out, options = ctx.opened, ctx.opened.oracle, ctx.models, ctx.scene, ctx.out, ctx.options
+    opened, oracle, models, ps, out = ctx.opened, ctx.opened.oracle, ctx.models, ctx.scene, ctx.out
+    options = ctx.options
     rigs = opened.each_rig
     spp, settings, direct, effect, depth, step = ctx.spp, ctx.settings, ctx.direct, ctx.effect, ctx.depth, ctx.step
     render, parts = ctx.render, ctx.parts

@@ -10,9 +10,10 @@ Two modes (docs/architecture.md, "The bounce loop" and "The live loop"):
 The output folder holds ``frames/NNNN.exr`` (the composite, linear radiance), ``frames/NNNN.png`` and
 ``frames/panel_NNNN.png`` (the Fig. 4 panel of the frame), ``composite.mp4`` and ``bounces.mp4`` (the panels),
 ``report.json`` (settings and per-frame timings and metrics, rewritten after every frame), ``status.json``
-(:mod:`lftransfer.runs.run_folder`) and, in live mode, ``state/projected_lf.npz`` (what the projector shows next)
-and, where the projection prefilter measured it, ``state/depth.npz`` (the real scene's depth: a resumed loop and
-the exchange check of :mod:`lftransfer.runs.effects` prefilter with it, as the frames did).
+(:mod:`lftransfer.runs.run_folder`) and, in live mode, ``state/projected_lf.npz`` (what the projector shows next;
+with several light field interfaces, each one's: ``data``, ``data_1``, ...) and, where the projection prefilter
+measured it, ``state/depth.npz`` (the real scene's depth: a resumed loop and the exchange check of
+:mod:`lftransfer.runs.effects` prefilter with it, as the frames did).
 ``--resume`` continues after the last finished frame of an interrupted sequence with the same settings.
 """
 

@@ -3,7 +3,8 @@
 
 One capture: encode the synthetic light field the projector is to show (skipped when it is the one shown
 already), project it, pose the real scene (the simulated rig moves its real objects; a physical one moves by
-itself), capture the LF camera and decode it, capture the view camera. :func:`capture_once` is that capture;
+itself), capture the LF camera and decode it, capture the view camera; with several light field interfaces, every
+projector and every LF camera, then the one view camera. :func:`capture_once` is that capture;
 the synchronous loop calls it inside each frame, and :class:`CaptureWorker` calls it again and again on its own
 thread, so that the render loop (:class:`lftransfer.transfer.live.LiveTransfer` with ``loop="decoupled"``) runs at
 its own rate with the newest capture it has.

@@ -18,6 +18,10 @@ all-bounce fixed point of the bounce loop (:mod:`lftransfer.transfer.bounce`); w
 follows within a few frames. :meth:`LiveTransfer.step` is the one step function that ``lft render --mode live``,
 ``lft live`` and ``lft bench`` call.
 
+With several light field interfaces (``rigs`` and ``models``, docs/interfaces.md) each step does the same through
+all of them at once: every projector shows its array's Ls_{t-1}, every LF camera is captured and decoded, and the
+synthetic side, lit by every R_t, renders each array's Ls_t (:func:`~lftransfer.transfer.synthetic_side.render_sides`).
+
 Synchronous (``"sync"``): steps 2 and 3 run inside the step (:func:`~lftransfer.transfer.capture.capture_once`),
 so a frame takes a capture plus a render, and a frame is always lit by the previous frame's light field. Decoupled
 (``"decoupled"``): a :class:`~lftransfer.transfer.capture.CaptureWorker` captures on its own thread at the devices'
@@ -54,7 +58,8 @@ from lftransfer.transfer.share import TurnTaking
 from lftransfer.transfer.synthetic_side import SyntheticSide, render_sides
 from lftransfer.transfer.timer import StageTimer
 
-__all__ = ["CAPTURE_STAGES", "FrameTimes", "InterfaceLight", "LiveFrame", "LiveTransfer", "LIVE_STAGES", "RENDER_STAGES"]
+__all__ = ["CAPTURE_STAGES", "FrameTimes", "InterfaceLight", "LiveFrame", "LiveTransfer", "LIVE_STAGES",
+           "RENDER_STAGES"]
 
 CAPTURE_STAGES = ("encode", "capture", "decode", "capture_view")
 RENDER_STAGES = ("pose", "measure_depth", "wait_capture", "incident_light", "render_lightfield", "prefilter",
@@ -187,6 +192,9 @@ class LiveTransfer:
         turns: a decoupled loop's captures and frames in turns
             (:class:`~lftransfer.transfer.share.TurnTaking`: the simulator process stopped while a frame renders);
             None: side by side.
+        rigs, models: with several light field interfaces, one rig and one rig model per interface in the scene's
+            order (``rig`` the first of ``rigs``; :attr:`OpenedRig.rigs` and :attr:`Knowledge.models`); empty for
+            one. ``projected`` and ``depth`` are then one per interface, and the composite is the over operator's.
 
     Example:
         >>> live = LiveTransfer(rig, calibration.model, scene.synthetic_part())      # doctest: +SKIP

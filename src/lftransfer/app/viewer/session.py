@@ -7,10 +7,11 @@ frame and the page never waits for a render.
 
 In the live loop a frame is one exchange, so its bounces cannot be told apart. On demand (an edit of type
 "bounces") the loop thread itself runs the bounce loop (:func:`lftransfer.transfer.interfaces.transfer_through`,
-through every light field interface, with ``bounce_views``) on the scene as it stands, between two frames: the live loop waits meanwhile (one thread uses
-the rig) and goes on afterwards as it was (paused or running, its accumulated light kept), and the per-bounce
-layers R_n and S_n, each at its own display gain (:func:`lftransfer.reports.report.bounce_layers`), go to a callback
-(:class:`ViewerBounces`). Nothing of this runs unless asked for.
+through every light field interface, with ``bounce_views``) on the scene as it stands, between two frames: the live
+loop waits meanwhile (one thread uses the rigs) and goes on afterwards as it was (paused or running, its accumulated
+light kept), and the per-bounce layers R_n and S_n, each at its own display gain
+(:func:`lftransfer.reports.report.bounce_layers`), go to a callback (:class:`ViewerBounces`). Nothing of this runs
+unless asked for.
 """
 
 from __future__ import annotations
