@@ -119,7 +119,8 @@ class RigArgs:
     """Which rig a command uses and what it knows of it."""
 
     rig: Annotated[str, option("--rig", metavar="SPEC", help=(
-        "Which rig: sim (simulated, default) | hardware:RIG.toml (a physical rig, or the device twin) | "
+        "Which rig: sim (simulated, default) | hardware:RIG.toml (a physical rig, or the device twin; a scene of "
+        "several light field interfaces: one rig file each, in its order, hardware:FRONT.toml,SIDE.toml) | "
         "replay:DIR (a recording)."))] = "sim"
     rig_model: Annotated[str, option(
         "--rig-model", metavar=metavar(choices.RigModel), callback=choice_check("--rig-model", choices.RigModel),
