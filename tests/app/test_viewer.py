@@ -327,7 +327,7 @@ def test_06_bounce_layers_failure_is_shown(variant, tmp_path, monkeypatch):
         raise RigError("the projector does not answer")
 
     session = open_session(_tiny_scene(), rig_model="oracle", truth_seed=None, out=tmp_path)
-    monkeypatch.setattr(session_module, "run_transfer", broken)
+    monkeypatch.setattr(session_module, "transfer_through", broken)
     events = _started(session)
     try:
         session.submit({"type": "bounces"})
