@@ -200,7 +200,10 @@ def score_cmd(run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="A run
         row(table, k, "undefined" if v is None else f"{v:.4g}")
     if scored.calibration_errors is not None:
         e = scored.calibration_errors
-        row(table, "calibration vs truth: projector mapping", f"{e.projector_mapping_rms_px:.3f} px")
-        row(table, "calibration vs truth: pose", f"{e.pose_position_rms_mm:.2f} mm, {e.pose_rotation_deg:.3f} deg")
+        for name, each in zip(getattr(e, "names", ("",)), getattr(e, "errors", (e,))):   # several: each interface's
+            of = f" ({name})" if name else ""
+            row(table, f"calibration vs truth{of}: projector mapping", f"{each.projector_mapping_rms_px:.3f} px")
+            row(table, f"calibration vs truth{of}: pose",
+                f"{each.pose_position_rms_mm:.2f} mm, {each.pose_rotation_deg:.3f} deg")
     Console().print(table)
     Console().print(escape(f"wrote {report_path}, {run_dir / 'ground_truth.png'}"), soft_wrap=True)
