@@ -52,10 +52,7 @@ def count_steps(scene) -> int:
     of several interfaces, else :func:`~lftransfer.calibration.rig.calibrate_rig`'s."""
     if not scene.interfaces:
         return count_calibration_steps(scene)
-    from lftransfer.calibration.shared_boards import count_shared_steps
-
-    return sum(count_calibration_steps(interface_scene(scene, i)) for i in range(len(scene.interfaces))) \
-        + count_shared_steps(scene)
+    return sum(count_calibration_steps(interface_scene(scene, i)) for i in range(len(scene.interfaces)))
 
 
 def read_calibration(path, scene):
@@ -129,8 +126,8 @@ def placed_calibration(calibration: Calibration, scene, i: int) -> Calibration:
     return replace(calibration, model=model)
 
 
-def calibrate_interfaces(rigs: list[Rig], scene, *, progress: Callable[[str], None] | None = None,
-                         tie: bool = True) -> InterfacesCalibration:
+def calibrate_interfaces(rigs: list[Rig], scene, *,
+                         progress: Callable[[str], None] | None = None) -> InterfacesCalibration:
     """Calibrate every interface of a scene through its own rig, one after another, into one world frame.
 
     Args:
@@ -138,30 +135,21 @@ def calibrate_interfaces(rigs: list[Rig], scene, *, progress: Callable[[str], No
             camera, its projector and the shared view camera); the others' projectors stay dark meanwhile.
         scene: the synthetic part of the scene (its ``[[interface]]`` tables, view camera and point lights).
         progress: called with a message per capture or step, each prefixed with the interface's name.
-        tie: tie every interface's pose to the first's through boards both light
-            (:func:`~lftransfer.calibration.shared_boards.tie_interfaces`; each one's diagnostics then hold ``tie``);
-            False: each pose from its own boards alone.
 
     Returns:
         InterfacesCalibration.
     """
-    from lftransfer.calibration.shared_boards import tie_interfaces
-
     if len(rigs) != len(scene.interfaces):
         raise ValueError(f"calibrate_interfaces: {len(rigs)} rigs for {len(scene.interfaces)} interfaces")
-    made = []
+    out = []
     for i, (rig, name) in enumerate(zip(rigs, interface_names(scene.interfaces))):
         def say(message: str, name=name) -> None:
             if progress is not None:
                 progress(f"{name}: {message}")
 
-        made.append(calibrate_rig(rig, interface_scene(scene, i), progress=say, walls=walls(scene.interfaces, i)))
-    if tie:
-        made, ties = tie_interfaces(rigs, scene, made, progress=progress)
-        for cal, measured in zip(made[1:], ties):
-            cal.diagnostics["tie"] = measured
-    return InterfacesCalibration(names=tuple(interface_names(scene.interfaces)),
-                                 interfaces=[placed_calibration(cal, scene, i) for i, cal in enumerate(made)])
+        made = calibrate_rig(rig, interface_scene(scene, i), progress=say, walls=walls(scene.interfaces, i))
+        out.append(placed_calibration(made, scene, i))
+    return InterfacesCalibration(names=tuple(interface_names(scene.interfaces)), interfaces=out)
 
 
 def interfaces_from_json(data, source: str, scene) -> InterfacesCalibration:

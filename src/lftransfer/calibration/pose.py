@@ -38,7 +38,7 @@ from lftransfer.rig.requests import Board, ViewCapture
 __all__ = ["BOARD_CLEARANCE_M", "BOARD_MAX_OBLIQUITY_DEG", "CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M",
            "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "FringeDecoding", "PoseError",
            "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose", "corner_landing",
-           "decode_fringes", "fringe_lightfields", "sees_lit_side", "solve_array_pose", "unapply_pose", "view_camera"]
+           "decode_fringes", "fringe_lightfields", "sees_lit_side", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
@@ -295,25 +295,6 @@ def apply_pose(model: RigModel, pose: ArrayPose) -> RigModel:
     return replace(model, array=array, camera=replace(model.camera, device=moved(model.camera.device)),
                    projector=replace(model.projector, device=moved(model.projector.device)),
                    tilt=(float(pose.tilt[0]), float(pose.tilt[1])))
-
-
-def unapply_pose(model: RigModel, pose: ArrayPose) -> RigModel:
-    """The rig model in the model frame that :func:`apply_pose` carried by ``pose`` into ``model`` (its lattice
-    unshifted, unturned and at the nominal pitch, each device's homography given its similarity back), so that
-    another pose can be applied to it."""
-    a = model.array
-    s, th = pose.scale, pose.rotation
-    array = LensArray(lattice=a.lattice, rows=a.rows, cols=a.cols, pitch=a.pitch / s, focal_length=a.focal_length / s,
-                      aperture=a.aperture)
-    sim = np.eye(3)
-    sim[:2, :2] = s * rotation_2d(th)
-    sim[:2, 2] = pose.offset
-
-    def back(dev: LensletDevice) -> LensletDevice:
-        return replace(dev, homography=dev.homography @ sim)
-
-    return replace(model, array=array, camera=replace(model.camera, device=back(model.camera.device)),
-                   projector=replace(model.projector, device=back(model.projector.device)), tilt=(0.0, 0.0))
 
 
 def corner_landing(array: LensArray, corners: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
