@@ -608,7 +608,8 @@ GROUPS = (("Fig. 4: the demo", ("demo", "demo_quick", "demo_quick_quiet", "oracl
             "occlusion_reverse_quick")),
           ("A light probe: the room's light as direct light", ("probe_quick",)),
           ("Several light field interfaces around the real objects",
-           ("interfaces_quick", "interfaces_calibrated_quick", "interfaces_calibration")),
+           ("interfaces_quick", "interfaces_calibrated_quick", "interfaces_calibration", "corner_quick",
+            "enclosure_quick")),
           ("The fidelity floor against the lens pitch: the rig designer", ("study_pitch",)),
           ("Calibration over hidden truths", ("calibration_seeds",)),
           ("The hardware path on the device twin", ("twin_compare",)))

@@ -26,7 +26,7 @@ from lftransfer.calibration.interfaces import count_steps as count_calibration_s
 from lftransfer.rig.model import nominal_rig
 from lftransfer.settings import Overrides, RunSettings, resolve_settings
 from lftransfer.transfer.bounce import count_steps, run_transfer
-from lftransfer.transfer.interfaces import transfer_through
+from lftransfer.transfer.interfaces import run_interfaces
 from lftransfer.render.selection import approximations, visible_steps
 from lftransfer.reports.verdict import verdict
 
@@ -372,7 +372,11 @@ class _Run:
         """Stage 2: the transfer with the run's settings."""
         for note in visible_steps(known.scene, self.settings.transfer.renderer):
             self.warning(note)
-        result = transfer_through(self.opened.each_rig, known.each_model, known.scene, self.settings.transfer,
+        if self.opened.rigs:            # several interfaces: the exchange through all of them
+            result = run_interfaces(self.opened.rigs, known.models, known.scene, self.settings.transfer,
+                                    progress=self.step)
+        else:
+            result = run_transfer(self.opened.rig, known.model, known.scene, self.settings.transfer,
                                   progress=self.step)
         for k, v in result.timings_s.items():
             self.timings[k] = self.timings.get(k, 0.0) + v
