@@ -211,10 +211,10 @@ RUNS: tuple[Run, ...] = (
          needs=("demo",)),
     _seq("corner_quick", "The corner live at quarter resolution: two interfaces calibrated, the lamp's light on the "
          "block through the second", "corner", quick=True, calibrate=None, calibration=None,
-         render=("--frames", "4", "--verify-every", "3")),
+         render=("--frames", "4", "--verify-every", "3", "--quiet-reference")),
     _seq("enclosure_quick", "The enclosure live at quarter resolution: three interfaces calibrated, the lamp's light on "
          "the block through the second", "enclosure", quick=True, calibrate=None, calibration=None,
-         render=("--frames", "4", "--verify-every", "3")),
+         render=("--frames", "4", "--verify-every", "3", "--quiet-reference")),
     _seq("fig5_quick_decoupled", "Fig. 5 at quarter resolution, the decoupled loop: the cost of stale captures",
          "fig5", quick=True, calibrate=None, calibration="out/runs/fig5_quick_cal/calibration.json",
          render=("--verify-every", "4", "--loop", "decoupled"), needs=("fig5_quick",)),
