@@ -125,3 +125,21 @@ def test_05_live_and_converged_sequences_through_two_interfaces(variant, tmp_pat
     assert metrics["psnr_objects_db"] > 20
     decoupled = render_sequence(scene, tmp_path / "decoupled", options, SequenceOptions(loop="decoupled", frames=2))
     assert decoupled["loop"] == "decoupled" and len(decoupled["frames"]) == 2
+
+
+def test_06_one_rig_file_per_interface(variant, tmp_path):
+    """``--rig hardware:A.toml,B.toml`` names one rig file per interface, in the scene's order: it is parsed and
+    printed back whole, and a scene of one interface refuses two rig files in one line before any device opens."""
+    from lftransfer.runs.rigs import open_rig
+    from tests.small import write_tiny_scene
+
+    files = [tmp_path / "front.toml", tmp_path / "side.toml"]
+    for f in files:
+        f.write_text("")
+    spec = RigSpec.parse(f"hardware:{files[0]},{files[1]}")
+    assert spec.paths == tuple(files) and spec.path == files[0] and str(spec) == f"hardware:{files[0]},{files[1]}"
+    assert RigSpec.parse(f"hardware:{files[0]}").paths == (files[0],)
+    with pytest.raises(ValueError, match="does not exist"):
+        RigSpec.parse(f"hardware:{files[0]},{tmp_path / 'missing.toml'}")
+    with pytest.raises(SceneError, match="2 rig files for a scene of one light field interface"):
+        open_rig(load_scene(write_tiny_scene(tmp_path / "tiny.toml")), RunOptions(rig=spec))

@@ -301,8 +301,7 @@ def verify_exchange(scene, out: str | Path, options: RunOptions, report: dict, *
         with reference_renderer(options.cluster if resolved.quiet_reference else None,
                                 use_cache=options.use_cache, step=step) as (render, parts):
             ctx = _Checking(opened, known.each_model, ps, depth, out, options, spp, resolved.quiet_reference, settings,
-                            direct,
-                            effect, render, parts, step)
+                            direct, effect, render, parts, step)
             for f in verified:
                 _check_frame(ctx, f, check)
     finally:

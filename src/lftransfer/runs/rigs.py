@@ -227,7 +227,9 @@ def open_rig(scene, options, *, operator: Operator | None = None, simulator=None
                              "them; benchmarks and studies run one interface so far (docs/interfaces.md)")
         return _open_interfaces(scene, options, simulator, operator)
     if len(spec.paths) > 1:
-        raise ValueError(f"--rig {spec}: {len(spec.paths)} rig files for a scene of one light field interface "
+        from lftransfer.scenes import SceneError
+
+        raise SceneError(f"--rig {spec}: {len(spec.paths)} rig files for a scene of one light field interface "
                          "(several are for a scene's [[interface]] tables, one each)")
     if simulator is not None and simulator.renderer_threads:
         from lftransfer.backend import set_drjit_threads
