@@ -386,7 +386,7 @@ class _Run:
                          f"exposure, or the lights' intensity)")
         if not self.verified:                 # what a later scoring against a truth needs (lft twin score)
             write_views(self.out / VIEWS_FILE, result)
-        stale = getattr(getattr(self.opened.rig, "inner", self.opened.rig), "stale_captures", 0)   # hardware rig's
+        stale = self.opened.stale_captures            # a hardware rig's (None for others)
         if stale:
             self.warning(f"{stale} capture(s) saw frames that still changed after the rig file's settle_s: they were "
                          "dropped, not averaged, and the captures waited; settle_s is too short (lft calibrate "

@@ -168,6 +168,14 @@ class OpenedRig:
         return list(self.rigs) or [self.rig]
 
     @property
+    def stale_captures(self) -> int | None:
+        """On a hardware rig, the captures that saw frames still changing after the rig file's ``settle_s`` (every
+        interface's, with several); None for other rigs."""
+        counts = [getattr(getattr(r, "inner", r), "stale_captures", None) for r in self.each_rig]
+        counts = [int(c) for c in counts if c is not None]
+        return sum(counts) if counts else None
+
+    @property
     def truth_seed(self) -> int | None:
         """The hidden truth's seed (None: no oracle, or a rig built exactly as its file says)."""
         return None if self.oracle is None else self.oracle.truth_seed

@@ -347,10 +347,10 @@ def _resumed(out: Path, seq: SequenceOptions, key: dict) -> tuple[list[dict], fl
     return done, scale
 
 
-def _stale_captures(report: dict, rig) -> None:
+def _stale_captures(report: dict, opened: OpenedRig) -> None:
     """On a hardware rig, the captures that saw frames still changing after the rig file's ``settle_s`` into the
     report's summary, and a warning where there were any."""
-    stale = getattr(getattr(rig, "inner", rig), "stale_captures", None)
+    stale = opened.stale_captures
     if stale is not None:          # a hardware rig: captures that saw a change arrive after settle_s
         report["summary"]["stale_captures"] = int(stale)
         if stale:
@@ -428,7 +428,7 @@ def render_sequence(scene, out: str | Path, options: RunOptions = RunOptions(), 
                                                               ps, settings, todo, step)
             step("write the videos")
             report["summary"] = sequence_summary(report["frames"])
-            _stale_captures(report, opened.rig)
+            _stale_captures(report, opened)
             _write_videos(out, n, report["fps"])
             write_json(report_path, report)
         finally:
