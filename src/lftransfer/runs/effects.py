@@ -35,8 +35,8 @@ from lftransfer.runs.reference_pool import reference_renderer
 from lftransfer.runs.sequence import frame_metrics, sequence_summary
 from lftransfer.reports.report import write_error_pictures
 from lftransfer.imageio_utils import read_exr, write_figure, write_json
-from lftransfer.transfer.bounce import TransferSettings, run_transfer
-from lftransfer.transfer.interfaces import run_interfaces
+from lftransfer.transfer.bounce import TransferSettings
+from lftransfer.transfer.interfaces import transfer_through
 
 __all__ = ["EffectCurve", "EffectPoint", "ExchangeCheck", "plot_effect", "verify_exchange"]
 
@@ -159,15 +159,6 @@ class _Checking:
     step: Callable[[str], None]
 
 
-def _transfer(rigs, models, scene, settings: TransferSettings, time_s: float, depths: dict):
-    """The bounce loop a frame's check runs: through one interface with the frame's own depth (``depths``: the
-    ``depth`` and ``view_depth`` of :func:`~lftransfer.transfer.bounce.run_transfer`), or through several
-    (:func:`~lftransfer.transfer.interfaces.run_interfaces`, which measures each interface's depth itself)."""
-    if len(rigs) == 1:
-        return run_transfer(rigs[0], models[0], scene, settings, time_s=time_s, **depths)
-    return run_interfaces(rigs, models, scene, settings, time_s=time_s)
-
-
 def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     """One verified frame: its cross-transfer error by side into its metrics, its fidelity floor where asked for,
     and the effect's point where the scene has one (:func:`verify_exchange`)."""
@@ -187,7 +178,7 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
     # a depth composite: the frame's own depth, so that both composites hide the same pixels
     kept = read_frame_depth(out, i)
     same = {} if kept is None else {"depth": kept[0], "view_depth": kept[1]}
-    alone = _transfer(rigs, models, ps, direct, t, same)
+    alone = transfer_through(rigs, models, ps, direct, time_s=t, **same)
     no_exchange = alone.composite_direct()
     if ctx.quiet:
         gt = _quiet_frame_truth(oracle, world, frame, no_exchange, f, spp, options.use_cache, step,
@@ -203,14 +194,15 @@ def _check_frame(ctx: _Checking, f: dict, check: ExchangeCheck) -> None:
         f["metrics"][f"cross_{side}_gt_noise_rel"] = part.gt_noise_rel
     if floor_skipped(options) is None:
         step(f"fidelity floor: frame {i}")
-        converged = _transfer(rigs, models, ps, settings, t, same or {"depth": depth})
+        converged = transfer_through(rigs, models, ps, settings, time_s=t, **(same or {"depth": depth}))
         _frame_floor(oracle, list(opened.rigs) or getattr(opened.rig, "inner", opened.rig), converged, gt, settings,
                      f, frame - no_exchange)
     if effect is None:
         return
     truth_without = oracle.ground_truth(spp=spp, world=_without(world, effect.by),
                                         use_cache=options.use_cache).image
-    result = _transfer(rigs, models, _without(ps, effect.by), settings, t, same or {"depth": depth})
+    result = transfer_through(rigs, models, _without(ps, effect.by), settings, time_s=t,
+                              **(same or {"depth": depth}))
     transfer_without = result.composite()
     pixels = object_pixels(world, effect.on)
     check.effect.points.append(EffectPoint(

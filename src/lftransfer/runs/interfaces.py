@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Callable
 
+from lftransfer.scenes.interfaces import interface_names
+
 __all__ = ["FIRST_INTERFACE_ONLY", "interfaces_report", "through_first_alone"]
 
 FIRST_INTERFACE_ONLY = "through the first interface alone"   # the negative control's name in the report
@@ -58,7 +60,7 @@ def added_light(oracle, scene, result, alt, gt) -> dict | None:
 def interfaces_report(scene, result, added: dict | None) -> dict:
     """``report.json``'s ``interfaces``: their names, each one's captured energy per bounce (None for one switched
     off) and :func:`added_light`."""
-    return {"names": [i.name for i in scene.interfaces],
+    return {"names": interface_names(scene.interfaces),
             "real_energy": [None if bounces is None else [b.real_energy for b in bounces]
                             for bounces in result.interfaces],
             "added_light": added}

@@ -196,7 +196,7 @@ class OpenedRig:
 
     def close(self) -> None:
         """Close the rig (every interface's, with several)."""
-        for rig in self.rigs or (self.rig,):
+        for rig in self.each_rig:
             rig.close()
 
     def start_frame(self, index: int) -> None:

@@ -37,6 +37,7 @@ from lftransfer.imageio_utils import write_exr, write_json, write_png, write_vid
 from lftransfer.lightfield import LightField
 from lftransfer.transfer.bounce import TransferResult, TransferSettings, composite_view
 from lftransfer.transfer.interfaces import transfer_through
+from lftransfer.scenes.interfaces import interface_names
 from lftransfer.settings import RunSettings
 from lftransfer.transfer.live import LiveTransfer
 from lftransfer.render.selection import approximations, visible_steps
@@ -534,7 +535,7 @@ def _live_frames(writer: _FrameWriter, opened: OpenedRig, known: Knowledge, sett
     elif done:
         raise SequenceError(f"--resume: {state} is missing: the live loop cannot continue where it stopped")
     depth = _read_each(depth_file, "depth", len(models)) if done and depth_file.is_file() else None
-    names = [i.name for i in scene.interfaces]
+    names = interface_names(scene.interfaces)
     with LiveTransfer(opened.rig, known.model, known.scene, settings, projected=projected,
                       time_s=float(times[len(done)]) if len(done) < n else 0.0, depth=depth, loop=loop,
                       depth_every_frame=_depth_every_frame(scene, settings), turns=opened.turns,

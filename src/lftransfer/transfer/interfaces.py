@@ -45,14 +45,15 @@ def count_interface_steps(settings: TransferSettings, interfaces: int) -> int:
 
 def transfer_through(rigs: Sequence[Rig], models: Sequence[RigModel], scene: SyntheticScene,
                      settings: TransferSettings = TransferSettings(), *,
-                     progress: Callable[[str], None] | None = None, time_s: float = 0.0) -> TransferResult:
+                     progress: Callable[[str], None] | None = None, time_s: float = 0.0, **one) -> TransferResult:
     """N bounces through one interface (:func:`~lftransfer.transfer.bounce.run_transfer`, ``rigs`` and ``models``
-    of one) or several (:func:`run_interfaces`): what ``lft run``, a converged sequence and the page's bounce layers
-    run."""
+    of one) or several (:func:`run_interfaces`): what a converged sequence, its exchange check and the page's bounce
+    layers run. ``one``: :func:`~lftransfer.transfer.bounce.run_transfer`'s further arguments (a depth measured
+    earlier, ``depth`` and ``view_depth``), for one interface; several measure each interface's depth themselves."""
     from lftransfer.transfer.bounce import run_transfer
 
     if len(rigs) == 1 and len(models) == 1:
-        return run_transfer(rigs[0], models[0], scene, settings, progress=progress, time_s=time_s)
+        return run_transfer(rigs[0], models[0], scene, settings, progress=progress, time_s=time_s, **one)
     return run_interfaces(rigs, models, scene, settings, progress=progress, time_s=time_s)
 
 

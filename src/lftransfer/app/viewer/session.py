@@ -38,6 +38,7 @@ from lftransfer.imageio_utils import to_preview
 from lftransfer.render.lights import LIGHTING_MODELS
 from lftransfer.rig.base import RigError
 from lftransfer.scenes import SceneError, with_overrides
+from lftransfer.scenes.interfaces import interface_names
 from lftransfer.settings import Overrides, resolve_settings
 from lftransfer.transfer.bounce import TransferSettings
 from lftransfer.transfer.interfaces import transfer_through
@@ -219,7 +220,7 @@ class LiveSession:
         self.live = live
         self.out = Path(out)
         self.sim_rig = sim_rig
-        self.interface_names = [i.name for i in getattr(scene, "interfaces", ())]   # several: each one's, in order
+        self.interface_names = interface_names(scene.interfaces)      # shown with several interfaces only
         self.paused = False
         self.exchanges = 1
         self.layers: set[str] = {"composite"}

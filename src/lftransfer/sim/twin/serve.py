@@ -175,7 +175,6 @@ class Twin:
             self.screens = [ProjectorScreen(self.display, info.projector, info.projector_bits,
                                             missing=options.projector_missing, origin=origin)
                             for info, origin in zip(self.world.infos, self.origins)]
-            self.screen = self.screens[0]
             # each LF camera's exposure, in ms like the rig file's exposure of a camera (relative: 1 = nominal)
             self.lf_exposure_base = 1000.0 * float(scene.rig.exposure)
             self._lf_exposure = [self.lf_exposure_base] * len(self.names)

@@ -73,8 +73,7 @@ class TwinWorld:
             return SimInterfaces(world, truths=truths if n > 1 else [truth], operator_seed=truth_seed, **kwargs).rigs
 
         self.sims = self._pool.submit(build).result()
-        self.sim = self.sims[0]
-        self.view_spp = self.sim.view_spp
+        self.view_spp = self.sims[0].view_spp
         self.infos = [rig.info for rig in self.sims]
         self.info = self.infos[0]
 
@@ -103,11 +102,10 @@ class TwinWorld:
 
     def radiance(self, camera: str, images) -> np.ndarray:
         """(H, W, 3) float32 radiance at ``camera``'s pixels ("view", or "lf0", "lf1", ...: interface i's LF camera)
-        while the projectors show ``images`` (one per interface, in order; an image alone for one interface).
+        while the projectors show ``images`` (one per interface, in order).
 
         Rendered on the world's thread the first time a state is asked for, then kept.
         """
-        images = images if isinstance(images, (list, tuple)) else (images,)
         key_images = tuple(digest(image) for image in images)
 
         def render() -> np.ndarray:
