@@ -43,7 +43,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lftransfer.calibration.pose import CHART, CORNER_WINDOW_PX, PoseError, chart_pose
+from lftransfer.calibration.pose import CHART, CORNER_WINDOW_MIN_PX, PoseError, chart_pose
 from lftransfer.optics.geometry import backproject, plane_axes, project, rectangle_to_world, view_camera
 from lftransfer.rig.base import Rig
 from lftransfer.rig.requests import Board, ViewCapture
@@ -67,8 +67,8 @@ DESIGN_CORNER_NOISE_PX = 0.1              # noise of the chessboard's corners (v
 CLEARANCE_M = 0.015                       # the boards' corners stay this far in front of the array's plane
 LIGHT_MIN_COS = 0.5                       # a board faces the light at least this much (cosine at its centre)
 VIEW_MIN_COS = 0.5                        # ... and the view camera
-MIN_SQUARE_PX = CORNER_WINDOW_PX + 1.0   # a board's chessboard squares are at least this many view pixels across
-                                         # (the narrowest, as seen): the next line clear of the corner window
+MIN_SQUARE_PX = 2.0 * CORNER_WINDOW_MIN_PX  # a board's chessboard squares are at least this many view pixels across
+                                            # (the narrowest, as seen): the smallest corner window reaches half-way
 GRID_XY = 5                               # candidate centres per axis ...
 GRID_SPAN = 0.6                           # ... over this fraction of the array's half extent
 GRID_DEPTHS_M = (0.06, 0.08, 0.10, 0.12)  # ... at these distances in front of it

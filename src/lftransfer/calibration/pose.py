@@ -35,10 +35,10 @@ from lftransfer.rig.base import Rig
 from lftransfer.rig.model import RigModel
 from lftransfer.rig.requests import Board, ViewCapture
 
-__all__ = ["BOARD_CLEARANCE_M", "BOARD_MAX_OBLIQUITY_DEG", "CHART", "CORNER_WINDOW_PX", "FRINGE_PERIOD_M",
-           "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern", "FringeDecoding", "PoseError",
-           "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose", "corner_landing",
-           "decode_fringes", "fringe_lightfields", "sees_lit_side", "solve_array_pose", "view_camera"]
+__all__ = ["BOARD_CLEARANCE_M", "BOARD_MAX_OBLIQUITY_DEG", "CHART", "CORNER_WINDOW_MIN_PX", "CORNER_WINDOW_PX",
+           "FRINGE_PERIOD_M", "FRINGE_SHIFTS", "POSE_DEPTHS", "POSE_ROUNDS", "ArrayPose", "BoardPattern",
+           "FringeDecoding", "PoseError", "apply_pose", "board_pattern", "board_plane", "calibrate_pose", "chart_pose",
+           "corner_landing", "corner_window", "decode_fringes", "fringe_lightfields", "sees_lit_side", "solve_array_pose", "view_camera"]
 
 
 class PoseError(ValueError):
@@ -186,18 +186,41 @@ class ArrayPose:
 
 
 CHART = (7, 5, 0.022)     # the chessboard printed on the calibration boards: columns, rows of squares, square metres
-CORNER_WINDOW_PX = 5      # half size of the corners' refinement window (cv2.cornerSubPix), view pixels: a corner is
-                          # refined from the image's gradients within this reach, so the chart's squares must be wider
-                          # than it (the next chessboard line outside the window), or the corners come out pixels off
+CORNER_WINDOW_PX = 5      # the largest half size of the corners' refinement window (cv2.cornerSubPix), view pixels
+CORNER_WINDOW_MIN_PX = 3  # ... and the smallest
+CORNER_CLEARANCE_PX = 4   # the window stops this far short of the neighbouring corners (:func:`corner_window`)
 
 
-def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[np.ndarray, float]:
+def corner_window(corners: np.ndarray, pattern: tuple[int, int]) -> int:
+    """The half size of the corners' refinement window for a chessboard whose corners were found at ``corners``.
+
+    ``cv2.cornerSubPix`` refines a corner from the image's gradients within the window; where the window reaches
+    the neighbouring corners' lines (blurred over a pixel or two) they pull it off. So the window is the corners'
+    smallest spacing in the image less :data:`CORNER_CLEARANCE_PX`, between :data:`CORNER_WINDOW_MIN_PX` and
+    :data:`CORNER_WINDOW_PX`. Measured on 112 simulated boards of the built-in scenes at quarter resolution (squares
+    6.2 to 11.2 pixels apart): with a window of 5 every board whose corners were 8.1 pixels apart or less was
+    measured 0.3 to 0.6 degree askew (0.34 degree RMS over the point light's boards, which put the corner's point
+    light 1 mm off); with this window 0.07 degree, and the boards with wider squares as before.
+
+    Args:
+        corners: (N, 2) the inner corners as ``cv2.findChessboardCorners`` orders them (row by row).
+        pattern: (per row, rows) of inner corners.
+    """
+    grid = np.asarray(corners, np.float64).reshape(pattern[1], pattern[0], 2)
+    spacing = min(np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
+                  np.linalg.norm(np.diff(grid, axis=0), axis=2).min())
+    return int(np.clip(np.floor(spacing) - CORNER_CLEARANCE_PX, CORNER_WINDOW_MIN_PX, CORNER_WINDOW_PX))
+
+
+def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view, *,
+               window: int | None = None) -> tuple[np.ndarray, float]:
     """Where a board stands in the world, from the chessboard printed on it (``cv2.solvePnP``, metric).
 
     Args:
         image: (H, W, 3) view camera image (linear radiance) of the lit board.
         chart: (columns, rows, square size in metres) of the printed chessboard's squares.
         view: ``ViewConfig``.
+        window: the corners' refinement window, half size in pixels (default: :func:`corner_window`).
 
     Returns:
         (4, 4) the chart's frame in the world (columns: unit axes along its columns and rows, its normal, and its
@@ -213,7 +236,8 @@ def chart_pose(image: np.ndarray, chart: tuple[int, int, float], view) -> tuple[
         ok, corners = cv2.findChessboardCornersSB(grey8, pattern)
     if not ok:
         raise PoseError(f"the printed {cols} x {rows} chessboard was not found in the view camera image")
-    window = (CORNER_WINDOW_PX, CORNER_WINDOW_PX)
+    half = corner_window(corners.reshape(-1, 2), pattern) if window is None else int(window)
+    window = (half, half)
     corners = cv2.cornerSubPix(grey8.astype(np.float32), corners.astype(np.float32), window, (-1, -1),
                                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)).reshape(-1, 2)
     i, j = np.meshgrid(np.arange(pattern[0]), np.arange(pattern[1]))
