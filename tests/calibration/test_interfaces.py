@@ -157,8 +157,9 @@ def test_05_the_side_interface_from_its_images():
     """The corner's second interface, turned 90 degrees in the world, calibrated from its own images in its own
     frame: lenslet centres and projector mapping within the targets, and the placed model takes world points into
     its array's frame as the true one does. Its pose, at this resolution (a 256 x 192 view camera that sees its
-    boards obliquely), is 0.93 mm RMS and 0.36 degree on this hidden truth (seed 2) and 0.30 mm, 0.13 degree on
-    seed 0: bounds 1 mm and 0.4 degree, against one interface's 0.7 mm and 0.35 degree (test_rig.py::test_01)."""
+    boards through translucent screens), is 0.09 mm RMS, 0.14 mm at the worst lenslet and 0.045 degree on this
+    hidden truth (seed 2): bounds 0.3 mm and 0.15 degree. It was 0.93 mm and 0.36 degree while the screens' charts
+    were measured by their corners alone, before they were aligned as a whole (pose.aligned_corners)."""
     scene = quick_scene(load_scene(builtin_scene("corner")))
     rigs, oracle = open_simulated_interfaces(scene, 2, capture_spp=4)
     ps = scene.synthetic_part()
@@ -166,7 +167,7 @@ def test_05_the_side_interface_from_its_images():
     e = calibration_errors(cal, oracle.models[1]).to_json()
     for key in ("projector_mapping_rms_px", "lenslet_centre_rms_px"):
         assert target(key).met(e[key]), (key, e[key])
-    assert e["pose_position_rms_mm"] <= 1.0 and e["pose_rotation_deg"] <= 0.4, e
+    assert e["pose_position_max_mm"] <= 0.3 and e["pose_rotation_deg"] <= 0.15, e
     assert e["lenslet_assignment_agreement"] > 0.999 and e["ray_direction_rms_deg"] < 0.5
     world = np.array([[-0.05, 0.02, 0.12, 1.0]])
     got = (cal.model.world_to_array() @ world.T)[:3, 0]

@@ -8,7 +8,7 @@ import pytest
 from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import (LIGHT_BOARDS, LightError, black_share, board_samples, calibrate_light,
                                           count_light_messages, fit_light, light_board_poses)
-from lftransfer.calibration.pose import chart_pose
+from lftransfer.calibration.chart import chart_pose
 from lftransfer.optics.geometry import project, rectangle_to_world
 from lftransfer.rig.requests import Board, ViewCapture
 from lftransfer.scenes import builtin_scene, load_scene, with_overrides

@@ -17,7 +17,7 @@ from lftransfer.scenes import quick_scene
 from lftransfer.calibration.light import (LIGHT_SPP, MIN_PIXELS, MIN_SQUARE_PX, LightError, board_samples,
                                           light_board_poses)
 from lftransfer.calibration.interfaces import interface_scene
-from lftransfer.calibration.pose import CORNER_WINDOW_MIN_PX, CORNER_WINDOW_PX, chart_pose
+from lftransfer.calibration.chart import CORNER_WINDOW_MIN_PX, CORNER_WINDOW_PX, chart_pose
 from lftransfer.optics.geometry import project, rectangle_to_world
 from lftransfer.rig.requests import ViewCapture
 from lftransfer.scenes import builtin_scene, builtin_scenes, load_scene, with_overrides
@@ -158,7 +158,7 @@ def test_05_a_misordered_grid_is_found_again(variant):
     them by 1 and 2.5 degrees, and put the light 8 mm off)."""
     import cv2
 
-    from lftransfer.calibration.pose import CHART_GRID_MAX_PX, _grid_residual, _inner_corners
+    from lftransfer.calibration.chart import CHART_GRID_MAX_PX, _grid_residual, _inner_corners
 
     scene = _scene("corner", quick=False)
     rig = _first_rig(scene)

@@ -24,8 +24,9 @@ import numpy as np
 import pytest
 
 from lftransfer.scenes import quick_scene
-from lftransfer.calibration.pose import (BOARD_CLEARANCE_M, CHART, POSE_DEPTHS, PoseError, board_pattern, chart_pose,
-                                         panel_shift, sees_lit_side)
+from lftransfer.calibration.chart import chart_pose
+from lftransfer.calibration.pose import (BOARD_CLEARANCE_M, CHART, POSE_DEPTHS, PoseError, board_pattern, panel_shift,
+                                         sees_lit_side)
 from lftransfer.optics.geometry import project, rectangle_to_world
 from lftransfer.rig.requests import Board, ViewCapture, describe, setup_from_json
 from lftransfer.scenes import builtin_scene, load_scene

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lftransfer.calibration.pose import CHART, CORNER_WINDOW_MIN_PX, PoseError, chart_pose
+from lftransfer.calibration.chart import CHART, CORNER_WINDOW_MIN_PX, PoseError, chart_pose
 from lftransfer.optics.geometry import backproject, plane_axes, project, rectangle_to_world, view_camera
 from lftransfer.rig.base import Rig
 from lftransfer.rig.requests import Board, ViewCapture

@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lftransfer.calibration.pose import PoseError, chart_pose
+from lftransfer.calibration.chart import PoseError, chart_pose
 from lftransfer.calibration.radiometric.common import (BOARD_ALBEDO, BOARD_CHART, BOARD_DISTANCES, BOARD_SIZE, Progress,
                                                       RadiometryError)
 from lftransfer.calibration.radiometric.projector import _ProjectorFit
