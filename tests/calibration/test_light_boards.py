@@ -74,9 +74,9 @@ def _squares_across_px(board, view) -> np.ndarray:
 @pytest.mark.parametrize("name", LIT)
 def test_01_every_builtin_boards_are_seen_well(name, quick):
     """Every board of every light, at the scene's resolution and at --quick's: its chessboard (one square wider
-    each way) is whole in the view, its squares at least MIN_SQUARE_PX across, twice the corner finder's
-    smallest window (fig1b --quick's third board was 5.4 pixels across), and it faces the light and the view camera, clear
-    of the array."""
+    each way) is whole in the view, its squares at least MIN_SQUARE_PX across, twice the corner finder's smallest
+    window (fig1b --quick's third board was 5.4 pixels across), and it faces the light and the view camera, clear of
+    the array."""
     scene = _measured(_scene(name, quick))
     w, h = scene.view.resolution
     eye = np.asarray(scene.view.origin, np.float64)
