@@ -163,8 +163,9 @@ ALIGN_ROUNDS = 2          # shading fitted, chart aligned; twice
 ALIGN_MAX_SPACING_PX = 20.0   # a screen's chart is aligned as a whole where its corners are closer than this: at
                               # quarter resolution (corners 8 to 11 pixels apart) it measured the screens' tilt
                               # to 0.05 degree RMS against 0.25 from the corners; at the paper's (about 35 pixels)
-                              # the corners alone measured four of the corner's screens to 0.03 degree, the
-                              # alignment to 0.13 (0.26 at worst, 0.5 to 0.8 mm off in depth; not explained)
+                              # the corners alone measured four of the corner's side screens to 0.03 degree,
+                              # the alignment to 0.13 (0.26 at worst, 0.5 to 0.8 mm off in depth; not explained;
+                              # its front's calibration did better aligned: docs/interfaces.md)
 
 
 def aligned_corners(grey: np.ndarray, chart: tuple[int, int, float], corners: np.ndarray) -> np.ndarray:
@@ -180,7 +181,7 @@ def aligned_corners(grey: np.ndarray, chart: tuple[int, int, float], corners: np
     each of 60 simulated pose screens of the corner and the enclosure at quarter resolution to 0.10 mm along its
     normal and 0.05 degree in tilt (RMS; 0.12 degree at worst), against 0.4 mm and 0.25 degree from the corners
     alone. On opaque boards it gained nothing and, twice in 52, tilted one by half a degree or more; at the paper's
-    resolution the corners alone do better (:data:`ALIGN_MAX_SPACING_PX`).
+    resolution the corners alone measured the corner's side screens better (:data:`ALIGN_MAX_SPACING_PX`).
 
     Args:
         grey: (H, W) the image's brightness (linear).
