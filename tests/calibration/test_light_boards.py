@@ -33,14 +33,9 @@ def _scene(name: str, quick: bool):
 
 def _first_rig(scene, seed: int = 0):
     """The simulated rig of hidden truth ``seed`` that measures the point light (the first interface's), dark."""
-    from lftransfer.sim import SimRig, hidden_world
-    from lftransfer.sim.oracle import open_simulated_interfaces
+    from lftransfer.sim.oracle import open_simulated_interfaces, open_simulated_rig
 
-    if scene.interfaces:
-        rig = open_simulated_interfaces(scene, seed)[0][0]
-    else:
-        world, truth = hidden_world(scene, seed)
-        rig = SimRig(world, truth=truth, operator_seed=seed)
+    rig = open_simulated_interfaces(scene, seed)[0][0] if scene.interfaces else open_simulated_rig(scene, seed)[0]
     rig.project(rig.info.black())
     return rig
 

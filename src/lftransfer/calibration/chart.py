@@ -211,8 +211,9 @@ def aligned_corners(grey: np.ndarray, chart: tuple[int, int, float], corners: np
     inside = np.all(np.abs(seen) < [cols * square / 2, rows * square / 2], axis=1)
     parity = grey.ravel()[inside & (dark_first < 1)].mean() < grey.ravel()[inside & (dark_first == 1)].mean()
     drawn = _chart_albedo(np.stack([u, v], -1).reshape(-1, 2), chart, parity).reshape(size[1], size[0])
-    for _ in range(ALIGN_ROUNDS):
-        seen = cv2.perspectiveTransform(pixels[None], np.linalg.inv(H))[0]
+    for round_ in range(ALIGN_ROUNDS):
+        if round_:                                       # where the previous round's alignment puts each pixel
+            seen = cv2.perspectiveTransform(pixels[None], np.linalg.inv(H))[0]
         edge = np.abs((seen / square + [cols / 2, rows / 2] + 0.5) % 1.0 - 0.5).min(axis=1) * square * px_per_m
         use = np.all(np.abs(seen) < half, axis=1) & (edge > ALIGN_EDGE_PX)
         if use.sum() < 50:
